@@ -1,0 +1,57 @@
+"""tobitkf: Tobit Kalman filtering of censored measurements, and skeleton-track smoothing.
+
+The public names are imported lazily (PEP 562), so ``import tobitkf`` stays fast and the
+command-line tool does not pay for plotting or file-format code it does not use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it
+_EXPORTS: dict[str, str] = {
+    # censored-normal moments (math core)
+    "ClippedMoments": "tobitkf.censored",
+    "clipped_normal_moments": "tobitkf.censored",
+    "bivariate_normal_cdf": "tobitkf.censored",
+    # models and filters (math core)
+    "LinearGaussian": "tobitkf.model",
+    "FilterResult": "tobitkf.model",
+    "SmootherResult": "tobitkf.model",
+    "kalman_filter": "tobitkf.kalman",
+    "rts_smooth": "tobitkf.kalman",
+    "tobit_filter": "tobitkf.tobit",
+    "adaptive_tobit_filter": "tobitkf.tobit",
+    "StreamingFilter": "tobitkf.streaming",
+    # likelihood and fitting
+    "censored_loglik": "tobitkf.likelihood",
+    "fit_noise": "tobitkf.likelihood",
+    "NoiseFit": "tobitkf.likelihood",
+    # skeletons
+    "Topology": "tobitkf.skeleton.topology",
+    "get_topology": "tobitkf.skeleton.topology",
+    "SkeletonSequence": "tobitkf.skeleton.sequence",
+    "TrackingState": "tobitkf.skeleton.sequence",
+    "smooth": "tobitkf.skeleton.smooth",
+    "fit_limits": "tobitkf.skeleton.limits",
+    "load": "tobitkf.io",
+    "save": "tobitkf.io",
+}
+
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tobitkf' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
