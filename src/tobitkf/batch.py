@@ -1,0 +1,295 @@
+"""Smoothing many recordings: input discovery, output naming, atomic writes, summaries.
+
+This is the library side of ``tobitkf smooth``: it never overwrites an input, writes
+each output atomically (a temporary file in the output folder, then ``os.replace``),
+and reports a bad file with its reason instead of stopping the whole run.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: output format -> file extension
+OUTPUT_EXTENSIONS = {"csv": ".csv", "npz": ".npz", "ntu": ".skeleton"}
+
+#: compound extensions stripped from input names before naming outputs
+_COMPOUND = (".txt.gz", ".csv.gz", ".tsv.gz")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One input file and where its output goes."""
+
+    source: Path
+    output: Path
+    output_format: str
+
+
+@dataclass(frozen=True)
+class FileSummary:
+    """What happened to one file (a row of the summary table)."""
+
+    source: str
+    output: str | None
+    ok: bool
+    error: str | None = None
+    bodies: int = 0
+    frames: int = 0
+    joints: int = 0
+    clipped_percent: float = float("nan")
+    missing_percent: float = float("nan")
+    seconds: float = 0.0
+    input_format: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def strip_extension(name: str) -> str:
+    """File name without its extension (``.txt.gz`` and similar count as one)."""
+    lower = name.lower()
+    for ext in _COMPOUND:
+        if lower.endswith(ext):
+            return name[: -len(ext)]
+    return Path(name).stem
+
+
+def discover_inputs(
+    inputs: Sequence[str | Path], pattern: str = "*", *, recursive: bool = True
+) -> list[tuple[Path, Path]]:
+    """Expand files and folders into ``(file, base)`` pairs.
+
+    A folder contributes every file below it (recursively) whose name matches ``pattern``;
+    ``base`` is the folder, so outputs can keep the relative layout. A file is taken as
+    given (the pattern does not filter explicit files); its base is its own folder.
+
+    Raises
+    ------
+    FileNotFoundError
+        If an input does not exist.
+    """
+    found: list[tuple[Path, Path]] = []
+    seen: set[Path] = set()
+    for item in inputs:
+        path = Path(item)
+        if not path.exists():
+            raise FileNotFoundError(f"input not found: {path}")
+        if path.is_dir():
+            walker = path.rglob("*") if recursive else path.glob("*")
+            for f in sorted(walker):
+                if f.is_file() and fnmatch.fnmatch(f.name, pattern) and not f.name.startswith("."):
+                    if f.resolve() not in seen:
+                        seen.add(f.resolve())
+                        found.append((f, path))
+        elif path.resolve() not in seen:
+            seen.add(path.resolve())
+            found.append((path, path.parent))
+    return found
+
+
+def default_output_format(input_format: str | None) -> str:
+    """``ntu`` inputs stay NTU (every extra field kept); everything else becomes CSV."""
+    return "ntu" if input_format == "ntu" else "csv"
+
+
+def plan_jobs(
+    pairs: Sequence[tuple[Path, Path]],
+    outdir: str | Path,
+    *,
+    method: str,
+    output_format: str = "auto",
+    detect: Callable[[Path], str] | None = None,
+) -> tuple[list[Job], list[FileSummary]]:
+    """Decide the output path of each input.
+
+    Outputs are ``OUTDIR/<relative folder>/<name>.<method><ext>``. A planned output that
+    would be an input file, or the output of an earlier input, is refused for that file.
+
+    Returns
+    -------
+    jobs : list of Job
+    refused : list of FileSummary for inputs that cannot be processed
+    """
+    outdir = Path(outdir)
+    inputs = {p.resolve() for p, _ in pairs}
+    taken: dict[Path, Path] = {}
+    jobs: list[Job] = []
+    refused: list[FileSummary] = []
+    for src, base in pairs:
+        fmt = output_format
+        if fmt == "auto":
+            in_fmt = None
+            if detect is not None:
+                try:
+                    in_fmt = detect(src)
+                except Exception:  # the reader will report the real problem later
+                    in_fmt = None
+            fmt = default_output_format(in_fmt)
+        if fmt not in OUTPUT_EXTENSIONS:
+            raise ValueError(
+                f"unknown output format {fmt!r}; expected one of {sorted(OUTPUT_EXTENSIONS)}"
+            )
+        try:
+            rel = src.parent.resolve().relative_to(base.resolve())
+        except ValueError:
+            rel = Path()
+        out = outdir / rel / f"{strip_extension(src.name)}.{method}{OUTPUT_EXTENSIONS[fmt]}"
+        key = out.resolve()
+        if key in inputs:
+            refused.append(
+                FileSummary(str(src), None, False, f"output {out} would overwrite an input")
+            )
+            continue
+        if key in taken:
+            refused.append(
+                FileSummary(
+                    str(src), None, False, f"output {out} is already the output of {taken[key]}"
+                )
+            )
+            continue
+        taken[key] = src
+        jobs.append(Job(src, out, fmt))
+    return jobs, refused
+
+
+def atomic_save(sequences: Sequence[Any], path: Path, output_format: str) -> None:
+    """Write ``sequences`` to ``path`` through a temporary file and a rename.
+
+    An interrupted run leaves at most a hidden temporary file, never a half-written output.
+    """
+    from tobitkf.io import save
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(
+        dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}"
+    )
+    os.close(fd)
+    try:
+        save(list(sequences), tmp, format=output_format)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _percent(values: Iterable[np.ndarray]) -> float:
+    arrays = [np.asarray(v, dtype=float).ravel() for v in values]
+    arrays = [a for a in arrays if a.size]
+    if not arrays:
+        return float("nan")
+    return 100.0 * float(np.nanmean(np.concatenate(arrays)))
+
+
+def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False) -> FileSummary:
+    """Read, smooth and write one file; any failure becomes a summary with its reason."""
+    from tobitkf.io import detect_format, load
+    from tobitkf.skeleton.smooth import smooth
+
+    start = time.perf_counter()
+    try:
+        in_fmt = detect_format(job.source)
+        sequences = load(job.source)
+        if not sequences:
+            raise ValueError("the file holds no skeleton")
+        smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        atomic_save(smoothed, job.output, job.output_format)
+    except Exception as exc:  # reported per file; the run goes on
+        return FileSummary(
+            str(job.source),
+            None,
+            False,
+            f"{type(exc).__name__}: {exc}",
+            seconds=time.perf_counter() - start,
+        )
+    diags = [s.metadata.get("diagnostics", {}) for s in smoothed]
+    missing = [np.isnan(s.positions).any(axis=-1) for s in sequences]
+    return FileSummary(
+        source=str(job.source),
+        output=str(job.output),
+        ok=True,
+        bodies=len(sequences),
+        frames=max(s.n_frames for s in sequences),
+        joints=max(s.n_joints for s in sequences),
+        clipped_percent=_percent(d.get("clipped_fraction", []) for d in diags),
+        missing_percent=_percent(missing),
+        seconds=time.perf_counter() - start,
+        input_format=in_fmt,
+    )
+
+
+def _run_job_star(args: tuple[Job, str, dict[str, Any], bool]) -> FileSummary:
+    return run_job(*args)
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    method: str,
+    params: dict[str, Any],
+    *,
+    offline: bool = False,
+    n_jobs: int = 1,
+    on_done: Callable[[FileSummary], None] | None = None,
+) -> list[FileSummary]:
+    """Run every job, in parallel processes when ``n_jobs > 1``; results in input order."""
+    results: dict[int, FileSummary] = {}
+    if n_jobs <= 1 or len(jobs) <= 1:
+        for i, job in enumerate(jobs):
+            results[i] = run_job(job, method, params, offline)
+            if on_done:
+                on_done(results[i])
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=n_jobs) as pool:
+            futures = {
+                pool.submit(_run_job_star, (job, method, params, offline)): i
+                for i, job in enumerate(jobs)
+            }
+            for fut in as_completed(futures):
+                i = futures[fut]
+                results[i] = fut.result()
+                if on_done:
+                    on_done(results[i])
+    return [results[i] for i in range(len(jobs))]
+
+
+def parse_param(text: str) -> tuple[str, Any]:
+    """Parse ``key=value`` from the command line.
+
+    Values become int, float, a tuple of floats (comma-separated), a bool
+    (``true``/``false``) or stay a string.
+    """
+    if "=" not in text:
+        raise ValueError(f"parameter {text!r} is not of the form key=value")
+    key, raw = text.split("=", 1)
+    key = key.strip().replace("-", "_")
+    raw = raw.strip()
+    if not key:
+        raise ValueError(f"parameter {text!r} has an empty name")
+    low = raw.lower()
+    if low in ("true", "false"):
+        return key, low == "true"
+    if low in ("none", "null"):
+        return key, None
+    try:
+        return key, int(raw)
+    except ValueError:
+        pass
+    try:
+        return key, float(raw)
+    except ValueError:
+        pass
+    if "," in raw:
+        try:
+            return key, tuple(float(v) for v in raw.split(","))
+        except ValueError:
+            pass
+    return key, raw

@@ -1,0 +1,283 @@
+"""Figures for reports: coordinate traces, skeleton snapshots and animations.
+
+All of matplotlib is imported inside the functions (it is an optional extra,
+``pip install tobitkf[plot]``), with the non-interactive Agg backend, so the rest of
+the package never pays for it.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+AXIS_NAMES = ("x", "y", "z")
+
+# colour for each series name; anything else cycles through the default palette
+_FIXED_COLOURS = {"raw": "0.55", "truth": "black"}
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("plotting needs matplotlib: pip install 'tobitkf[plot]'") from exc
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _colours(names: Sequence[str]) -> dict[str, Any]:
+    plt = _pyplot()
+    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    out: dict[str, Any] = {}
+    i = 0
+    for name in names:
+        if name in _FIXED_COLOURS:
+            out[name] = _FIXED_COLOURS[name]
+        else:
+            out[name] = cycle[i % len(cycle)]
+            i += 1
+    return out
+
+
+def figure_to_png(fig) -> bytes:
+    """Render a matplotlib figure to PNG bytes and close it."""
+    plt = _pyplot()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def png_data_uri(data: bytes, mime: str = "image/png") -> str:
+    """A ``data:`` URI embedding ``data`` (for a self-contained HTML page)."""
+    return f"data:{mime};base64," + base64.b64encode(data).decode("ascii")
+
+
+def episodes(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Runs of True in a boolean vector, as half-open ``(start, stop)`` frame ranges.
+
+    Parameters
+    ----------
+    mask : (T,) bool
+
+    Returns
+    -------
+    list of (int, int)
+    """
+    m = np.asarray(mask, dtype=bool).ravel()
+    if m.size == 0:
+        return []
+    edges = np.diff(np.concatenate(([0], m.astype(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1)
+    return list(zip(starts.tolist(), stops.tolist()))
+
+
+def plot_joint_traces(
+    times: np.ndarray,
+    series: Mapping[str, np.ndarray],
+    *,
+    title: str = "",
+    shade: Sequence[tuple[int, int]] = (),
+    unit: str = "m",
+):
+    """Per-axis coordinate traces of one joint (like Fig. 1, 2, 4, 6 of the 2020 paper).
+
+    Parameters
+    ----------
+    times : (T,) seconds
+    series : mapping name -> (T, 3) positions; ``"raw"`` and ``"truth"`` get fixed colours
+    title : str
+    shade : frame ranges ``(start, stop)`` to shade (glitch episodes)
+    unit : axis label unit
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    times = np.asarray(times, dtype=float)
+    colours = _colours(list(series))
+    fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
+    for k, ax in enumerate(axes):
+        for start, stop in shade:
+            lo = times[min(start, len(times) - 1)]
+            hi = times[min(max(stop - 1, start), len(times) - 1)]
+            ax.axvspan(lo - 0.5 / 30, hi + 0.5 / 30, color="tab:red", alpha=0.12, lw=0)
+        for name, values in series.items():
+            v = np.asarray(values, dtype=float)
+            style = {"lw": 1.6 if name == "truth" else 1.1}
+            if name == "raw":
+                style.update(lw=0.9, marker=".", ms=2.5)
+            ax.plot(times[: len(v)], v[:, k], label=name, color=colours[name], **style)
+        ax.set_ylabel(f"{AXIS_NAMES[k]} [{unit}]")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].legend(loc="upper right", fontsize=8, ncol=min(len(series), 5))
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def _view_axes(up_axis: int) -> tuple[int, int]:
+    """Horizontal and vertical coordinate for a frontal view with ``up_axis`` vertical."""
+    horizontal = 0 if up_axis != 0 else 1
+    return horizontal, up_axis
+
+
+def plot_skeleton_frames(
+    frames: Mapping[str, np.ndarray],
+    frame_indices: Sequence[int],
+    parents: Sequence[int],
+    *,
+    up_axis: int = 1,
+    frame_labels: Sequence[str] | None = None,
+    title: str = "",
+):
+    """Skeletons at a few frames, one row per method (like Fig. 5 of the 2020 paper).
+
+    Parameters
+    ----------
+    frames : mapping name -> (T, J, 3) positions
+    frame_indices : frames to draw (columns)
+    parents : (J,) parent index per joint, -1 for the root
+    up_axis : which coordinate points up (drawn vertically)
+    frame_labels : column titles (default "frame k")
+    title : figure title
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    names = list(frames)
+    colours = _colours(names)
+    h, v = _view_axes(up_axis)
+    allpts = np.concatenate(
+        [np.asarray(frames[n])[list(frame_indices)].reshape(-1, 3) for n in names]
+    )
+    finite = allpts[np.all(np.isfinite(allpts), axis=1)]
+    lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
+    hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
+    ncol = len(frame_indices)
+    fig, axes = plt.subplots(
+        len(names), ncol, figsize=(2.3 * ncol, 2.6 * len(names)), squeeze=False
+    )
+    for r, name in enumerate(names):
+        pos = np.asarray(frames[name], dtype=float)
+        for c, t in enumerate(frame_indices):
+            ax = axes[r, c]
+            p = pos[t]
+            for j, par in enumerate(parents):
+                if par >= 0:
+                    ax.plot([p[par, h], p[j, h]], [p[par, v], p[j, v]], color=colours[name])
+            ax.plot(p[:, h], p[:, v], ".", color=colours[name], ms=3)
+            ax.set_xlim(lo[h], hi[h])
+            ax.set_ylim(lo[v], hi[v])
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if r == 0:
+                ax.set_title(frame_labels[c] if frame_labels else f"frame {t}", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(name)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def animate_skeletons(
+    frames: Mapping[str, np.ndarray],
+    parents: Sequence[int],
+    path: str | Path,
+    *,
+    fps: float = 30.0,
+    up_axis: int = 1,
+    step: int = 2,
+    max_frames: int = 150,
+) -> Path:
+    """Write an animated GIF with the skeletons of several methods side by side.
+
+    Parameters
+    ----------
+    frames : mapping name -> (T, J, 3) positions (same T)
+    parents : (J,) parent index per joint, -1 for the root
+    path : output ``.gif`` path
+    fps : frame rate of the input; the GIF plays at ``fps / step``
+    up_axis : coordinate drawn vertically
+    step : draw every ``step``-th frame
+    max_frames : at most this many GIF frames (the step grows for long recordings)
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    plt = _pyplot()
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    names = list(frames)
+    arrays = [np.asarray(frames[n], dtype=float) for n in names]
+    T = arrays[0].shape[0]
+    step = max(step, int(np.ceil(T / max_frames)))
+    idx = np.arange(0, T, step)
+    colours = _colours(names)
+    h, v = _view_axes(up_axis)
+    allpts = np.concatenate([a.reshape(-1, 3) for a in arrays])
+    finite = allpts[np.all(np.isfinite(allpts), axis=1)]
+    lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
+    hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
+    fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 3.2), squeeze=False)
+    lines = []
+    for ax, name in zip(axes[0], names):
+        ax.set_xlim(lo[h], hi[h])
+        ax.set_ylim(lo[v], hi[v])
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(name, fontsize=9)
+        segs = [ax.plot([], [], color=colours[name])[0] for par in parents if par >= 0]
+        lines.append(segs)
+    label = fig.text(0.01, 0.01, "", fontsize=8)
+    bones = [(j, par) for j, par in enumerate(parents) if par >= 0]
+
+    def draw(t: int):
+        for segs, a in zip(lines, arrays):
+            p = a[t]
+            for seg, (j, par) in zip(segs, bones):
+                seg.set_data([p[par, h], p[j, h]], [p[par, v], p[j, v]])
+        label.set_text(f"t = {t / fps:5.2f} s")
+        return [s for segs in lines for s in segs]
+
+    anim = FuncAnimation(fig, draw, frames=idx, blit=False)
+    path = Path(path)
+    anim.save(path, writer=PillowWriter(fps=max(1.0, fps / step)))
+    plt.close(fig)
+    return path
+
+
+def plot_bar_table(rows: Mapping[str, float], *, title: str = "", unit: str = "cm"):
+    """Horizontal bar chart of one metric per method (e.g. pooled RMSE)."""
+    plt = _pyplot()
+    names = list(rows)
+    values = [rows[n] for n in names]
+    colours = _colours(names)
+    fig, ax = plt.subplots(figsize=(6, 0.35 * len(names) + 1.2))
+    ax.barh(names, values, color=[colours[n] for n in names])
+    ax.invert_yaxis()
+    ax.set_xlabel(unit)
+    for i, val in enumerate(values):
+        ax.text(val, i, f" {val:.2f}", va="center", fontsize=8)
+    if title:
+        ax.set_title(title)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,199 @@
+"""A self-contained HTML report: metrics tables, coordinate traces, skeleton snapshots, GIF.
+
+Every figure is embedded as a ``data:`` URI, so the page is one file that can be mailed
+or attached to a lab notebook. Plotting uses :mod:`tobitkf.plots` (matplotlib, lazily).
+"""
+
+from __future__ import annotations
+
+import html
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+GLITCH_THRESHOLD_M = 0.10
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """One table of the report."""
+
+    title: str
+    columns: list[str]
+    rows: list[list[Any]]
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class ReportInput:
+    """Everything a report shows.
+
+    Attributes
+    ----------
+    title : page title
+    raw : the input track (SkeletonSequence)
+    methods : method name -> smoothed SkeletonSequence (same frames and joints as ``raw``)
+    truth : (T, J, 3) ground truth in the raw track's frame and times, NaN where a joint
+        has no mocap partner; None without ground truth
+    tables : metric tables shown at the top
+    notes : paragraphs of plain text (conclusions, caveats)
+    """
+
+    title: str
+    raw: Any
+    methods: Mapping[str, Any]
+    truth: np.ndarray | None = None
+    tables: Sequence[TableSpec] = ()
+    notes: Sequence[str] = ()
+    figures: Mapping[str, bytes] = field(default_factory=dict)
+
+
+def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITCH_THRESHOLD_M):
+    """Frames × joints where the raw track is more than ``threshold`` from a reference.
+
+    Parameters
+    ----------
+    raw, reference : (T, J, 3)
+
+    Returns
+    -------
+    (T, J) bool
+    """
+    err = np.linalg.norm(np.asarray(raw, float) - np.asarray(reference, float), axis=-1)
+    return np.nan_to_num(err, nan=0.0) > threshold
+
+
+def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
+    """Joints to plot: those with most glitch frames, then those with the largest jumps."""
+    from tobitkf.skeleton.inspect import largest_jumps
+
+    counts = mask.sum(axis=0)
+    jump, _ = largest_jumps(raw)
+    score = counts * 1e3 + np.nan_to_num(jump, nan=0.0)
+    return [int(j) for j in np.argsort(-score)[:n]]
+
+
+def _table_html(spec: TableSpec) -> str:
+    def cell(v: Any) -> str:
+        if isinstance(v, (float, np.floating)):
+            return "–" if not np.isfinite(v) else f"{float(v):.2f}"
+        return html.escape(str(v))
+
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in spec.columns)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{cell(v)}</td>" for v in row) + "</tr>" for row in spec.rows
+    )
+    note = f"<p class='note'>{html.escape(spec.note)}</p>" if spec.note else ""
+    return (
+        f"<h2>{html.escape(spec.title)}</h2><table><thead><tr>{head}</tr></thead>"
+        f"<tbody>{body}</tbody></table>{note}"
+    )
+
+
+def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> dict[str, bytes]:
+    """Render the report's figures; returns name -> PNG or GIF bytes."""
+    from tobitkf import plots
+
+    raw = np.asarray(inp.raw.positions, dtype=float)
+    names = list(inp.methods)
+    reference = (
+        inp.truth
+        if inp.truth is not None
+        else (np.asarray(inp.methods[names[0]].positions) if names else raw)
+    )
+    mask = glitch_mask(raw, reference)
+    times = np.asarray(inp.raw.times(), dtype=float)
+    figures: dict[str, bytes] = dict(inp.figures)
+    joint_names = list(inp.raw.joint_names)
+    for j in pick_joints(mask, raw, n_joints):
+        series: dict[str, np.ndarray] = {"raw": raw[:, j]}
+        for name in names:
+            series[name] = np.asarray(inp.methods[name].positions, float)[:, j]
+        if inp.truth is not None and np.isfinite(inp.truth[:, j]).any():
+            series["truth"] = inp.truth[:, j]
+        fig = plots.plot_joint_traces(
+            times, series, title=f"{joint_names[j]}", shade=plots.episodes(mask[:, j])
+        )
+        figures[f"traces_{joint_names[j]}.png"] = plots.figure_to_png(fig)
+
+    # skeletons before, during and after the worst glitch
+    err = np.linalg.norm(raw - reference, axis=-1)
+    worst = int(np.nanargmax(np.nan_to_num(err, nan=-1.0).max(axis=1))) if raw.size else 0
+    T = raw.shape[0]
+    cols = sorted({max(0, worst - 10), worst, min(T - 1, worst + 10)})
+    frames: dict[str, np.ndarray] = {"raw": raw}
+    for name in names:
+        frames[name] = np.asarray(inp.methods[name].positions, float)
+    if inp.truth is not None:
+        frames["truth"] = inp.truth
+    parents = list(inp.raw.topology.parents)
+    up = int(getattr(inp.raw.topology, "up_axis", 1))
+    fig = plots.plot_skeleton_frames(
+        frames,
+        cols,
+        parents,
+        up_axis=up,
+        frame_labels=[f"frame {c}" + (" (worst)" if c == worst else "") for c in cols],
+        title="skeletons around the worst glitch",
+    )
+    figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
+
+    if gif and names:
+        anim = {"raw": raw, names[0]: frames[names[0]]}
+        if inp.truth is not None:
+            anim["truth"] = inp.truth
+        with tempfile.TemporaryDirectory() as tmp:
+            path = plots.animate_skeletons(
+                anim, parents, Path(tmp) / "anim.gif", fps=float(inp.raw.fps or 30.0), up_axis=up
+            )
+            figures["animation.gif"] = path.read_bytes()
+    return figures
+
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.5em 0 1em}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;font-size:0.9em}
+th:first-child,td:first-child{text-align:left}
+th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
+.note{color:#555;font-size:0.9em}
+"""
+
+
+def render_html(inp: ReportInput, figures: Mapping[str, bytes]) -> str:
+    """The report page as one HTML string with embedded figures."""
+    from tobitkf.plots import png_data_uri
+
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        f"<title>{html.escape(inp.title)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(inp.title)}</h1>",
+    ]
+    for note in inp.notes:
+        parts.append(f"<p>{html.escape(note)}</p>")
+    for spec in inp.tables:
+        parts.append(_table_html(spec))
+    parts.append("<h2>Figures</h2>")
+    for name, data in figures.items():
+        mime = "image/gif" if name.endswith(".gif") else "image/png"
+        parts.append(
+            f"<figure><img alt='{html.escape(name)}' src='{png_data_uri(data, mime)}'>"
+            f"<figcaption class='note'>{html.escape(name)}</figcaption></figure>"
+        )
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def write_report(inp: ReportInput, path: str | Path, *, gif: bool = True) -> Path:
+    """Render figures and write the self-contained HTML report to ``path``."""
+    figures = make_figures(inp, gif=gif)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.part")
+    tmp.write_text(render_html(inp, figures), encoding="utf-8")
+    tmp.replace(path)
+    return path

@@ -1,0 +1,61 @@
+"""Figures render to real, non-empty images; glitch episodes are found exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("matplotlib")
+
+from tobitkf import plots
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def test_episodes_examples():
+    assert plots.episodes(np.array([0, 1, 1, 0, 0, 1], bool)) == [(1, 3), (5, 6)]
+    assert plots.episodes(np.zeros(4, bool)) == []
+    assert plots.episodes(np.ones(3, bool)) == [(0, 3)]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.booleans(), max_size=60))
+def test_episodes_cover_exactly_the_true_frames(bits):
+    mask = np.array(bits, dtype=bool)
+    rebuilt = np.zeros_like(mask)
+    eps = plots.episodes(mask)
+    for start, stop in eps:
+        assert start < stop
+        rebuilt[start:stop] = True
+    assert np.array_equal(rebuilt, mask)
+    # runs are maximal: consecutive episodes never touch
+    assert all(b[0] > a[1] for a, b in zip(eps, eps[1:]))
+
+
+def test_traces_and_skeleton_figures_are_png(tmp_path):
+    T = 40
+    t = np.arange(T) / 30
+    raw = np.stack([np.sin(t), np.cos(t), t], axis=1)
+    fig = plots.plot_joint_traces(
+        t, {"raw": raw, "atkf": raw * 0.9, "truth": raw}, shade=[(5, 9)], title="HandRight"
+    )
+    png = plots.figure_to_png(fig)
+    assert png.startswith(PNG_MAGIC) and len(png) > 5000
+
+    parents = [-1, 0, 1]
+    pos = np.random.default_rng(0).normal(size=(T, 3, 3))
+    fig = plots.plot_skeleton_frames({"raw": pos, "kf": pos}, [0, 10, 20], parents)
+    assert plots.figure_to_png(fig).startswith(PNG_MAGIC)
+
+
+def test_animation_is_a_gif_with_frames(tmp_path):
+    from PIL import Image
+
+    T = 30
+    pos = np.cumsum(np.random.default_rng(1).normal(scale=0.01, size=(T, 3, 3)), axis=0)
+    out = plots.animate_skeletons({"raw": pos, "atkf": pos}, [-1, 0, 1], tmp_path / "a.gif", step=3)
+    with Image.open(out) as im:
+        assert im.format == "GIF"
+        assert getattr(im, "n_frames", 1) == len(range(0, T, 3))
