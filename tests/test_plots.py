@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -31,7 +33,7 @@ def test_episodes_cover_exactly_the_true_frames(bits):
         rebuilt[start:stop] = True
     assert np.array_equal(rebuilt, mask)
     # runs are maximal: consecutive episodes never touch
-    assert all(b[0] > a[1] for a, b in zip(eps, eps[1:]))
+    assert all(b[0] > a[1] for a, b in itertools.pairwise(eps))
 
 
 def test_traces_and_skeleton_figures_are_png(tmp_path):
