@@ -1,0 +1,474 @@
+"""Baseline smoothers people use on skeleton tracks today.
+
+Pure array functions over time-first arrays ``x`` of shape ``(T, *batch, d)`` (a 1-D
+``(T,)`` series is accepted too and returned with the same shape). NaN marks a missing
+sample. Nothing here knows about skeleton files; :mod:`tobitkf.skeleton.smooth` wires
+these into :func:`tobitkf.smooth`.
+
+- :func:`savgol`: Savitzky–Golay filter along time (``scipy.signal.savgol_filter``).
+- :func:`one_euro`: the 1€ filter (Casiez, Roussel, Vogel, CHI 2012).
+- :func:`kinect_double_exponential`: the Kinect SDK joint filter (Holt double
+  exponential smoothing with jitter radius and maximum-deviation clamping), as in the
+  SDK sample ``KinectJointFilter`` and the "Skeletal Joint Smoothing" white paper.
+- :func:`moving_average`: centred or trailing box filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.signal import savgol_filter
+
+__all__ = [
+    "KINECT_PRESETS",
+    "kinect_double_exponential",
+    "moving_average",
+    "one_euro",
+    "savgol",
+]
+
+#: Kinect SDK smoothing presets: (smoothing, correction, prediction, jitter_radius,
+#: max_deviation_radius). "default" is the SDK v1 default (``NUI_TRANSFORM_SMOOTH_PARAMETERS``
+#: defaults); "v2_sample" the values used by the Kinect v2 ``KinectJointFilter`` sample.
+KINECT_PRESETS: dict[str, dict[str, float]] = {
+    "default": {
+        "smoothing": 0.5,
+        "correction": 0.5,
+        "prediction": 0.5,
+        "jitter_radius": 0.05,
+        "max_deviation_radius": 0.04,
+    },
+    "v2_sample": {
+        "smoothing": 0.25,
+        "correction": 0.25,
+        "prediction": 0.25,
+        "jitter_radius": 0.03,
+        "max_deviation_radius": 0.05,
+    },
+}
+
+_INFERRED = 1  # TrackingState.INFERRED
+_NOT_TRACKED = 0  # TrackingState.NOT_TRACKED
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _as_series(x: ArrayLike, name: str = "x") -> tuple[NDArray[np.float64], tuple[int, ...]]:
+    """Return ``x`` as float ``(T, *batch, d)`` (1-D input becomes ``(T, 1)``) and its shape."""
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim == 0:
+        raise ValueError(f"{name} must have a leading time axis, got a scalar")
+    shape = arr.shape
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.shape[0] == 0:
+        raise ValueError(f"{name} has no frames (shape {shape})")
+    return arr, shape
+
+
+def _positive_int(window: int, name: str = "window") -> int:
+    if int(window) != window or window < 1:
+        raise ValueError(f"{name} must be a positive integer, got {window!r}")
+    return int(window)
+
+
+def _time_steps(
+    n_frames: int, fps: float | None, timestamps: ArrayLike | None
+) -> NDArray[np.float64]:
+    """Return the time of each frame ``(T,)`` in seconds from ``timestamps`` or ``fps``."""
+    if timestamps is not None:
+        t = np.asarray(timestamps, dtype=float)
+        if t.shape != (n_frames,):
+            raise ValueError(f"timestamps must have shape ({n_frames},), got {t.shape}")
+        if not np.all(np.isfinite(t)):
+            raise ValueError("timestamps must be finite")
+        if n_frames > 1 and np.any(np.diff(t) <= 0):
+            k = int(np.argmax(np.diff(t) <= 0))
+            raise ValueError(
+                f"timestamps must be strictly increasing; frame {k + 1} ({t[k + 1]!r} s) "
+                f"is not after frame {k} ({t[k]!r} s)"
+            )
+        return t
+    if fps is None:
+        raise ValueError("give fps or timestamps")
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a positive number, got {fps!r}")
+    return np.arange(n_frames, dtype=float) / float(fps)
+
+
+# --------------------------------------------------------------------------- Savitzky–Golay
+
+
+def savgol(
+    x: ArrayLike,
+    window: int = 9,
+    polyorder: int = 3,
+    *,
+    max_gap: int | None = None,
+) -> NDArray[np.float64]:
+    """Savitzky–Golay smoothing along time, NaN-aware.
+
+    Each series (one column of the flattened batch) is filtered over the span between
+    its first and last finite sample. Interior gaps are linearly interpolated before
+    filtering, so their output is an estimate; NaN is restored where nothing could be
+    estimated: before the first and after the last finite sample, in gaps longer than
+    ``max_gap`` frames (when given), and in series with fewer than ``polyorder + 1``
+    finite samples. When a span is shorter than ``window`` the window shrinks to the
+    largest odd length that fits (and exceeds ``polyorder``).
+
+    The filter works on sample index: it assumes (approximately) uniform sampling.
+    Edges use ``mode="interp"`` (polynomial fit to the first / last window), so a
+    polynomial of degree ``<= polyorder`` passes through unchanged.
+
+    Parameters
+    ----------
+    x : array_like, shape (T, *batch, d) or (T,)
+    window : int
+        Odd window length in frames (``> polyorder``).
+    polyorder : int
+        Degree of the local polynomial.
+    max_gap : int, optional
+        Gaps (runs of NaN) longer than this many frames stay NaN in the output.
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+    """
+    arr, shape = _as_series(x)
+    window = _positive_int(window)
+    if window % 2 == 0:
+        raise ValueError(f"window must be odd, got {window}")
+    if int(polyorder) != polyorder or polyorder < 0:
+        raise ValueError(f"polyorder must be a non-negative integer, got {polyorder!r}")
+    if polyorder >= window:
+        raise ValueError(f"polyorder ({polyorder}) must be less than window ({window})")
+    T = arr.shape[0]
+    flat = arr.reshape(T, -1)
+    out = np.full_like(flat, np.nan)
+    finite = np.isfinite(flat)
+    idx = np.arange(T)
+    # group columns by their finite span so that complete columns go through one call
+    groups: dict[tuple[int, int], list[int]] = {}
+    for col in range(flat.shape[1]):
+        valid = np.flatnonzero(finite[:, col])
+        if valid.size < polyorder + 1:
+            continue
+        groups.setdefault((int(valid[0]), int(valid[-1])), []).append(col)
+    for (first, last), cols in groups.items():
+        seg = flat[first : last + 1, cols].copy()
+        seg_finite = finite[first : last + 1, cols]
+        seg_idx = idx[first : last + 1]
+        for c in np.flatnonzero(~seg_finite.all(axis=0)):
+            ok = seg_finite[:, c]
+            seg[~ok, c] = np.interp(seg_idx[~ok], seg_idx[ok], seg[ok, c])
+        n = last - first + 1
+        w = min(window, n if n % 2 == 1 else n - 1)
+        if w <= polyorder:
+            continue
+        out[first : last + 1, cols] = savgol_filter(seg, w, polyorder, axis=0, mode="interp")
+    if max_gap is not None:
+        long_gap = _long_gaps(finite, int(max_gap))
+        out[long_gap] = np.nan
+    return out.reshape(shape)
+
+
+def _long_gaps(finite: NDArray[np.bool_], max_gap: int) -> NDArray[np.bool_]:
+    """Mask of missing samples ``(T, m)`` that belong to runs longer than ``max_gap``."""
+    T, m = finite.shape
+    mask = np.zeros((T, m), dtype=bool)
+    for c in range(m):
+        miss = ~finite[:, c]
+        if not miss.any():
+            continue
+        edges = np.diff(np.concatenate([[0], miss.astype(np.int8), [0]]))
+        starts = np.flatnonzero(edges == 1)
+        ends = np.flatnonzero(edges == -1)
+        for s, e in zip(starts, ends, strict=True):
+            if e - s > max_gap:
+                mask[s:e, c] = True
+    return mask
+
+
+# --------------------------------------------------------------------------- moving average
+
+
+def moving_average(x: ArrayLike, window: int = 5, centered: bool = True) -> NDArray[np.float64]:
+    """Box-filter moving average along time, NaN-aware.
+
+    Each output sample is the mean of the finite samples inside its window: frames
+    ``k - h .. k + h`` (``h = window // 2``) when ``centered`` (use an odd window), or
+    ``k - window + 1 .. k`` (causal, trailing) otherwise. The window is truncated at the
+    ends of the series. The output is NaN only where the window holds no finite sample.
+
+    Parameters
+    ----------
+    x : array_like, shape (T, *batch, d) or (T,)
+    window : int
+        Window length in frames.
+    centered : bool
+        Centred (offline) or trailing (causal) window.
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+    """
+    arr, shape = _as_series(x)
+    window = _positive_int(window)
+    if centered and window % 2 == 0:
+        raise ValueError(f"a centred moving average needs an odd window, got {window}")
+    T = arr.shape[0]
+    finite = np.isfinite(arr)
+    vals = np.where(finite, arr, 0.0)
+    zeros = np.zeros((1, *arr.shape[1:]))
+    csum = np.concatenate([zeros, np.cumsum(vals, axis=0)])
+    ccount = np.concatenate([zeros, np.cumsum(finite, axis=0, dtype=float)])
+    k = np.arange(T)
+    if centered:
+        lo = np.clip(k - window // 2, 0, T)
+        hi = np.clip(k + window // 2 + 1, 0, T)
+    else:
+        lo = np.clip(k - window + 1, 0, T)
+        hi = k + 1
+    total = csum[hi] - csum[lo]
+    count = ccount[hi] - ccount[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
+    return out.reshape(shape)
+
+
+# --------------------------------------------------------------------------- 1€ filter
+
+
+def _one_euro_alpha(cutoff: NDArray[np.float64], te: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Smoothing factor ``alpha = 1 / (1 + tau / Te)``, ``tau = 1 / (2 pi fc)`` (Casiez 2012)."""
+    tau = 1.0 / (2.0 * np.pi * cutoff)
+    return 1.0 / (1.0 + tau / te)
+
+
+def one_euro(
+    x: ArrayLike,
+    fps: float = 30.0,
+    *,
+    timestamps: ArrayLike | None = None,
+    mincutoff: float = 1.0,
+    beta: float = 0.0,
+    dcutoff: float = 1.0,
+) -> NDArray[np.float64]:
+    """The 1€ filter (Casiez, Roussel, Vogel 2012), vectorised over the batch.
+
+    Each scalar component is filtered independently, exactly as in the paper's
+    pseudo-code. With ``Te`` the time since the previous (filtered) sample::
+
+        alpha(fc) = 1 / (1 + tau / Te),  tau = 1 / (2 pi fc)
+        dx_k      = (x_k - x̂_{k-1}) / Te             (0 at the first sample)
+        dx̂_k      = alpha(dcutoff) dx_k + (1 - alpha(dcutoff)) dx̂_{k-1}
+        fc        = mincutoff + beta |dx̂_k|
+        x̂_k       = alpha(fc) x_k + (1 - alpha(fc)) x̂_{k-1}
+
+    The first finite sample of each component initialises ``x̂ = x`` and ``dx̂ = 0``.
+
+    Missing samples (NaN) hold: the output repeats the last estimate and the filter
+    state is left untouched, so at the next finite sample ``Te`` is the whole time
+    elapsed since the last finite one (the 1€ filter has no motion model to predict
+    with beyond its derivative estimate; holding is its standard behaviour). Output
+    before a component's first finite sample is NaN.
+
+    Parameters
+    ----------
+    x : array_like, shape (T, *batch, d) or (T,)
+    fps : float
+        Frame rate in Hz, used when ``timestamps`` is not given (``Te = 1 / fps``).
+    timestamps : array_like, shape (T,), optional
+        Frame times in seconds (strictly increasing); per-step ``Te`` is their difference.
+    mincutoff : float
+        Minimum cutoff frequency in Hz (> 0).
+    beta : float
+        Speed coefficient (>= 0).
+    dcutoff : float
+        Cutoff frequency in Hz of the derivative filter (> 0).
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+    """
+    arr, shape = _as_series(x)
+    for name, value in (("mincutoff", mincutoff), ("dcutoff", dcutoff)):
+        if not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} must be a positive number of Hz, got {value!r}")
+    if not np.isfinite(beta) or beta < 0:
+        raise ValueError(f"beta must be >= 0, got {beta!r}")
+    T = arr.shape[0]
+    t = _time_steps(T, fps, timestamps)
+    out = np.full_like(arr, np.nan)
+    xhat = np.full(arr.shape[1:], np.nan)
+    dxhat = np.zeros(arr.shape[1:])
+    t_prev = np.full(arr.shape[1:], np.nan)
+    started = np.zeros(arr.shape[1:], dtype=bool)
+    for k in range(T):
+        xk = arr[k]
+        ok = np.isfinite(xk)
+        first = ok & ~started
+        upd = ok & started
+        # first finite sample: x̂ = x, dx̂ = 0
+        xhat = np.where(first, xk, xhat)
+        t_prev = np.where(first, t[k], t_prev)
+        if upd.any():
+            te = np.where(upd, t[k] - t_prev, 1.0)
+            dx = np.where(upd, (xk - xhat) / te, 0.0)
+            a_d = _one_euro_alpha(np.asarray(dcutoff, dtype=float), te)
+            new_dxhat = a_d * dx + (1.0 - a_d) * dxhat
+            fc = mincutoff + beta * np.abs(new_dxhat)
+            a = _one_euro_alpha(fc, te)
+            new_xhat = a * np.where(upd, xk, 0.0) + (1.0 - a) * np.where(upd, xhat, 0.0)
+            xhat = np.where(upd, new_xhat, xhat)
+            dxhat = np.where(upd, new_dxhat, dxhat)
+            t_prev = np.where(upd, t[k], t_prev)
+        started |= ok
+        out[k] = xhat
+    return out.reshape(shape)
+
+
+# --------------------------------------------------------------------------- Kinect SDK filter
+
+
+def kinect_double_exponential(
+    x: ArrayLike,
+    smoothing: float | None = None,
+    correction: float | None = None,
+    prediction: float | None = None,
+    jitter_radius: float | None = None,
+    max_deviation_radius: float | None = None,
+    tracking_state: ArrayLike | None = None,
+    *,
+    preset: str = "default",
+) -> NDArray[np.float64]:
+    """Kinect SDK joint filter: Holt double exponential smoothing with jitter removal.
+
+    A transcription of the SDK sample ``FilterDoubleExponential`` (``KinectJointFilter``),
+    vectorised over joints. Per joint, with ``r`` the raw 3-D position, ``f`` the filtered
+    position, ``b`` the trend and ``‖·‖`` the Euclidean norm over the last axis:
+
+    - frame 1 after a (re)start: ``f = r``, ``b = 0``;
+    - frame 2: ``f = (r + r_prev) / 2``, ``b = c (f - f_prev) + (1 - c) b_prev``;
+    - later: jitter filter ``f' = r`` if ``‖r - f_prev‖ > J`` else
+      ``f' = (d/J) r + (1 - d/J) f_prev`` with ``d = ‖r - f_prev‖``; then
+      ``f = (1 - s) f' + s (f_prev + b_prev)`` and ``b = c (f - f_prev) + (1 - c) b_prev``;
+    - output ``p = f + P b``, pulled back towards ``r`` so that ``‖p - r‖ <= M``:
+      if ``e = ‖p - r‖ > M``, ``p = (M/e) p + (1 - M/e) r``.
+
+    ``s, c, P, J, M`` = smoothing, correction, prediction, jitter radius (clamped to at
+    least 0.1 mm as in the SDK), maximum deviation radius. The filter counts frames, not
+    seconds: like the SDK it assumes the sensor's native rate.
+
+    Tracking state (as in the SDK): INFERRED joints use ``2 J`` and ``2 M``. The SDK
+    resets a joint's filter when its position is invalid (the sensor reports zeros);
+    here a joint whose position has a NaN, or whose state is NOT_TRACKED, is invalid:
+    its filter is reset and the output for that frame is the raw input (NaN stays NaN),
+    as the SDK passes the invalid position through. One deliberate deviation: the SDK
+    stores the invalid (zero) position as the "previous raw" sample, so its next valid
+    frame is averaged with the origin (``f = (r + 0) / 2``), a jump halfway to the
+    sensor. Here the next valid frame simply restarts the filter (``f = r``).
+
+    Parameters
+    ----------
+    x : array_like, shape (T, *batch, 3)
+        Joint positions in metres (any last-axis size works; the norm is over it).
+    smoothing, correction, prediction, jitter_radius, max_deviation_radius : float, optional
+        Override the preset's values.
+    tracking_state : array_like of int, shape (T, *batch), optional
+        0 = NOT_TRACKED, 1 = INFERRED, 2 = TRACKED (None: all tracked).
+    preset : {"default", "v2_sample"}
+        "default" = (0.5, 0.5, 0.5, 0.05, 0.04), "v2_sample" = (0.25, 0.25, 0.25, 0.03, 0.05).
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+    """
+    if preset not in KINECT_PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; valid presets: {sorted(KINECT_PRESETS)}")
+    p = dict(KINECT_PRESETS[preset])
+    for name, value in (
+        ("smoothing", smoothing),
+        ("correction", correction),
+        ("prediction", prediction),
+        ("jitter_radius", jitter_radius),
+        ("max_deviation_radius", max_deviation_radius),
+    ):
+        if value is not None:
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+            p[name] = float(value)
+    for name in ("smoothing", "correction"):
+        if p[name] > 1:
+            raise ValueError(f"{name} must be in [0, 1], got {p[name]!r}")
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim < 2:
+        raise ValueError(f"x must have shape (T, *batch, 3), got {arr.shape}")
+    T = arr.shape[0]
+    batch = arr.shape[1:-1]
+    if tracking_state is None:
+        state = np.full((T, *batch), 2, dtype=np.int8)
+    else:
+        state = np.asarray(tracking_state)
+        if state.shape != (T, *batch):
+            raise ValueError(
+                f"tracking_state must have shape {(T, *batch)} to match x {arr.shape}, "
+                f"got {state.shape}"
+            )
+    s, c, pred = p["smoothing"], p["correction"], p["prediction"]
+    jitter0 = max(1e-4, p["jitter_radius"])
+    maxdev0 = p["max_deviation_radius"]
+
+    out = np.empty_like(arr)
+    f_prev = np.zeros(batch + arr.shape[-1:])
+    b_prev = np.zeros_like(f_prev)
+    r_prev = np.zeros_like(f_prev)
+    count = np.zeros(batch, dtype=np.int64)
+    for k in range(T):
+        r = arr[k]
+        valid = np.all(np.isfinite(r), axis=-1) & (state[k] != _NOT_TRACKED)
+        inferred = state[k] == _INFERRED
+        jit = np.where(inferred, 2.0 * jitter0, jitter0)[..., None]
+        mdev = np.where(inferred, 2.0 * maxdev0, maxdev0)
+        count = np.where(valid, count, 0)
+        rr = np.where(valid[..., None], r, 0.0)
+        # frame 1: start
+        f0 = rr
+        b0 = np.zeros_like(rr)
+        # frame 2
+        f1 = 0.5 * (rr + r_prev)
+        b1 = c * (f1 - f_prev) + (1.0 - c) * b_prev
+        # later frames: jitter filter then double exponential
+        d = np.linalg.norm(rr - f_prev, axis=-1, keepdims=True)
+        w = d / jit
+        fj = np.where(d <= jit, w * rr + (1.0 - w) * f_prev, rr)
+        f2 = (1.0 - s) * fj + s * (f_prev + b_prev)
+        b2 = c * (f2 - f_prev) + (1.0 - c) * b_prev
+        c0 = (count == 0)[..., None]
+        c1 = (count == 1)[..., None]
+        f = np.where(c0, f0, np.where(c1, f1, f2))
+        b = np.where(c0, b0, np.where(c1, b1, b2))
+        pk = f + pred * b
+        e = np.linalg.norm(pk - rr, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(e > mdev, mdev / np.where(e > 0, e, 1.0), 1.0)[..., None]
+        pk = np.where(ratio < 1.0, ratio * pk + (1.0 - ratio) * rr, pk)
+        out[k] = np.where(valid[..., None], pk, r)
+        r_prev = np.where(valid[..., None], rr, r_prev)
+        f_prev = np.where(valid[..., None], f, f_prev)
+        b_prev = np.where(valid[..., None], b, b_prev)
+        count = np.where(valid, count + 1, 0)
+    return out
+
+
+#: name -> function, for callers that dispatch on a string
+BASELINES: dict[str, Callable[..., Any]] = {
+    "savgol": savgol,
+    "one_euro": one_euro,
+    "kinect": kinect_double_exponential,
+    "moving_average": moving_average,
+}
