@@ -1,0 +1,684 @@
+"""Plain Kalman filter, the shared run loop of all filters, and the RTS smoother.
+
+Every filter (KF, TKF, TKF^c, ATKF) is one *step function* (:func:`filter_step`) applied
+frame by frame: predict, (adaptive limits), update. The batch functions loop over time
+and call exactly the same step function as :class:`tobitkf.streaming.StreamingFilter`,
+so the two cannot diverge.
+
+Two numerical paths
+-------------------
+*General*: states ``x (*batch, n)``, covariances ``P (*batch, n, n)``, updates solved with
+``np.linalg.solve`` on stacked matrices (no explicit inverse), covariances symmetrised after
+every update (no Joseph form: the update ``P = P⁻ - K Pxyᵀ`` is the Schur complement of a
+valid joint covariance, and symmetrising removes the round-off asymmetry).
+
+*Diagonal (per axis)*: when A, H, Q, R, P0 (and every A_seq, Q_seq, R_seq) are diagonal and
+n == p, each axis is an independent scalar filter: everything is elementwise over
+``(*batch, p)`` and only the variances ``(*batch, n)`` are carried. Both paths give the same
+numbers (to round-off); pass ``diagonal=False`` to force the general one.
+
+Missing data: a NaN measurement component is unobserved. In the general path its row and
+column of Pyy are replaced by those of the identity and its innovation and cross-covariance
+column by zeros, which is exactly the update with that component removed; the other
+components of the step are still used. A fully missing step is a pure prediction.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tobitkf.model import FilterResult, LinearGaussian, SmootherResult, check_covariance
+
+__all__ = [
+    "KF",
+    "Method",
+    "StepModel",
+    "StepOutput",
+    "UpdateOut",
+    "filter_step",
+    "kalman_filter",
+    "make_step_model",
+    "rts_smooth",
+    "run_filter",
+]
+
+Array = NDArray[np.float64]
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+# --------------------------------------------------------------------------------------
+# per-step containers
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StepModel:
+    """Model matrices used in one step.
+
+    Diagonal path: ``A, Q, H`` have shape (n,) (the diagonals) and ``R`` (p,) or
+    (*batch, p) (R_scale applied). General path: ``A (n, n)``, ``Q (n, n)``, ``H (p, n)``,
+    ``R (p, p)`` or ``(*batch, p, p)``. ``a_identity``: A is exactly the identity (enables
+    the symmetric fast path of the adaptive filter).
+    """
+
+    A: Array
+    Q: Array
+    H: Array
+    R: Array
+    diagonal: bool
+    a_identity: bool
+
+
+@dataclass(frozen=True)
+class UpdateOut:
+    """Result of a measurement update (one step).
+
+    ``x (*batch, n)``, ``P`` (*batch, n, n) or variances (*batch, n) on the diagonal
+    path; ``loglik (*batch)``; ``p_lower, p_uncensored, p_upper (*batch, p)`` or None
+    (plain KF: 0, 1, 0); ``clipped (*batch, p)`` bool or None; ``gain`` K, (*batch, n, p)
+    or (*batch, p) on the diagonal path (missing components have zero gain).
+    """
+
+    x: Array
+    P: Array
+    loglik: Array
+    p_lower: Array | None
+    p_uncensored: Array | None
+    p_upper: Array | None
+    clipped: NDArray[np.bool_] | None
+    gain: Array
+
+
+UpdateFn = Callable[..., UpdateOut]
+
+
+@dataclass(frozen=True)
+class Method:
+    """A filter: its update function and whether its limits are adaptive (ATKF).
+
+    ``update(xp, Pp, y, sm, lower, upper, c) -> UpdateOut``; ``clip``: clip y to the
+    limits before the update (the Tobit filters); ``adaptive``: limits H x̂_{k-1} ± c and a
+    plain KF update at the first step (Algorithm 2 of the 2020 paper).
+    """
+
+    name: str
+    update: UpdateFn
+    clip: bool = False
+    adaptive: bool = False
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    """Everything one :func:`filter_step` produces (shapes as in :class:`FilterResult`)."""
+
+    x_pred: Array
+    P_pred: Array
+    lower: Array
+    upper: Array
+    update: UpdateOut
+
+
+# --------------------------------------------------------------------------------------
+# predict / KF update
+# --------------------------------------------------------------------------------------
+def predict(x: Array, P: Array, sm: StepModel) -> tuple[Array, Array]:
+    """Prediction x⁻ = A x, P⁻ = A P Aᵀ + Q (Algorithm 1, lines 6-7).
+
+    Diagonal path: elementwise, P holds variances (*batch, n).
+    """
+    if sm.diagonal:
+        if sm.a_identity:
+            return x, P + sm.Q
+        return sm.A * x, sm.A * sm.A * P + sm.Q
+    if sm.a_identity:
+        return x, P + sm.Q
+    xp = x @ sm.A.T
+    Pp = sm.A @ P @ sm.A.T + sm.Q
+    return xp, 0.5 * (Pp + np.swapaxes(Pp, -1, -2))
+
+
+def observed_mask(y: Array) -> tuple[NDArray[np.bool_], bool]:
+    """``(obs, all_observed)``: obs = ~isnan(y)."""
+    obs = ~np.isnan(y)
+    return obs, bool(obs.all())
+
+
+def gain_update_general(
+    xp: Array, Pp: Array, Pxy: Array, Pyy: Array, e: Array, obs: NDArray[np.bool_], full: bool
+) -> tuple[Array, Array, Array, Array]:
+    """Generic linear update x = x⁻ + K e, P = P⁻ - K Pxyᵀ with K = Pxy Pyy⁻¹.
+
+    Parameters
+    ----------
+    xp : (*batch, n); Pp : (*batch, n, n); Pxy : (*batch, n, p); Pyy : (*batch, p, p);
+    e : (*batch, p) innovation (NaN where unobserved); obs : (*batch, p) observed mask;
+    full : all components observed (skips the masking).
+
+    Returns
+    -------
+    x (*batch, n), P (*batch, n, n) symmetrised, K (*batch, n, p), w = Pyy⁻¹ e (*batch, p).
+    Unobserved components: their row/column of Pyy is replaced by the identity's and their
+    Pxy column and innovation by zeros (exactly the update without them).
+    """
+    n = xp.shape[-1]
+    p = e.shape[-1]
+    if not full:
+        both = obs[..., :, None] & obs[..., None, :]
+        Pyy = np.where(both, Pyy, 0.0)
+        idx = np.arange(p)
+        Pyy[..., idx, idx] += ~obs
+        Pxy = Pxy * obs[..., None, :]
+        e = np.where(obs, e, 0.0)
+    batch = np.broadcast_shapes(Pyy.shape[:-2], Pxy.shape[:-2], e.shape[:-1])
+    Pyy = np.broadcast_to(Pyy, (*batch, p, p))
+    rhs = np.concatenate(
+        [
+            np.broadcast_to(np.swapaxes(Pxy, -1, -2), (*batch, p, n)),
+            np.broadcast_to(e[..., None], (*batch, p, 1)),
+        ],
+        axis=-1,
+    )
+    sol = np.linalg.solve(Pyy, rhs)
+    Kt = sol[..., :n]
+    w = sol[..., n]
+    x = xp + np.einsum("...np,...p->...n", Pxy, w)
+    P = Pp - Pxy @ Kt
+    P = 0.5 * (P + np.swapaxes(P, -1, -2))
+    return x, P, np.swapaxes(Kt, -1, -2), w
+
+
+def _kf_update_diag(
+    xp: Array, vp: Array, y: Array, sm: StepModel, lower: Any, upper: Any, c: Any
+) -> UpdateOut:
+    h, r = sm.H, sm.R
+    m = h * xp
+    Pxy = h * vp
+    S = h * Pxy + r
+    K = Pxy / S
+    e = y - m
+    obs, full = observed_mask(y)
+    if not full:
+        e = np.where(obs, e, 0.0)
+        K = np.where(obs, K, 0.0)
+    x = xp + K * e
+    v = vp - K * Pxy
+    terms = np.log(S) + e * e / S + _LOG_2PI
+    if not full:
+        terms = np.where(obs, terms, 0.0)
+    ll = -0.5 * terms.sum(axis=-1)
+    return UpdateOut(x, v, ll, None, None, None, None, K)
+
+
+def _kf_update_general(
+    xp: Array, Pp: Array, y: Array, sm: StepModel, lower: Any, upper: Any, c: Any
+) -> UpdateOut:
+    H = sm.H
+    m = xp @ H.T
+    HP = H @ Pp
+    S = HP @ H.T + sm.R
+    S = 0.5 * (S + np.swapaxes(S, -1, -2))
+    Pxy = np.swapaxes(HP, -1, -2)
+    obs, full = observed_mask(y)
+    e = y - m
+    x, P, K, w = gain_update_general(xp, Pp, Pxy, S, e, obs, full)
+    # log N(y_obs; m_obs, S_obs): logdet of the masked Pyy equals logdet S_obs
+    if not full:
+        both = obs[..., :, None] & obs[..., None, :]
+        S = np.where(both, S, 0.0)
+        idx = np.arange(S.shape[-1])
+        S[..., idx, idx] += ~obs
+        e = np.where(obs, e, 0.0)
+    _, logdet = np.linalg.slogdet(S)
+    k = obs.sum(axis=-1)
+    ll = -0.5 * (k * _LOG_2PI + logdet + np.sum(e * w, axis=-1))
+    return UpdateOut(x, P, ll, None, None, None, None, K)
+
+
+def kf_update(
+    xp: Array,
+    Pp: Array,
+    y: Array,
+    sm: StepModel,
+    lower: Any = None,
+    upper: Any = None,
+    c: Any = None,
+) -> UpdateOut:
+    """Kalman-filter measurement update (MATH.md §3, row KF).
+
+    Pyy = S = H P⁻ Hᵀ + R, Pxy = P⁻ Hᵀ, E[y] = H x⁻. Log-likelihood: the Gaussian
+    log density of the observed components of the innovation, log N(y_o; m_o, S_oo)
+    (0 when nothing is observed). Limits are ignored.
+    """
+    if sm.diagonal:
+        return _kf_update_diag(xp, Pp, y, sm, lower, upper, c)
+    return _kf_update_general(xp, Pp, y, sm, lower, upper, c)
+
+
+KF = Method("kf", kf_update)
+
+
+# --------------------------------------------------------------------------------------
+# one step of any filter
+# --------------------------------------------------------------------------------------
+def filter_step(
+    method: Method,
+    first: bool,
+    x: Array,
+    P: Array,
+    y: Array,
+    sm: StepModel,
+    lower: Array,
+    upper: Array,
+    c: Array | None = None,
+) -> StepOutput:
+    """One frame of a filter: (adaptive limits), predict, clip, update.
+
+    Parameters
+    ----------
+    method : Method
+    first : bool
+        First frame (the adaptive filter then does a plain KF update, Algorithm 2 line 6).
+    x, P : previous filtered mean (*batch, n) and covariance (*batch, n, n) / variances.
+    y : (*batch, p) reported measurement, NaN = unobserved.
+    sm : StepModel for this frame.
+    lower, upper : (*batch, p) broadcastable limits (ignored by the adaptive filter).
+    c : (*batch, p) broadcastable half-widths of the adaptive filter.
+    """
+    update = method.update
+    if method.adaptive:
+        if first:
+            lower = upper = None
+            update = kf_update
+        else:
+            centre = sm.H * x if sm.diagonal else x @ sm.H.T
+            lower = centre - c
+            upper = centre + c
+    xp, Pp = predict(x, P, sm)
+    if method.clip and lower is not None:
+        y = np.minimum(np.maximum(y, lower), upper)  # NaN stays NaN
+    out = update(xp, Pp, y, sm, lower, upper, c)
+    if lower is None:
+        lower, upper = -np.inf, np.inf
+    return StepOutput(xp, Pp, lower, upper, out)
+
+
+# --------------------------------------------------------------------------------------
+# validation and per-step model construction
+# --------------------------------------------------------------------------------------
+def _diag(M: Array) -> Array:
+    return np.ascontiguousarray(np.diagonal(M, axis1=-2, axis2=-1))
+
+
+def _all_diag(M: Array) -> bool:
+    n = M.shape[-1]
+    return not np.any(M[..., ~np.eye(n, dtype=bool)])
+
+
+def make_step_model(
+    model: LinearGaussian,
+    diagonal: bool,
+    *,
+    A: Array | None = None,
+    Q: Array | None = None,
+    R: Array | None = None,
+    R_scale: Array | None = None,
+) -> StepModel:
+    """StepModel from the model with optional per-step A, Q, R and R_scale.
+
+    R_scale (*batch, p) scales the variances of the measurement noise: R_eff = D R D with
+    D = diag(sqrt(R_scale)) (correlations kept; for a diagonal R, R_ii * R_scale_i).
+    """
+    A = model.A if A is None else A
+    Q = model.Q if Q is None else Q
+    R = model.R if R is None else R
+    H = model.H
+    a_identity = bool(np.array_equal(A, np.eye(A.shape[0])))
+    if diagonal:
+        r = _diag(R)
+        if R_scale is not None:
+            r = r * R_scale
+        return StepModel(_diag(A), _diag(Q), _diag(H), r, True, a_identity)
+    if R_scale is not None:
+        d = np.sqrt(R_scale)
+        R = R * d[..., :, None] * d[..., None, :]
+    return StepModel(A, Q, H, R, False, a_identity)
+
+
+def _check_seq(name: str, M: ArrayLike | None, T: int, shape: tuple[int, ...]) -> Array | None:
+    if M is None:
+        return None
+    arr = np.asarray(M, dtype=float)
+    if arr.shape != (T, *shape):
+        raise ValueError(f"{name}: expected shape {(T, *shape)} (time first), found {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinite entries")
+    return arr
+
+
+def _broadcast_param(
+    name: str, value: ArrayLike | None, shape: tuple[int, ...], fill: float
+) -> Array:
+    if value is None:
+        return np.full(shape, fill)
+    arr = np.asarray(value, dtype=float)
+    try:
+        return np.broadcast_to(arr, shape)
+    except ValueError:
+        raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {shape}") from None
+
+
+@dataclass
+class RunInputs:
+    """Validated inputs of a batch run (internal)."""
+
+    ys: Array
+    T: int
+    batch: tuple[int, ...]
+    diagonal: bool
+    A_seq: Array | None
+    Q_seq: Array | None
+    R_seq: Array | None
+    R_scale: Array | None
+    lower: Array  # (*batch, p) or (T, *batch, p) when seq
+    upper: Array
+    limits_seq: bool
+    c: Array | None
+    c_seq: bool
+
+
+def prepare_inputs(
+    model: LinearGaussian,
+    ys: ArrayLike,
+    *,
+    A_seq: ArrayLike | None = None,
+    Q_seq: ArrayLike | None = None,
+    R_seq: ArrayLike | None = None,
+    R_scale: ArrayLike | None = None,
+    lower: ArrayLike | None = None,
+    upper: ArrayLike | None = None,
+    lower_seq: ArrayLike | None = None,
+    upper_seq: ArrayLike | None = None,
+    c: ArrayLike | None = None,
+    c_seq: ArrayLike | None = None,
+    diagonal: bool | None = None,
+) -> RunInputs:
+    """Validate a batch call; names the argument, the expected and the found shape."""
+    if not isinstance(model, LinearGaussian):
+        raise TypeError(f"model: expected LinearGaussian, found {type(model).__name__}")
+    y = np.asarray(ys, dtype=float)
+    n, p = model.n, model.p
+    if y.ndim < 2 or y.shape[-1] != p:
+        raise ValueError(f"ys: expected shape (T, *batch, p) with p={p}, found {y.shape}")
+    if np.any(np.isinf(y)):
+        raise ValueError("ys: contains infinite values (use NaN for missing components)")
+    T = y.shape[0]
+    batch = tuple(y.shape[1:-1])
+    try:
+        np.broadcast_shapes(model.batch_shape, batch)
+        if np.broadcast_shapes(model.batch_shape, batch) != batch:
+            raise ValueError
+    except ValueError:
+        raise ValueError(
+            f"model batch shape {model.batch_shape} (x0/P0) does not broadcast to the batch "
+            f"shape {batch} of ys"
+        ) from None
+    A_s = _check_seq("A_seq", A_seq, T, (n, n))
+    Q_s = _check_seq("Q_seq", Q_seq, T, (n, n))
+    R_s = _check_seq("R_seq", R_seq, T, (p, p))
+    if Q_s is not None:
+        check_covariance("Q_seq", Q_s)
+    if R_s is not None:
+        check_covariance("R_seq", R_s, definite=True)
+    Rsc = None
+    if R_scale is not None:
+        Rsc = _broadcast_param("R_scale", R_scale, (T, *batch, p), 1.0)
+        if not np.all(np.isfinite(Rsc)) or np.any(Rsc <= 0):
+            raise ValueError("R_scale: entries must be finite and > 0")
+    full = (*batch, p)
+    if lower is not None and lower_seq is not None:
+        raise ValueError("give either lower or lower_seq, not both")
+    if upper is not None and upper_seq is not None:
+        raise ValueError("give either upper or upper_seq, not both")
+    limits_seq = lower_seq is not None or upper_seq is not None
+    if limits_seq:
+        lo = _broadcast_param(
+            "lower_seq", lower_seq if lower_seq is not None else lower, (T, *full), -np.inf
+        )
+        up = _broadcast_param(
+            "upper_seq", upper_seq if upper_seq is not None else upper, (T, *full), np.inf
+        )
+    else:
+        lo = _broadcast_param("lower", lower, full, -np.inf)
+        up = _broadcast_param("upper", upper, full, np.inf)
+    if np.any(np.isnan(lo)) or np.any(np.isnan(up)):
+        raise ValueError("lower/upper: NaN limits (use -inf / inf for no limit)")
+    if np.any(lo >= up):
+        raise ValueError("lower/upper: every lower limit must be < the upper limit")
+    if np.any(lo == np.inf) or np.any(up == -np.inf):
+        raise ValueError("lower/upper: lower = +inf or upper = -inf")
+    cc = None
+    if c is not None and c_seq is not None:
+        raise ValueError("give either c or c_seq, not both")
+    if c_seq is not None:
+        cc = _broadcast_param("c_seq", c_seq, (T, *full), np.inf)
+    elif c is not None:
+        cc = _broadcast_param("c", c, full, np.inf)
+    if cc is not None and (np.any(np.isnan(cc)) or np.any(cc <= 0)):
+        raise ValueError("c: half-widths must be > 0 (inf allowed)")
+    can_diag = (
+        model.is_diagonal
+        and (A_s is None or _all_diag(A_s))
+        and (Q_s is None or _all_diag(Q_s))
+        and (R_s is None or _all_diag(R_s))
+    )
+    if diagonal is None:
+        diagonal = can_diag
+    elif diagonal and not can_diag:
+        raise ValueError("diagonal=True needs diagonal A, H, Q, R, P0 (and A/Q/R_seq) and n == p")
+    return RunInputs(
+        y, T, batch, bool(diagonal), A_s, Q_s, R_s, Rsc, lo, up, limits_seq, cc, c_seq is not None
+    )
+
+
+def initial_state(
+    model: LinearGaussian, batch: tuple[int, ...], diagonal: bool
+) -> tuple[Array, Array]:
+    """x0 (*batch, n) and P0 (*batch, n, n) / variances (*batch, n), writable copies."""
+    n = model.n
+    x = np.broadcast_to(model.x0, (*batch, n)).copy()
+    if diagonal:
+        P = np.broadcast_to(_diag(model.P0), (*batch, n)).copy()
+    else:
+        P = np.broadcast_to(model.P0, (*batch, n, n)).copy()
+    return x, P
+
+
+# --------------------------------------------------------------------------------------
+# the batch run loop
+# --------------------------------------------------------------------------------------
+def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterResult:
+    """Run ``method`` over all frames of validated inputs; returns a FilterResult."""
+    T, batch, diagonal = inp.T, inp.batch, inp.diagonal
+    n, p = model.n, model.p
+    ys = inp.ys
+    cov_shape = (T, *batch, n) if diagonal else (T, *batch, n, n)
+    means = np.empty((T, *batch, n))
+    pmeans = np.empty((T, *batch, n))
+    covs = np.empty(cov_shape)
+    pcovs = np.empty(cov_shape)
+    loglik = np.empty((T, *batch))
+    full = (*batch, p)
+    censoring = method.name != "kf"
+    if censoring:
+        p_lo = np.empty((T, *full))
+        p_un = np.empty((T, *full))
+        p_up = np.empty((T, *full))
+        clipped = np.empty((T, *full), dtype=bool)
+    if method.adaptive:
+        lo_out = np.empty((T, *full))
+        up_out = np.empty((T, *full))
+    constant_model = inp.A_seq is None and inp.Q_seq is None and inp.R_seq is None
+    constant_model = constant_model and inp.R_scale is None
+    sm = make_step_model(model, diagonal) if constant_model else None
+    x, P = initial_state(model, batch, diagonal)
+    for t in range(T):
+        if not constant_model:
+            sm = make_step_model(
+                model,
+                diagonal,
+                A=None if inp.A_seq is None else inp.A_seq[t],
+                Q=None if inp.Q_seq is None else inp.Q_seq[t],
+                R=None if inp.R_seq is None else inp.R_seq[t],
+                R_scale=None if inp.R_scale is None else inp.R_scale[t],
+            )
+        lo = inp.lower[t] if inp.limits_seq else inp.lower
+        up = inp.upper[t] if inp.limits_seq else inp.upper
+        c = None if inp.c is None else (inp.c[t] if inp.c_seq else inp.c)
+        st = filter_step(method, t == 0, x, P, ys[t], sm, lo, up, c)  # type: ignore[arg-type]
+        u = st.update
+        x, P = u.x, u.P
+        pmeans[t] = st.x_pred
+        pcovs[t] = st.P_pred
+        means[t] = x
+        covs[t] = P
+        loglik[t] = u.loglik
+        if censoring:
+            if u.p_uncensored is None:
+                p_lo[t], p_un[t], p_up[t], clipped[t] = 0.0, 1.0, 0.0, False
+            else:
+                p_lo[t], p_un[t], p_up[t], clipped[t] = (
+                    u.p_lower,
+                    u.p_uncensored,
+                    u.p_upper,
+                    u.clipped,
+                )
+        if method.adaptive:
+            lo_out[t], up_out[t] = st.lower, st.upper
+    if not censoring:
+        p_lo = np.broadcast_to(0.0, (T, *full))
+        p_un = np.broadcast_to(1.0, (T, *full))
+        p_up = np.broadcast_to(0.0, (T, *full))
+        clipped = np.broadcast_to(False, (T, *full))
+    if method.adaptive:
+        lower, upper = lo_out, up_out
+    elif inp.limits_seq:
+        lower, upper = inp.lower, inp.upper
+    else:
+        lower = np.broadcast_to(inp.lower, (T, *full))
+        upper = np.broadcast_to(inp.upper, (T, *full))
+    return FilterResult(
+        means=means,
+        predicted_means=pmeans,
+        cov_data=covs,
+        predicted_cov_data=pcovs,
+        diagonal=diagonal,
+        loglik=loglik,
+        p_lower=p_lo,
+        p_uncensored=p_un,
+        p_upper=p_up,
+        clipped=clipped,
+        lower=lower,
+        upper=upper,
+        A_seq=inp.A_seq,
+        method=method.name,
+    )
+
+
+def kalman_filter(
+    model: LinearGaussian,
+    ys: ArrayLike,
+    *,
+    A_seq: ArrayLike | None = None,
+    Q_seq: ArrayLike | None = None,
+    R_seq: ArrayLike | None = None,
+    R_scale: ArrayLike | None = None,
+    diagonal: bool | None = None,
+) -> FilterResult:
+    """Plain Kalman filter over a time-first batch (Algorithm 1 with the KF moments).
+
+    Parameters
+    ----------
+    model : LinearGaussian
+    ys : array_like, shape (T, *batch, p)
+        Measurements; NaN components are unobserved (only they are skipped).
+    A_seq, Q_seq : array_like, shape (T, n, n), optional
+        Time-varying transition / process noise: step t predicts with A_seq[t], Q_seq[t].
+    R_seq : array_like, shape (T, p, p), optional
+        Time-varying measurement noise.
+    R_scale : array_like, broadcastable to (T, *batch, p), optional
+        Per-component multiplier of the measurement variances (R_eff = D R D,
+        D = diag(sqrt(R_scale))), e.g. > 1 for Kinect "inferred" joints.
+    diagonal : bool, optional
+        Force (True) or forbid (False) the per-axis path; default: used when possible.
+
+    Returns
+    -------
+    FilterResult
+        ``loglik[t]`` = log N(y_t,obs; H x⁻_t, S_t,obs) with S = H P⁻ Hᵀ + R over the
+        observed components (0 for a fully missing step). Censoring probabilities are
+        0 / 1 / 0, limits ±inf.
+    """
+    inp = prepare_inputs(
+        model, ys, A_seq=A_seq, Q_seq=Q_seq, R_seq=R_seq, R_scale=R_scale, diagonal=diagonal
+    )
+    return run_filter(model, KF, inp)
+
+
+# --------------------------------------------------------------------------------------
+# RTS smoother
+# --------------------------------------------------------------------------------------
+def rts_smooth(model: LinearGaussian, result: FilterResult) -> SmootherResult:
+    """Rauch–Tung–Striebel smoother on the output of any of the filters.
+
+    For t = T-2, ..., 0 with A = A_{t+1} (the transition used to predict step t+1)::
+
+        G_t   = P_t Aᵀ (P⁻_{t+1})⁻¹
+        x^s_t = x_t + G_t (x^s_{t+1} - x⁻_{t+1})
+        P^s_t = P_t + G_t (P^s_{t+1} - P⁻_{t+1}) G_tᵀ
+
+    For the Tobit filters this smooths their Gaussian approximation of the posterior.
+
+    Parameters
+    ----------
+    model : LinearGaussian
+        The model the filter ran with (its A is used unless ``result.A_seq`` is set).
+    result : FilterResult
+
+    Returns
+    -------
+    SmootherResult
+        Means (T, *batch, n), covariances (T, *batch, n, n) (variances on the diagonal
+        path) and gains.
+    """
+    T = result.n_steps
+    xs = np.array(result.means, dtype=float)
+    Ps = np.array(result.cov_data, dtype=float)
+    xf, xp = result.means, result.predicted_means
+    Pf, Pp = result.cov_data, result.predicted_cov_data
+    gains = np.zeros_like(Ps)
+    A_seq = result.A_seq
+    if result.diagonal:
+        a_const = _diag(model.A)
+        for t in range(T - 2, -1, -1):
+            a = a_const if A_seq is None else _diag(A_seq[t + 1])
+            ppt = Pp[t + 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                G = np.where(ppt > 0, Pf[t] * a / ppt, 0.0)
+            xs[t] = xf[t] + G * (xs[t + 1] - xp[t + 1])
+            Ps[t] = Pf[t] + G * G * (Ps[t + 1] - ppt)
+            gains[t] = G
+        return SmootherResult(xs, Ps, diagonal=True, gains=gains)
+    for t in range(T - 2, -1, -1):
+        A = model.A if A_seq is None else A_seq[t + 1]
+        # Gᵀ = (P⁻)⁻¹ A P  (P⁻, P symmetric)
+        Gt = np.linalg.solve(Pp[t + 1], A @ Pf[t])
+        G = np.swapaxes(Gt, -1, -2)
+        xs[t] = xf[t] + np.einsum("...ij,...j->...i", G, xs[t + 1] - xp[t + 1])
+        Pn = Pf[t] + G @ (Ps[t + 1] - Pp[t + 1]) @ Gt
+        Ps[t] = 0.5 * (Pn + np.swapaxes(Pn, -1, -2))
+        gains[t] = G
+    return SmootherResult(xs, Ps, diagonal=False, gains=gains)
