@@ -1,0 +1,175 @@
+"""C3D motion-capture files, read through the optional ``c3d`` package.
+
+Install with ``pip install tobitkf[c3d]`` (or ``pip install c3d``). POINT samples with a
+negative residual are missing (NaN); units from ``POINT:UNITS`` are converted to metres;
+the rate is ``POINT:RATE``; labels are kept (stripped; duplicates get ``_2``, ``_3``
+suffixes). Up axis z (Vicon/Qualisys convention).
+
+``points`` selects which POINT entries to return:
+
+* ``"all"`` (default): every entry, including model outputs;
+* ``"markers"``: real markers only: no Plug-in Gait segment frames (``…O/…A/…L/…P``
+  quadruples) and no model outputs (``…Angles``, ``…Force``, ``…Moment``, ``…Power``,
+  ``CentreOfMass…``);
+* ``"joint_centres"``: the origins (``…O``) of the Plug-in Gait segment frames (PELO,
+  LFEO, LTIO, LHUO, ...), usable as joint centres.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from tobitkf.io.errors import ReadError
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+
+__all__ = ["classify_labels", "read_c3d", "sniff_c3d"]
+
+_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1, "in": 0.0254}
+_MODEL_OUTPUTS = ("angles", "force", "moment", "power", "centreofmass", "centerofmass")
+
+
+def _import_c3d():
+    try:
+        import c3d
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "reading C3D files needs the 'c3d' package: pip install tobitkf[c3d] "
+            "(or pip install c3d)"
+        ) from exc
+    return c3d
+
+
+def classify_labels(labels: list[str]) -> list[str]:
+    """Kind of each POINT label: ``"marker"``, ``"segment_origin"``, ``"segment_axis"``
+    or ``"model_output"``."""
+    kinds = []
+    upper = {lab.upper() for lab in labels}
+    for lab in labels:
+        u = lab.upper()
+        low = u.lower()
+        if any(k in low for k in _MODEL_OUTPUTS):
+            kinds.append("model_output")
+            continue
+        if len(u) >= 2 and u[-1] in "OALP":
+            stem = u[:-1]
+            if all(stem + s in upper for s in "OALP"):
+                kinds.append("segment_origin" if u[-1] == "O" else "segment_axis")
+                continue
+        kinds.append("marker")
+    return kinds
+
+
+def _unique(labels: list[str]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for i, lab in enumerate(labels):
+        lab = lab or f"P{i + 1}"
+        if lab in seen:
+            seen[lab] += 1
+            lab = f"{lab}_{seen[lab]}"
+        else:
+            seen[lab] = 1
+        out.append(lab)
+    return out
+
+
+def read_c3d(
+    path: str | os.PathLike[str], points: str = "all", units: str | None = None
+) -> list[SkeletonSequence]:
+    """Read the POINT data of a C3D file.
+
+    Parameters
+    ----------
+    points : {"all", "markers", "joint_centres"}
+        Which POINT entries to return (see module docstring).
+    units : str, optional
+        Override ``POINT:UNITS`` (``"mm"``, ``"cm"``, ``"m"``).
+
+    Returns
+    -------
+    list with one SkeletonSequence: positions (T, P, 3) metres (NaN where the residual is
+    negative), fps = POINT:RATE, ``metadata["labels"]``, ``metadata["residuals"]`` (T, P).
+    """
+    if points not in ("all", "markers", "joint_centres"):
+        raise ValueError(f"points must be 'all', 'markers' or 'joint_centres', found {points!r}")
+    c3d = _import_c3d()
+    try:
+        with open(path, "rb") as fh:
+            reader = c3d.Reader(fh)
+            labels = [str(lab).strip() for lab in reader.point_labels]
+            rate = float(reader.point_rate)
+            unit_param = reader.get("POINT:UNITS")
+            file_units = unit_param.string_value.strip() if unit_param is not None else "mm"
+            frames = []
+            for _, pts, _analog in reader.read_frames():
+                frames.append(np.array(pts[:, :4], dtype=float))
+    except (
+        ValueError,
+        struct.error,
+        EOFError,
+        IndexError,
+        KeyError,
+        AssertionError,
+        UnicodeDecodeError,
+        TypeError,
+    ) as exc:
+        raise ReadError(
+            path, None, f"not a readable C3D file ({type(exc).__name__}: {exc})"
+        ) from None
+    if not frames:
+        raise ReadError(path, None, "C3D file holds no frames")
+    data = np.stack(frames)  # (T, P, 4)
+    unit = (units or file_units or "mm").lower()
+    if unit not in _UNITS:
+        raise ReadError(
+            path, None, f"unknown POINT:UNITS {unit!r}; expected one of {sorted(_UNITS)}"
+        )
+    if not np.isfinite(rate) or rate <= 0:
+        raise ReadError(path, None, f"expected a positive POINT:RATE, found {rate}")
+    if len(labels) < data.shape[1]:
+        labels = labels + [""] * (data.shape[1] - len(labels))
+    labels = labels[: data.shape[1]]
+    positions = data[:, :, :3] * _UNITS[unit]
+    residual = data[:, :, 3]
+    positions[residual < 0] = np.nan
+    kinds = classify_labels(labels)
+    if points == "markers":
+        keep = [i for i, k in enumerate(kinds) if k == "marker"]
+    elif points == "joint_centres":
+        keep = [i for i, k in enumerate(kinds) if k == "segment_origin"]
+    else:
+        keep = list(range(len(labels)))
+    if not keep:
+        raise ReadError(path, None, f"no POINT entries of the kind {points!r}")
+    names = _unique([labels[i] for i in keep])
+    seq = SkeletonSequence(
+        positions=np.ascontiguousarray(positions[:, keep]),
+        topology=Topology.from_names(names, up_axis=2, name="c3d"),
+        fps=rate,
+        metadata={
+            "source": str(path),
+            "format": "c3d",
+            "labels": [labels[i] for i in keep],
+            "point_kinds": [kinds[i] for i in keep],
+            "units_in_file": unit,
+            "residuals": np.ascontiguousarray(residual[:, keep]),
+        },
+    )
+    return [seq]
+
+
+def sniff_c3d(path: Path, head: str) -> int:
+    """Score: byte 2 of the file is 0x50 (the C3D parameter-section key)."""
+    try:
+        with open(path, "rb") as fh:
+            first = fh.read(2)
+    except OSError:
+        return 0
+    if len(first) == 2 and first[1] == 0x50:
+        return 90 if path.name.lower().endswith(".c3d") else 30
+    return 0

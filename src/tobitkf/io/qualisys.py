@@ -1,0 +1,153 @@
+"""Qualisys Track Manager (QTM) 3-D TSV export (data README §4).
+
+Header: ``KEY<TAB>values`` lines (``NO_OF_FRAMES``, ``NO_OF_MARKERS``, ``FREQUENCY``,
+``MARKER_NAMES`` ...), optionally a column-name line (``Frame  Time  <Marker> X ...``),
+then one line per frame: either ``frame time x y z ...`` or only the 3 × markers values.
+Positions are millimetres (converted to metres), z up. Empty fields and markers at exactly
+(0, 0, 0) (QTM's gap value) become NaN. ``NO_OF_FRAMES`` may exceed the rows present (a
+cut export); the rows present are read.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io.errors import ReadError
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+
+__all__ = ["read_qualisys", "sniff_qualisys"]
+
+_UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+
+
+def _int_or_none(values: list[str] | None) -> int | None:
+    if not values:
+        return None
+    try:
+        return int(values[0])
+    except ValueError:
+        return None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[SkeletonSequence]:
+    """Read a QTM TSV file.
+
+    Parameters
+    ----------
+    units : {"mm", "cm", "m"}
+        Units of the file (QTM exports millimetres).
+
+    Returns
+    -------
+    list with one SkeletonSequence: positions (T, M, 3) metres, topology of the marker
+    names (z up), fps = FREQUENCY, timestamps from the ``Time`` column when present.
+    """
+    if units not in _UNIT_SCALE:
+        raise ValueError(f"units must be one of {sorted(_UNIT_SCALE)}, found {units!r}")
+    lines = read_lines(path)
+    if not any(line.strip() for line in lines):
+        raise ReadError(path, None, "empty file: expected a QTM TSV header")
+    header: dict[str, list[str]] = {}
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if not line.strip():
+            i += 1
+            continue
+        fields = line.rstrip("\t").split("\t")
+        key = fields[0].strip()
+        if _is_number(key):
+            break
+        if key.lower() == "frame":  # column-name line
+            i += 1
+            break
+        header[key.upper()] = [f.strip() for f in fields[1:]]
+        i += 1
+    names = header.get("MARKER_NAMES")
+    if not names:
+        raise ReadError(path, None, "expected a MARKER_NAMES header line (QTM TSV)")
+    if len(set(names)) != len(names) or any(not n for n in names):
+        raise ReadError(path, None, f"marker names must be unique and non-empty, found {names}")
+    n_markers = len(names)
+    declared = _int_or_none(header.get("NO_OF_MARKERS"))
+    if declared is not None and declared != n_markers:
+        raise ReadError(
+            path,
+            None,
+            f"NO_OF_MARKERS says {declared} but MARKER_NAMES lists {n_markers} names",
+        )
+    fps = None
+    freq = header.get("FREQUENCY")
+    if freq:
+        try:
+            fps = float(freq[0])
+        except ValueError:
+            raise ReadError(
+                path, None, f"expected a number for FREQUENCY, found {freq[0]!r}"
+            ) from None
+        if not np.isfinite(fps) or fps <= 0:
+            raise ReadError(path, None, f"expected a positive FREQUENCY, found {freq[0]!r}")
+    rows, numbers = nonempty(lines, i)
+    if not rows:
+        raise ReadError(path, None, "no frames after the header")
+    rows = [r.rstrip("\t\r ") for r in rows]
+    first = len(rows[0].split("\t"))
+    with_time = first == 3 * n_markers + 2
+    ncols = 3 * n_markers + (2 if with_time else 0)
+    data = parse_rows(
+        path,
+        rows,
+        numbers,
+        sep="\t",
+        ncols=ncols,
+        what=f"{'frame, time and ' if with_time else ''}{n_markers} markers x 3",
+        allow_empty=True,
+    )
+    timestamps = None
+    if with_time:
+        timestamps = data[:, 1].copy()
+        bad = np.flatnonzero(~np.isfinite(timestamps))
+        if bad.size:
+            raise ReadError(path, numbers[int(bad[0])], "expected a time value, found none")
+        back = np.flatnonzero(np.diff(timestamps) < 0)
+        if back.size:
+            k = int(back[0]) + 1
+            raise ReadError(path, numbers[k], "expected non-decreasing Time values")
+        data = data[:, 2:]
+    positions = np.ascontiguousarray(data.reshape(-1, n_markers, 3)) * _UNIT_SCALE[units]
+    zeros_to_nan(positions)
+    seq = SkeletonSequence(
+        positions=positions,
+        topology=Topology.from_names(names, up_axis=2, name="qualisys"),
+        timestamps=timestamps,
+        fps=fps,
+        metadata={
+            "source": str(path),
+            "format": "qualisys",
+            "units_in_file": units,
+            "header": {k: v for k, v in header.items() if k != "MARKER_NAMES"},
+            "declared_frames": _int_or_none(header.get("NO_OF_FRAMES")),
+        },
+    )
+    return [seq]
+
+
+def sniff_qualisys(path: Path, head: str) -> int:
+    """Score: the first line is ``NO_OF_FRAMES<TAB>n`` (QTM TSV header)."""
+    for line in head.split("\n")[:5]:
+        if line.strip():
+            return 90 if line.split("\t")[0].strip().upper() == "NO_OF_FRAMES" else 0
+    return 0

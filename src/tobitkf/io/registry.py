@@ -1,0 +1,229 @@
+"""Format registry: readers, writers, extensions and content sniffers; load / save.
+
+A format is registered with :func:`register_format`. ``detect_format`` asks every
+sniffer for a score on the file's first 64 KB (0 = not this format, higher = more sure)
+and breaks ties by the file extension; with no positive score it falls back to the
+extension alone when that is unambiguous.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tobitkf.io._text import read_head
+from tobitkf.io.errors import ReadError
+from tobitkf.skeleton.sequence import SkeletonSequence
+
+__all__ = [
+    "FormatSpec",
+    "detect_format",
+    "formats",
+    "get_format",
+    "load",
+    "register_format",
+    "save",
+]
+
+Reader = Callable[..., list[SkeletonSequence]]
+Writer = Callable[..., None]
+Sniffer = Callable[[Path, str], int]
+
+
+@dataclass(frozen=True)
+class FormatSpec:
+    """A registered file format."""
+
+    name: str
+    reader: Reader | None
+    writer: Writer | None
+    extensions: tuple[str, ...]
+    sniff: Sniffer | None
+    description: str = ""
+
+
+_FORMATS: dict[str, FormatSpec] = {}
+_ALIASES: dict[str, str] = {}
+
+
+def register_format(
+    name: str,
+    reader: Reader | None,
+    writer: Writer | None = None,
+    extensions: Iterable[str] = (),
+    sniff: Sniffer | None = None,
+    *,
+    description: str = "",
+    aliases: Iterable[str] = (),
+) -> FormatSpec:
+    """Register (or replace) a file format.
+
+    Parameters
+    ----------
+    name : str
+        Format name used by ``load(..., format=name)`` and ``save(..., format=name)``.
+    reader : callable ``(path, **options) -> list[SkeletonSequence]`` or None
+    writer : callable ``(sequences, path, **options) -> None`` or None
+    extensions : iterable of str
+        Lower-case file name endings including the dot (``".csv"``, ``".txt.gz"``).
+    sniff : callable ``(path, head_text) -> int`` or None
+        Score of the file's content (0 = not this format).
+    aliases : iterable of str
+        Other names accepted for this format.
+    """
+    spec = FormatSpec(
+        name=name,
+        reader=reader,
+        writer=writer,
+        extensions=tuple(e.lower() for e in extensions),
+        sniff=sniff,
+        description=description,
+    )
+    _FORMATS[name] = spec
+    for a in aliases:
+        _ALIASES[a] = name
+    return spec
+
+
+def formats() -> dict[str, FormatSpec]:
+    """All registered formats by name."""
+    return dict(_FORMATS)
+
+
+def get_format(name: str) -> FormatSpec:
+    """Registered format by name or alias."""
+    key = _ALIASES.get(name, name)
+    try:
+        return _FORMATS[key]
+    except KeyError:
+        raise ValueError(f"unknown format {name!r}; expected one of {sorted(_FORMATS)}") from None
+
+
+def _extension_matches(path: Path) -> list[str]:
+    lower = path.name.lower()
+    best: list[tuple[int, str]] = []
+    for spec in _FORMATS.values():
+        lengths = [len(e) for e in spec.extensions if lower.endswith(e)]
+        if lengths:
+            best.append((max(lengths), spec.name))
+    if not best:
+        return []
+    top = max(n for n, _ in best)
+    return [name for n, name in best if n == top]
+
+
+def detect_format(path: str | os.PathLike[str]) -> str:
+    """Name of the format of ``path``, from its content and its extension.
+
+    Raises
+    ------
+    ReadError
+        When the file is missing, empty or matches no registered format.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ReadError(p, None, "file not found")
+    if p.is_dir():
+        raise ReadError(p, None, "expected a file, found a directory")
+    if p.stat().st_size == 0:
+        raise ReadError(p, None, "empty file: expected skeleton data")
+    head = read_head(p)
+    by_ext = set(_extension_matches(p))
+    scored: list[tuple[int, int, str]] = []
+    for spec in _FORMATS.values():
+        if spec.sniff is None or spec.reader is None:
+            continue
+        try:
+            score = int(spec.sniff(p, head))
+        except Exception:  # a sniffer never decides by crashing
+            score = 0
+        if score > 0:
+            scored.append((score, int(spec.name in by_ext), spec.name))
+    if scored:
+        scored.sort(reverse=True)
+        return scored[0][2]
+    readable = [n for n in by_ext if _FORMATS[n].reader is not None]
+    if len(readable) == 1:
+        return readable[0]
+    raise ReadError(
+        p,
+        None,
+        "unrecognised content: expected one of the formats "
+        f"{sorted(n for n, s in _FORMATS.items() if s.reader is not None)}",
+    )
+
+
+def load(
+    path: str | os.PathLike[str], format: str = "auto", **options: Any
+) -> list[SkeletonSequence]:
+    """Read a recording: one :class:`SkeletonSequence` per body.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    format : str
+        A registered format name, or ``"auto"`` (:func:`detect_format`).
+    **options
+        Passed to the reader (e.g. ``points="markers"`` for C3D).
+
+    Raises
+    ------
+    ReadError
+        Bad content (names file, line and what was expected).
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ReadError(p, None, "file not found")
+    name = detect_format(p) if format in (None, "auto") else format
+    spec = get_format(name)
+    if spec.reader is None:
+        raise ValueError(f"format {spec.name!r} has no reader")
+    try:
+        result = spec.reader(p, **options)
+    except (ReadError, ImportError, OSError, TypeError):
+        raise
+    except (ValueError, IndexError, KeyError, ArithmeticError) as exc:  # safety net
+        raise ReadError(p, None, f"invalid {spec.name} content ({exc})") from exc
+    return list(result)
+
+
+def save(
+    sequences: SkeletonSequence | Sequence[SkeletonSequence],
+    path: str | os.PathLike[str],
+    format: str | None = None,
+    **options: Any,
+) -> None:
+    """Write sequences (one per body) to ``path``.
+
+    Parameters
+    ----------
+    sequences : SkeletonSequence or list of them
+    path : str or PathLike
+    format : str, optional
+        A registered format with a writer (``"csv"``, ``"npz"``, ``"ntu"``); by default
+        from the extension.
+    """
+    if isinstance(sequences, SkeletonSequence):
+        sequences = [sequences]
+    seqs = list(sequences)
+    for s in seqs:
+        if not isinstance(s, SkeletonSequence):
+            raise TypeError(f"expected SkeletonSequence objects, found {type(s).__name__}")
+    p = Path(path)
+    if format in (None, "auto"):
+        names = [n for n in _extension_matches(p) if _FORMATS[n].writer is not None]
+        if len(names) != 1:
+            writable = sorted(n for n, s in _FORMATS.items() if s.writer is not None)
+            raise ValueError(
+                f"cannot choose an output format from the name {p.name!r}; "
+                f"pass format= one of {writable}"
+            )
+        format = names[0]
+    spec = get_format(format)
+    if spec.writer is None:
+        writable = sorted(n for n, s in _FORMATS.items() if s.writer is not None)
+        raise ValueError(f"format {spec.name!r} cannot be written; writable formats: {writable}")
+    spec.writer(seqs, p, **options)

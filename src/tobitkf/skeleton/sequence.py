@@ -1,0 +1,219 @@
+"""The skeleton sequence type: joint positions over time with tracking states.
+
+Arrays are time-first: ``positions`` is ``(T, J, 3)`` in metres with NaN marking a missing
+sample, ``tracking_state`` is ``(T, J)`` (:class:`TrackingState` codes) and ``timestamps``
+is ``(T,)`` seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from tobitkf.skeleton.topology import Topology, get_topology
+
+__all__ = ["SkeletonSequence", "TrackingState"]
+
+
+class TrackingState(IntEnum):
+    """Per-joint tracking state, as reported by the Kinect SDK (``TrackingState``)."""
+
+    NOT_TRACKED = 0
+    INFERRED = 1
+    TRACKED = 2
+
+
+@dataclass(frozen=True, eq=False)
+class SkeletonSequence:
+    """One body's joint tracks.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (T, J, 3)
+        Joint positions in metres; NaN where a joint is missing.
+    topology : Topology or str
+        Joint names and tree; a string is resolved with :func:`get_topology`.
+        ``topology.n_joints`` must equal J.
+    tracking_state : ndarray, shape (T, J), optional
+        :class:`TrackingState` codes (stored as int8).
+    timestamps : ndarray, shape (T,), optional
+        Seconds, non-decreasing (strictly increasing is not required: duplicated stamps are
+        kept as read, but a step backwards is an error).
+    fps : float, optional
+        Nominal frame rate, > 0.
+    body_id : int, str or None
+        Identifier of the body (e.g. the Kinect body ID).
+    metadata : dict
+        Source path, format and extra per-frame fields (e.g. ``orientations`` (T, J, 4)).
+    """
+
+    positions: np.ndarray
+    topology: Topology
+    tracking_state: np.ndarray | None = None
+    timestamps: np.ndarray | None = None
+    fps: float | None = None
+    body_id: int | str | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        topo = self.topology
+        if isinstance(topo, str):
+            topo = get_topology(topo)
+            object.__setattr__(self, "topology", topo)
+        if not isinstance(topo, Topology):
+            raise TypeError(f"topology must be a Topology or a name, found {type(topo).__name__}")
+        try:
+            pos = np.asarray(self.positions, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"positions must be numeric, found {exc}") from None
+        if pos.ndim != 3 or pos.shape[2] != 3:
+            raise ValueError(f"positions must have shape (T, J, 3), found {pos.shape}")
+        T, J = pos.shape[:2]
+        if J != topo.n_joints:
+            raise ValueError(
+                f"positions have {J} joints but topology {topo.name!r} has {topo.n_joints}"
+            )
+        if np.isinf(pos).any():
+            raise ValueError("positions must be finite or NaN, found inf")
+        object.__setattr__(self, "positions", pos)
+        if self.tracking_state is not None:
+            st = np.asarray(self.tracking_state)
+            if st.shape != (T, J):
+                raise ValueError(
+                    f"tracking_state must have shape (T, J) = {(T, J)}, found {st.shape}"
+                )
+            if st.size and (
+                not np.issubdtype(st.dtype, np.number)
+                or np.any(st != np.round(st))
+                or st.min() < 0
+                or st.max() > 2
+            ):
+                raise ValueError("tracking_state values must be 0, 1 or 2 (TrackingState)")
+            object.__setattr__(self, "tracking_state", st.astype(np.int8))
+        if self.timestamps is not None:
+            ts = np.asarray(self.timestamps, dtype=float)
+            if ts.shape != (T,):
+                raise ValueError(f"timestamps must have shape (T,) = {(T,)}, found {ts.shape}")
+            if not np.all(np.isfinite(ts)):
+                raise ValueError("timestamps must be finite")
+            if T > 1 and np.any(np.diff(ts) < 0):
+                k = int(np.argmax(np.diff(ts) < 0))
+                raise ValueError(
+                    f"timestamps must be non-decreasing; frame {k + 1} ({ts[k + 1]}) comes "
+                    f"before frame {k} ({ts[k]})"
+                )
+            object.__setattr__(self, "timestamps", ts)
+        if self.fps is not None:
+            fps = float(self.fps)
+            if not np.isfinite(fps) or fps <= 0:
+                raise ValueError(f"fps must be a positive number, found {self.fps!r}")
+            object.__setattr__(self, "fps", fps)
+        if self.metadata is None:
+            object.__setattr__(self, "metadata", {})
+        elif not isinstance(self.metadata, dict):
+            raise TypeError(f"metadata must be a dict, found {type(self.metadata).__name__}")
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_frames(self) -> int:
+        """Number of frames T."""
+        return int(self.positions.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints J."""
+        return int(self.positions.shape[1])
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Joint names, length J."""
+        return self.topology.joints
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def __repr__(self) -> str:
+        return (
+            f"SkeletonSequence(T={self.n_frames}, J={self.n_joints}, "
+            f"topology={self.topology.name!r}, fps={self.fps}, body_id={self.body_id!r}, "
+            f"tracking_state={'yes' if self.tracking_state is not None else 'no'}, "
+            f"timestamps={'yes' if self.timestamps is not None else 'no'})"
+        )
+
+    # ------------------------------------------------------------------ time
+    def times(self) -> np.ndarray:
+        """Frame times in seconds, shape (T,).
+
+        ``timestamps`` when present, else ``arange(T) / fps``; without either, frame
+        indices (``fps`` taken as 1) are returned.
+        """
+        if self.timestamps is not None:
+            return self.timestamps.copy()
+        fps = self.fps if self.fps is not None else 1.0
+        return np.arange(self.n_frames, dtype=float) / fps
+
+    def dt(self) -> np.ndarray:
+        """Time steps in seconds between consecutive frames, shape (T-1,)."""
+        return np.diff(self.times())
+
+    # ------------------------------------------------------------------ derived
+    def replace(self, **changes: Any) -> SkeletonSequence:
+        """Copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def missing(self) -> np.ndarray:
+        """Boolean ``(T, J)``: joint position missing (any coordinate NaN)."""
+        return np.isnan(self.positions).any(axis=-1)
+
+    def select_joints(self, names: Sequence[str]) -> SkeletonSequence:
+        """Sequence restricted to the given joints (in the given order).
+
+        Per-joint metadata arrays of shape ``(T, J, ...)`` (e.g. ``orientations``) are
+        sliced too.
+        """
+        idx = self.topology.indices(names)
+        topo = self.topology.subset(names)
+        meta = {}
+        for k, v in self.metadata.items():
+            if (
+                isinstance(v, np.ndarray)
+                and v.ndim >= 2
+                and v.shape[:2] == (self.n_frames, self.n_joints)
+            ):
+                meta[k] = v[:, idx]
+            else:
+                meta[k] = v
+        return self.replace(
+            positions=self.positions[:, idx],
+            topology=topo,
+            tracking_state=None if self.tracking_state is None else self.tracking_state[:, idx],
+            metadata=meta,
+        )
+
+    def largest_jumps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Largest frame-to-frame displacement of each joint.
+
+        Returns
+        -------
+        jumps : ndarray, shape (J,)
+            ``max_t ||p_t - p_{t-1}||`` in metres over consecutive frames where both samples
+            are present; NaN if a joint has no such pair.
+        frames : ndarray of int, shape (J,)
+            Frame ``t`` at which the largest jump lands (``-1`` when ``jumps`` is NaN).
+        """
+        J = self.n_joints
+        if self.n_frames < 2:
+            return np.full(J, np.nan), np.full(J, -1, dtype=int)
+        step = np.linalg.norm(np.diff(self.positions, axis=0), axis=-1)  # (T-1, J)
+        valid = ~np.isnan(step)
+        filled = np.where(valid, step, -1.0)
+        arg = np.argmax(filled, axis=0)
+        has = valid.any(axis=0)
+        jumps = np.where(has, filled[arg, np.arange(J)], np.nan)
+        frames = np.where(has, arg + 1, -1)
+        return jumps, frames
