@@ -273,6 +273,8 @@ def fit_time_alignment(
         step_r = rates[1] - rates[0] if len(rates) > 1 else 1.0
 
         def f(x):
+            if not rate_range[0] <= x[1] <= rate_range[1]:
+                return 1e3
             s, _ = score(x[0], x[1])
             return -s if np.isfinite(s) else 1e3
 

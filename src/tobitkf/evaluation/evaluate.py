@@ -196,6 +196,7 @@ def prepare_truth(
     time: str = "auto",
     mocap_rate: float | None = None,
     fit_rate: bool | None = None,
+    rate_range: tuple[float, float] | None = None,
     n_signals: int = 20,
 ) -> GroundTruth:
     """Pair, time-align and register a mocap recording onto a raw track.
@@ -214,6 +215,10 @@ def prepare_truth(
         ``"fixed"`` for KERAAL (documented common time zero), ``"fit"`` otherwise.
     mocap_rate : nominal mocap rate (Hz); default ``mocap.fps``.
     fit_rate : fit the mocap rate too; default True for UI-PRMD, else False.
+    rate_range : (lo, hi) Hz searched when fitting the rate; default ``(0.6, 1.6)`` times the
+        nominal rate for UI-PRMD (its m07 episodes fit 130–160 Hz against a nominal 100 Hz,
+        i.e. the two files' clocks disagree by more than the documented 80–100 Hz), else
+        ``(0.75, 1.1)`` times it.
     n_signals : number of most-varying inter-point distances used for the time fit.
 
     Returns
@@ -257,7 +262,11 @@ def prepare_truth(
     sig_t = distance_signals(y, jp)
     sig_m = distance_signals(m_full, jp)
     sel = np.argsort(-np.nan_to_num(np.nanstd(sig_m, axis=0)))[:n_signals]
-    fitted = fit_time_alignment(tt, sig_t[:, sel], sig_m[:, sel], rate=rate, fit_rate=fit_rate)
+    if fit_rate and rate_range is None:
+        rate_range = (0.6 * rate, 1.6 * rate) if is_uiprmd else (0.75 * rate, 1.1 * rate)
+    fitted = fit_time_alignment(
+        tt, sig_t[:, sel], sig_m[:, sel], rate=rate, fit_rate=fit_rate, rate_range=rate_range
+    )
     if time == "fixed":
         used = TimeAlignment(0.0, rate, float("nan"), float("nan"), False)
     else:
