@@ -62,7 +62,8 @@ class StepModel:
     Diagonal path: ``A, Q, H`` have shape (n,) (the diagonals) and ``R`` (p,) or
     (*batch, p) (R_scale applied). General path: ``A (n, n)``, ``Q (n, n)``, ``H (p, n)``,
     ``R (p, p)`` or ``(*batch, p, p)``. ``a_identity``: A is exactly the identity (enables
-    the symmetric fast path of the adaptive filter).
+    the symmetric fast path of the adaptive filter); ``h_identity``: H is exactly the
+    identity.
     """
 
     A: Array
@@ -71,6 +72,7 @@ class StepModel:
     R: Array
     diagonal: bool
     a_identity: bool
+    h_identity: bool = False
 
 
 @dataclass(frozen=True)
@@ -100,14 +102,14 @@ UpdateFn = Callable[..., UpdateOut]
 class Method:
     """A filter: its update function and whether its limits are adaptive (ATKF).
 
-    ``update(xp, Pp, y, sm, lower, upper, c) -> UpdateOut``; ``clip``: clip y to the
-    limits before the update (the Tobit filters); ``adaptive``: limits H x̂_{k-1} ± c and a
-    plain KF update at the first step (Algorithm 2 of the 2020 paper).
+    ``update(xp, Pp, y, sm, lower, upper, c, full=None, out_x=None) -> UpdateOut``
+    (the Tobit updates clip y to the limits themselves); ``full``: optional hint that y has
+    no NaN (None: checked); ``out_x``: optional buffer for the new mean. ``adaptive``:
+    limits H x̂_{k-1} ± c and a plain KF update at the first step (Algorithm 2, 2020).
     """
 
     name: str
     update: UpdateFn
-    clip: bool = False
     adaptive: bool = False
 
 
@@ -141,8 +143,11 @@ def predict(x: Array, P: Array, sm: StepModel) -> tuple[Array, Array]:
     return xp, 0.5 * (Pp + np.swapaxes(Pp, -1, -2))
 
 
-def observed_mask(y: Array) -> tuple[NDArray[np.bool_], bool]:
-    """``(obs, all_observed)``: obs = ~isnan(y)."""
+def observed_mask(y: Array, full: bool | None = None) -> tuple[NDArray[np.bool_] | None, bool]:
+    """``(obs, all_observed)`` with obs = ~isnan(y); ``full=True`` (a caller's hint that y
+    has no NaN) skips the check and returns ``(None, True)``."""
+    if full:
+        return None, True
     obs = ~np.isnan(y)
     return obs, bool(obs.all())
 
@@ -192,29 +197,55 @@ def gain_update_general(
 
 
 def _kf_update_diag(
-    xp: Array, vp: Array, y: Array, sm: StepModel, lower: Any, upper: Any, c: Any
+    xp: Array,
+    vp: Array,
+    y: Array,
+    sm: StepModel,
+    lower: Any,
+    upper: Any,
+    c: Any,
+    full: bool | None = None,
+    out_x: Array | None = None,
 ) -> UpdateOut:
-    h, r = sm.H, sm.R
-    m = h * xp
-    Pxy = h * vp
-    S = h * Pxy + r
+    # variances may carry fewer batch axes than the means (they do not depend on the data
+    # until a component goes missing): every operation on them is then cheap
+    r = sm.R
+    if sm.h_identity:
+        m, Pxy = xp, vp
+        S = vp + r
+    else:
+        m = sm.H * xp
+        Pxy = sm.H * vp
+        S = sm.H * Pxy + r
     K = Pxy / S
     e = y - m
-    obs, full = observed_mask(y)
+    obs, full = observed_mask(y, full)
     if not full:
         e = np.where(obs, e, 0.0)
         K = np.where(obs, K, 0.0)
-    x = xp + K * e
+    x = np.add(xp, K * e, out=out_x)
     v = vp - K * Pxy
-    terms = np.log(S) + e * e / S + _LOG_2PI
+    inv_S = 1.0 / S
     if not full:
-        terms = np.where(obs, terms, 0.0)
-    ll = -0.5 * terms.sum(axis=-1)
+        terms = np.where(obs, np.log(S) + e * e * inv_S + _LOG_2PI, 0.0)
+        ll = -0.5 * terms.sum(axis=-1)
+    elif S.ndim == 1:
+        ll = -0.5 * ((e * e) @ inv_S + (np.sum(np.log(S)) + S.shape[0] * _LOG_2PI))
+    else:
+        ll = -0.5 * ((e * e * inv_S).sum(axis=-1) + np.log(S).sum(axis=-1) + S.shape[-1] * _LOG_2PI)
     return UpdateOut(x, v, ll, None, None, None, None, K)
 
 
 def _kf_update_general(
-    xp: Array, Pp: Array, y: Array, sm: StepModel, lower: Any, upper: Any, c: Any
+    xp: Array,
+    Pp: Array,
+    y: Array,
+    sm: StepModel,
+    lower: Any,
+    upper: Any,
+    c: Any,
+    full: bool | None = None,
+    out_x: Array | None = None,
 ) -> UpdateOut:
     H = sm.H
     m = xp @ H.T
@@ -222,7 +253,7 @@ def _kf_update_general(
     S = HP @ H.T + sm.R
     S = 0.5 * (S + np.swapaxes(S, -1, -2))
     Pxy = np.swapaxes(HP, -1, -2)
-    obs, full = observed_mask(y)
+    obs, full = observed_mask(y, full)
     e = y - m
     x, P, K, w = gain_update_general(xp, Pp, Pxy, S, e, obs, full)
     # log N(y_obs; m_obs, S_obs): logdet of the masked Pyy equals logdet S_obs
@@ -233,7 +264,7 @@ def _kf_update_general(
         S[..., idx, idx] += ~obs
         e = np.where(obs, e, 0.0)
     _, logdet = np.linalg.slogdet(S)
-    k = obs.sum(axis=-1)
+    k = S.shape[-1] if full else obs.sum(axis=-1)
     ll = -0.5 * (k * _LOG_2PI + logdet + np.sum(e * w, axis=-1))
     return UpdateOut(x, P, ll, None, None, None, None, K)
 
@@ -246,6 +277,8 @@ def kf_update(
     lower: Any = None,
     upper: Any = None,
     c: Any = None,
+    full: bool | None = None,
+    out_x: Array | None = None,
 ) -> UpdateOut:
     """Kalman-filter measurement update (MATH.md §3, row KF).
 
@@ -254,8 +287,8 @@ def kf_update(
     (0 when nothing is observed). Limits are ignored.
     """
     if sm.diagonal:
-        return _kf_update_diag(xp, Pp, y, sm, lower, upper, c)
-    return _kf_update_general(xp, Pp, y, sm, lower, upper, c)
+        return _kf_update_diag(xp, Pp, y, sm, lower, upper, c, full, out_x)
+    return _kf_update_general(xp, Pp, y, sm, lower, upper, c, full, out_x)
 
 
 KF = Method("kf", kf_update)
@@ -271,38 +304,43 @@ def filter_step(
     P: Array,
     y: Array,
     sm: StepModel,
-    lower: Array,
-    upper: Array,
-    c: Array | None = None,
+    lower: Any,
+    upper: Any,
+    c: Any = None,
+    *,
+    full: bool | None = None,
+    out_x: Array | None = None,
 ) -> StepOutput:
-    """One frame of a filter: (adaptive limits), predict, clip, update.
+    """One frame of a filter: (adaptive limits), predict, update.
 
     Parameters
     ----------
     method : Method
     first : bool
         First frame (the adaptive filter then does a plain KF update, Algorithm 2 line 6).
-    x, P : previous filtered mean (*batch, n) and covariance (*batch, n, n) / variances.
+    x, P : previous filtered mean (*batch, n) and covariance (*batch, n, n) (variances,
+        possibly with fewer batch axes, on the diagonal path).
     y : (*batch, p) reported measurement, NaN = unobserved.
     sm : StepModel for this frame.
-    lower, upper : (*batch, p) broadcastable limits (ignored by the adaptive filter).
-    c : (*batch, p) broadcastable half-widths of the adaptive filter.
+    lower, upper : limits broadcastable to (*batch, p) (ignored by the adaptive filter).
+    c : half-widths of the adaptive filter, broadcastable to (*batch, p).
+    full : optional hint that y has no NaN (None: checked).
+    out_x : optional buffer (*batch, n) the new mean is written to.
     """
     update = method.update
     if method.adaptive:
         if first:
-            lower = upper = None
+            lower, upper = -np.inf, np.inf
             update = kf_update
         else:
-            centre = sm.H * x if sm.diagonal else x @ sm.H.T
+            if sm.diagonal:
+                centre = x if sm.h_identity else sm.H * x
+            else:
+                centre = x @ sm.H.T
             lower = centre - c
             upper = centre + c
     xp, Pp = predict(x, P, sm)
-    if method.clip and lower is not None:
-        y = np.minimum(np.maximum(y, lower), upper)  # NaN stays NaN
-    out = update(xp, Pp, y, sm, lower, upper, c)
-    if lower is None:
-        lower, upper = -np.inf, np.inf
+    out = update(xp, Pp, y, sm, lower, upper, c, full, out_x)
     return StepOutput(xp, Pp, lower, upper, out)
 
 
@@ -337,15 +375,16 @@ def make_step_model(
     R = model.R if R is None else R
     H = model.H
     a_identity = bool(np.array_equal(A, np.eye(A.shape[0])))
+    h_identity = bool(H.shape[0] == H.shape[1] and np.array_equal(H, np.eye(H.shape[0])))
     if diagonal:
         r = _diag(R)
         if R_scale is not None:
             r = r * R_scale
-        return StepModel(_diag(A), _diag(Q), _diag(H), r, True, a_identity)
+        return StepModel(_diag(A), _diag(Q), _diag(H), r, True, a_identity, h_identity)
     if R_scale is not None:
         d = np.sqrt(R_scale)
         R = R * d[..., :, None] * d[..., None, :]
-    return StepModel(A, Q, H, R, False, a_identity)
+    return StepModel(A, Q, H, R, False, a_identity, h_identity)
 
 
 def _check_seq(name: str, M: ArrayLike | None, T: int, shape: tuple[int, ...]) -> Array | None:
@@ -359,16 +398,19 @@ def _check_seq(name: str, M: ArrayLike | None, T: int, shape: tuple[int, ...]) -
     return arr
 
 
-def _broadcast_param(
-    name: str, value: ArrayLike | None, shape: tuple[int, ...], fill: float
-) -> Array:
+def _param(name: str, value: ArrayLike | None, shape: tuple[int, ...], fill: float) -> Array:
+    """``value`` as a float array that broadcasts to ``shape`` (kept at its own shape, so
+    that per-axis quantities stay small); ``fill`` when None."""
     if value is None:
-        return np.full(shape, fill)
+        return np.asarray(fill, dtype=float)
     arr = np.asarray(value, dtype=float)
     try:
-        return np.broadcast_to(arr, shape)
+        ok = np.broadcast_shapes(arr.shape, shape) == shape
     except ValueError:
-        raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {shape}") from None
+        ok = False
+    if not ok:
+        raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {shape}")
+    return arr
 
 
 @dataclass
@@ -383,11 +425,12 @@ class RunInputs:
     Q_seq: Array | None
     R_seq: Array | None
     R_scale: Array | None
-    lower: Array  # (*batch, p) or (T, *batch, p) when seq
+    lower: Array  # broadcastable to (*batch, p), or to (T, *batch, p) when limits_seq
     upper: Array
     limits_seq: bool
     c: Array | None
     c_seq: bool
+    finite_steps: NDArray[np.bool_]  # (T,) the frame has no NaN
 
 
 def prepare_inputs(
@@ -406,26 +449,27 @@ def prepare_inputs(
     c_seq: ArrayLike | None = None,
     diagonal: bool | None = None,
 ) -> RunInputs:
-    """Validate a batch call; names the argument, the expected and the found shape."""
+    """Validate a batch call; errors name the argument, the expected and the found shape."""
     if not isinstance(model, LinearGaussian):
         raise TypeError(f"model: expected LinearGaussian, found {type(model).__name__}")
     y = np.asarray(ys, dtype=float)
     n, p = model.n, model.p
     if y.ndim < 2 or y.shape[-1] != p:
         raise ValueError(f"ys: expected shape (T, *batch, p) with p={p}, found {y.shape}")
-    if np.any(np.isinf(y)):
-        raise ValueError("ys: contains infinite values (use NaN for missing components)")
     T = y.shape[0]
     batch = tuple(y.shape[1:-1])
+    finite_steps = np.isfinite(y).reshape(T, -1).all(axis=1)
+    if not finite_steps.all() and np.any(np.isinf(y[~finite_steps])):
+        raise ValueError("ys: contains infinite values (use NaN for missing components)")
     try:
-        np.broadcast_shapes(model.batch_shape, batch)
-        if np.broadcast_shapes(model.batch_shape, batch) != batch:
-            raise ValueError
+        ok = np.broadcast_shapes(model.batch_shape, batch) == batch
     except ValueError:
+        ok = False
+    if not ok:
         raise ValueError(
             f"model batch shape {model.batch_shape} (x0/P0) does not broadcast to the batch "
             f"shape {batch} of ys"
-        ) from None
+        )
     A_s = _check_seq("A_seq", A_seq, T, (n, n))
     Q_s = _check_seq("Q_seq", Q_seq, T, (n, n))
     R_s = _check_seq("R_seq", R_seq, T, (p, p))
@@ -433,27 +477,29 @@ def prepare_inputs(
         check_covariance("Q_seq", Q_s)
     if R_s is not None:
         check_covariance("R_seq", R_s, definite=True)
+    full = (*batch, p)
     Rsc = None
     if R_scale is not None:
-        Rsc = _broadcast_param("R_scale", R_scale, (T, *batch, p), 1.0)
+        Rsc = np.broadcast_to(_param("R_scale", R_scale, (T, *full), 1.0), (T, *full))
         if not np.all(np.isfinite(Rsc)) or np.any(Rsc <= 0):
             raise ValueError("R_scale: entries must be finite and > 0")
-    full = (*batch, p)
     if lower is not None and lower_seq is not None:
         raise ValueError("give either lower or lower_seq, not both")
     if upper is not None and upper_seq is not None:
         raise ValueError("give either upper or upper_seq, not both")
     limits_seq = lower_seq is not None or upper_seq is not None
     if limits_seq:
-        lo = _broadcast_param(
-            "lower_seq", lower_seq if lower_seq is not None else lower, (T, *full), -np.inf
+        lo = np.broadcast_to(
+            _param("lower_seq", lower_seq if lower_seq is not None else lower, (T, *full), -np.inf),
+            (T, *full),
         )
-        up = _broadcast_param(
-            "upper_seq", upper_seq if upper_seq is not None else upper, (T, *full), np.inf
+        up = np.broadcast_to(
+            _param("upper_seq", upper_seq if upper_seq is not None else upper, (T, *full), np.inf),
+            (T, *full),
         )
     else:
-        lo = _broadcast_param("lower", lower, full, -np.inf)
-        up = _broadcast_param("upper", upper, full, np.inf)
+        lo = _param("lower", lower, full, -np.inf)
+        up = _param("upper", upper, full, np.inf)
     if np.any(np.isnan(lo)) or np.any(np.isnan(up)):
         raise ValueError("lower/upper: NaN limits (use -inf / inf for no limit)")
     if np.any(lo >= up):
@@ -464,9 +510,9 @@ def prepare_inputs(
     if c is not None and c_seq is not None:
         raise ValueError("give either c or c_seq, not both")
     if c_seq is not None:
-        cc = _broadcast_param("c_seq", c_seq, (T, *full), np.inf)
+        cc = np.broadcast_to(_param("c_seq", c_seq, (T, *full), np.inf), (T, *full))
     elif c is not None:
-        cc = _broadcast_param("c", c, full, np.inf)
+        cc = _param("c", c, full, np.inf)
     if cc is not None and (np.any(np.isnan(cc)) or np.any(cc <= 0)):
         raise ValueError("c: half-widths must be > 0 (inf allowed)")
     can_diag = (
@@ -480,51 +526,99 @@ def prepare_inputs(
     elif diagonal and not can_diag:
         raise ValueError("diagonal=True needs diagonal A, H, Q, R, P0 (and A/Q/R_seq) and n == p")
     return RunInputs(
-        y, T, batch, bool(diagonal), A_s, Q_s, R_s, Rsc, lo, up, limits_seq, cc, c_seq is not None
-    )
+        y, T, batch, bool(diagonal), A_s, Q_s, R_s, Rsc, lo, up, limits_seq, cc,
+        c_seq is not None, finite_steps,
+    )  # fmt: skip
 
 
 def initial_state(
     model: LinearGaussian, batch: tuple[int, ...], diagonal: bool
 ) -> tuple[Array, Array]:
-    """x0 (*batch, n) and P0 (*batch, n, n) / variances (*batch, n), writable copies."""
+    """x0 (*batch, n) and P0 (*batch, n, n), writable copies.
+
+    On the diagonal path P holds the variances with the batch axes of P0 only (often
+    ``(n,)``): they broadcast against the means and grow to (*batch, n) only when the
+    data make them differ (missing components, R_scale).
+    """
     n = model.n
     x = np.broadcast_to(model.x0, (*batch, n)).copy()
     if diagonal:
-        P = np.broadcast_to(_diag(model.P0), (*batch, n)).copy()
+        P = _diag(model.P0).copy()
     else:
         P = np.broadcast_to(model.P0, (*batch, n, n)).copy()
     return x, P
+
+
+class _Store:
+    """Per-step outputs of shape ``full`` that stay small while the values broadcast.
+
+    ``put(t, v)`` in time order; ``get()`` returns (T, *full): a read-only broadcast view
+    when no step ever had the full shape, else a dense array.
+    """
+
+    def __init__(self, T: int, full: tuple[int, ...], dtype: Any = float) -> None:
+        self.T, self.full, self.dtype = T, full, dtype
+        self.small: list[Any] = []
+        self.arr: NDArray[Any] | None = None
+
+    def put(self, t: int, v: Any) -> None:
+        if self.arr is None:
+            if np.shape(v) != self.full:
+                self.small.append(v)
+                return
+            self.arr = np.empty((self.T, *self.full), dtype=self.dtype)
+            for i, s in enumerate(self.small):
+                self.arr[i] = s
+            self.small = []
+        self.arr[t] = v
+
+    def get(self) -> NDArray[Any]:
+        if self.arr is not None:
+            return self.arr
+        shape = np.broadcast_shapes(*(np.shape(s) for s in self.small))
+        stacked = np.empty((self.T, *shape), dtype=self.dtype)
+        for i, s in enumerate(self.small):
+            stacked[i] = s
+        pad = (1,) * (len(self.full) - len(shape))
+        return np.broadcast_to(stacked.reshape((self.T, *pad, *shape)), (self.T, *self.full))
 
 
 # --------------------------------------------------------------------------------------
 # the batch run loop
 # --------------------------------------------------------------------------------------
 def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterResult:
-    """Run ``method`` over all frames of validated inputs; returns a FilterResult."""
+    """Run ``method`` over all frames of validated inputs; returns a FilterResult.
+
+    Every frame goes through :func:`filter_step`, exactly as in the streaming filter.
+    """
     T, batch, diagonal = inp.T, inp.batch, inp.diagonal
     n, p = model.n, model.p
     ys = inp.ys
-    cov_shape = (T, *batch, n) if diagonal else (T, *batch, n, n)
-    means = np.empty((T, *batch, n))
-    pmeans = np.empty((T, *batch, n))
-    covs = np.empty(cov_shape)
-    pcovs = np.empty(cov_shape)
-    loglik = np.empty((T, *batch))
     full = (*batch, p)
+    cov_full = (*batch, n) if diagonal else (*batch, n, n)
+    covs = _Store(T, cov_full)
+    pcovs = _Store(T, cov_full)
+    loglik = np.empty((T, *batch))
     censoring = method.name != "kf"
     if censoring:
-        p_lo = np.empty((T, *full))
-        p_un = np.empty((T, *full))
-        p_up = np.empty((T, *full))
-        clipped = np.empty((T, *full), dtype=bool)
+        p_lo, p_un, p_up = _Store(T, full), _Store(T, full), _Store(T, full)
+        clipped = _Store(T, full, bool)
     if method.adaptive:
-        lo_out = np.empty((T, *full))
-        up_out = np.empty((T, *full))
+        lo_out, up_out = _Store(T, full), _Store(T, full)
     constant_model = inp.A_seq is None and inp.Q_seq is None and inp.R_seq is None
     constant_model = constant_model and inp.R_scale is None
     sm = make_step_model(model, diagonal) if constant_model else None
     x, P = initial_state(model, batch, diagonal)
+    # with A = I throughout, x⁻_t = x_{t-1}: one buffer holds both means
+    shared = sm is not None and sm.a_identity
+    if shared:
+        buf = np.empty((T + 1, *batch, n))
+        buf[0] = x
+        x = buf[0]
+        means, pmeans = buf[1:], buf[:-1]
+    else:
+        means = np.empty((T, *batch, n))
+        pmeans = np.empty((T, *batch, n))
     for t in range(T):
         if not constant_model:
             sm = make_step_model(
@@ -538,33 +632,44 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
         lo = inp.lower[t] if inp.limits_seq else inp.lower
         up = inp.upper[t] if inp.limits_seq else inp.upper
         c = None if inp.c is None else (inp.c[t] if inp.c_seq else inp.c)
-        st = filter_step(method, t == 0, x, P, ys[t], sm, lo, up, c)  # type: ignore[arg-type]
+        out_x = means[t]
+        st = filter_step(
+            method, t == 0, x, P, ys[t], sm, lo, up, c,  # type: ignore[arg-type]
+            full=True if inp.finite_steps[t] else None, out_x=out_x,
+        )  # fmt: skip
         u = st.update
-        x, P = u.x, u.P
-        pmeans[t] = st.x_pred
-        pcovs[t] = st.P_pred
-        means[t] = x
-        covs[t] = P
+        if u.x is not out_x:
+            means[t] = u.x
+        x, P = out_x, u.P
+        if not shared:
+            pmeans[t] = st.x_pred
+        pcovs.put(t, st.P_pred)
+        covs.put(t, P)
         loglik[t] = u.loglik
         if censoring:
             if u.p_uncensored is None:
-                p_lo[t], p_un[t], p_up[t], clipped[t] = 0.0, 1.0, 0.0, False
+                p_lo.put(t, 0.0)
+                p_un.put(t, 1.0)
+                p_up.put(t, 0.0)
+                clipped.put(t, False)
             else:
-                p_lo[t], p_un[t], p_up[t], clipped[t] = (
-                    u.p_lower,
-                    u.p_uncensored,
-                    u.p_upper,
-                    u.clipped,
-                )
+                p_lo.put(t, u.p_lower)
+                p_un.put(t, u.p_uncensored)
+                p_up.put(t, u.p_upper)
+                clipped.put(t, u.clipped)
         if method.adaptive:
-            lo_out[t], up_out[t] = st.lower, st.upper
-    if not censoring:
-        p_lo = np.broadcast_to(0.0, (T, *full))
-        p_un = np.broadcast_to(1.0, (T, *full))
-        p_up = np.broadcast_to(0.0, (T, *full))
-        clipped = np.broadcast_to(False, (T, *full))
+            lo_out.put(t, st.lower)
+            up_out.put(t, st.upper)
+    if censoring:
+        p_lower, p_uncensored, p_upper = p_lo.get(), p_un.get(), p_up.get()
+        clipped_arr = clipped.get()
+    else:
+        p_lower = np.broadcast_to(0.0, (T, *full))
+        p_uncensored = np.broadcast_to(1.0, (T, *full))
+        p_upper = np.broadcast_to(0.0, (T, *full))
+        clipped_arr = np.broadcast_to(False, (T, *full))
     if method.adaptive:
-        lower, upper = lo_out, up_out
+        lower, upper = lo_out.get(), up_out.get()
     elif inp.limits_seq:
         lower, upper = inp.lower, inp.upper
     else:
@@ -573,14 +678,14 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
     return FilterResult(
         means=means,
         predicted_means=pmeans,
-        cov_data=covs,
-        predicted_cov_data=pcovs,
+        cov_data=covs.get(),
+        predicted_cov_data=pcovs.get(),
         diagonal=diagonal,
         loglik=loglik,
-        p_lower=p_lo,
-        p_uncensored=p_un,
-        p_upper=p_up,
-        clipped=clipped,
+        p_lower=p_lower,
+        p_uncensored=p_uncensored,
+        p_upper=p_upper,
+        clipped=clipped_arr,
         lower=lower,
         upper=upper,
         A_seq=inp.A_seq,

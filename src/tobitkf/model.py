@@ -257,7 +257,7 @@ def first_observed(ys: ArrayLike) -> Array:
 
 
 def _readonly(a: NDArray[Any] | None) -> None:
-    if a is not None and a.flags.writeable and a.flags.owndata:
+    if a is not None and a.flags.writeable:
         a.setflags(write=False)
 
 
