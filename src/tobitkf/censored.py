@@ -15,7 +15,7 @@ component pairs):
 * Narrow intervals (half-width ``h`` with ``h (1 + |centre|) <= 1``) use a 12-point
   Gauss–Legendre rule on the exponentially tilted density, which gives ``P``, the mean and
   the (centred, hence non-negative) variance without cancellation.
-* Far tails (whole interval beyond 8 standard deviations) use the continued fraction of the
+* Far tails (whole interval beyond 3 standard deviations) use the continued fraction of the
   Mills ratio for the distance of the truncated mean from the near limit, so the
   truncated variance ``≈ 1/α²`` keeps relative precision where ``1 + αλ - λ²`` would not.
 * The clipped variance is the non-negative mixture form of MATH.md §2.
@@ -54,7 +54,7 @@ _GL12_X, _GL12_W = np.polynomial.legendre.leggauss(12)
 _GL20_X, _GL20_W = np.polynomial.legendre.leggauss(20)
 _GL10_X, _GL10_W = np.polynomial.legendre.leggauss(10)
 # Beyond this many standard deviations the far-tail (continued fraction) branch is used.
-_FAR = 8.0
+_FAR = 3.0
 _CF_TERMS = 60
 
 
@@ -120,7 +120,7 @@ class TruncatedStats:
 
 
 def _mills_tail(x: NDArray) -> tuple[NDArray, NDArray]:
-    """Continued-fraction pieces for ``Z | Z > x`` with large ``x`` (``x >= _FAR``).
+    """Continued-fraction pieces for ``Z | Z > x`` with ``x >= 3`` (60 terms: exact to rounding).
 
     With ``λ = φ(x)/Q(x)`` (inverse Mills ratio), Laplace's continued fraction
     ``λ = x + 1/(x + 2/(x + 3/(x + ...)))`` gives ``r = λ - x = 1/(x + s)`` and
@@ -191,9 +191,9 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
             d_lo[narrow] = hn * (1.0 + m1)
             d_hi[narrow] = hn * (1.0 - m1)
 
-        # --- far branch: interval inside (-inf, -8]; reflect once more to (x1, x2) ------
+        # --- far branch: interval inside (-inf, -3]; reflect once more to (x1, x2) ------
         if np.any(far):
-            x1 = -b[far]  # >= 8
+            x1 = -b[far]  # >= 3
             x2 = -a[far]  # > x1, may be +inf
             r1, s1 = _mills_tail(x1)
             lq1 = log_ndtr(-x1)
