@@ -80,6 +80,7 @@ __all__ = [
     "NoTruthTable",
     "evaluate_methods",
     "evaluate_without_truth",
+    "pool_scores",
     "prepare_truth",
     "resolve_method",
     "score_estimate",
@@ -362,6 +363,8 @@ class MethodScore:
     smoothness_M : the paper's M (eq. 41) of this method's output on the paired joints.
     lag_frames, lag_refined, lag_correlation : hand-velocity cross-correlation lag.
     angles : per angle (elbows, knees) the RMSE in degrees at the best and at a fixed delay.
+    counts : number of scored samples: ``"all"``, per group and per raw class (for pooling
+        several recordings with :func:`pool_scores`).
     """
 
     method: str
@@ -376,6 +379,7 @@ class MethodScore:
     lag_refined: float | None
     lag_correlation: float | None
     angles: dict[str, AngleScore]
+    counts: dict[str, int] = field(default_factory=dict)
 
     def row(self) -> dict[str, Any]:
         """Flat dict for a table (centimetres, degrees)."""
@@ -442,12 +446,17 @@ def score_estimate(
     p95 = float(np.percentile(finite, 95)) if finite.size else float("nan")
     mx = float(finite.max()) if finite.size else float("nan")
     over = int(np.sum(np.nan_to_num(err, nan=0.0).max(axis=1) > over_threshold))
+    ok = np.isfinite(err)
+    counts = {"all": int(ok.sum())}
     g_rmse = {}
     for g, idx in groups.items():
         idx = [i for i in idx if truth.paired[i]]
         if idx:
             g_rmse[g] = rmse(err[:, idx])
+            counts[g] = int(ok[:, idx].sum())
     by_class = {name: rmse(err, raw_classes == code) for code, name in GLITCH_CLASS_NAMES.items()}
+    for code, name in GLITCH_CLASS_NAMES.items():
+        counts[name] = int((ok & (raw_classes == code)).sum())
     paired_idx = np.flatnonzero(truth.paired)
     M = smoothness(est, paired_idx)
     lag = lagr = lagc = None
@@ -478,7 +487,49 @@ def score_estimate(
         lag_refined=lagr,
         lag_correlation=lagc,
         angles=angles,
+        counts=counts,
     )
+
+
+def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
+    """Pool several recordings' scores per method (sample-weighted RMSE, cm).
+
+    RMSEs are combined as ``sqrt(Σ n_i rmse_i² / Σ n_i)`` over recordings, overall, per joint
+    group and per raw glitch class, so the result equals the RMSE over all samples of all
+    recordings.  Max is the largest max; frames over the threshold are summed.
+
+    Returns
+    -------
+    list of dicts, one per method (in the first table's order): ``method``, ``rmse_cm``,
+    ``<group>_cm``, ``<class>_cm``, ``max_cm``, ``frames_over``, ``n_samples``.
+    """
+    if not tables:
+        raise ValueError("pool_scores: no tables")
+    out = []
+    for s0 in tables[0].scores:
+        parts = [t.score(s0.method) for t in tables]
+        row: dict[str, Any] = {"method": s0.method}
+        keys = ["all", *s0.rmse_groups, *GLITCH_CLASS_NAMES.values()]
+        for key in keys:
+            num = den = 0.0
+            for p in parts:
+                v = (
+                    p.rmse
+                    if key == "all"
+                    else p.rmse_groups.get(key, p.rmse_by_class.get(key, float("nan")))
+                )
+                n = p.counts.get(key, 0)
+                if n and np.isfinite(v):
+                    num += n * v * v
+                    den += n
+            row["rmse_cm" if key == "all" else f"{key}_cm"] = (
+                100 * math.sqrt(num / den) if den else float("nan")
+            )
+        row["max_cm"] = 100 * max(p.max for p in parts)
+        row["frames_over"] = sum(p.frames_over for p in parts)
+        row["n_samples"] = sum(p.counts.get("all", 0) for p in parts)
+        out.append(row)
+    return out
 
 
 @dataclass(frozen=True)

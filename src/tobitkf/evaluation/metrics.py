@@ -180,7 +180,7 @@ def largest_jumps(
     p = np.asarray(positions, dtype=float)
     jumps = np.linalg.norm(np.diff(p, axis=0), axis=-1)
     flat = np.nan_to_num(jumps, nan=-1.0).ravel()
-    order = np.argsort(-flat)[:n]
+    order = np.argsort(-flat, kind="stable")[:n]  # ties: earliest first
     out = []
     for k in order:
         if flat[k] < 0:

@@ -25,6 +25,7 @@ every smoothing method (:func:`RigidRegistration.truth_in_track_frame`).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -242,7 +243,7 @@ def fit_registration(
     trim_fraction: float = 0.6,
     tukey_c: float = 4.685,
     min_scale: float = 0.005,
-    max_iter: int = 50,
+    max_iter: int = 100,
     tol: float = 1e-7,
     quaternion_order: str | None = None,
 ) -> RigidRegistration:
@@ -296,33 +297,59 @@ def fit_registration(
     sigma = np.inf
     n_it = 0
 
-    def solve_offsets(R, t, s, w):
-        # residual in mocap frame: R^T (y - t)/s - m  ≈ offset
-        back = np.einsum("ba,tjb->tja", R, y - t) / s - m
-        if offset_mode == "body":
-            back = np.einsum("tjba,tjb->tja", rots, back)
+    def wmean(a: NDArray, w: NDArray) -> NDArray:
+        """Per-joint weighted mean over time of (T, J, 3); median where no weight is left."""
         ww = np.where(finite, w, 0.0)
-        num = np.nansum(np.where(finite[..., None], back, 0.0) * ww[..., None], axis=0)
+        num = np.sum(np.where(finite[..., None], a, 0.0) * ww[..., None], axis=0)
         den = ww.sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
             out = num / den[:, None]
-        return np.where(den[:, None] > 0, out, 0.0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # unpaired joints: all NaN
+            med = np.nanmedian(np.where(finite[..., None], a, np.nan), axis=0)
+        return np.where(den[:, None] > 1e-9, out, np.nan_to_num(med))
+
+    def solve_offsets(R, t, s, w):
+        # residual in mocap frame: R^T (y - t)/s - m  ≈ offset (world), Q^T of it (body)
+        back = np.einsum("ba,tjb->tja", R, y - t) / s - m
+        if offset_mode == "body":
+            back = np.einsum("tjba,tjb->tja", rots, back)
+        return wmean(back, w)
 
     def residuals(R, t, s, offsets):
         pred = s * (m + _offset_seq(offsets, offset_mode, m, rots)) @ R.T + t
         return np.linalg.norm(y - pred, axis=-1), pred
 
+    paired = finite.any(axis=0)
+    if offset_mode == "body":
+        # start from the world-offset fit: its rotation, weights and (time-median) offsets
+        init = fit_registration(
+            y, m, offset_mode="world", scale=scale, trim_fraction=trim_fraction,
+            tukey_c=tukey_c, min_scale=min_scale, max_iter=max_iter, tol=tol,
+        )  # fmt: skip
+        R, t, s, w = init.rotation, init.translation, init.scale, init.weights
+        offsets = solve_offsets(R, t, s, np.zeros_like(w))  # plain medians
     stage_trim = 6  # trimmed iterations before IRLS
     for it in range(max_iter):
         n_it = it + 1
-        src = m + _offset_seq(offsets, offset_mode, m, rots)
-        R, t, s = kabsch(src[finite], y[finite], w[finite], scale=scale)
-        if offset_mode != "none":
+        if offset_mode == "none":
+            R, t, s = kabsch(m[finite], y[finite], w[finite], scale=scale)
+        elif offset_mode == "world":
+            # per-joint centring removes the (unknown) offsets from the rotation fit
+            mc = m - wmean(m, w)
+            yc = y - wmean(y, w)
+            R, _, s = kabsch(mc[finite], yc[finite], w[finite], scale=scale)
+            c = wmean(y - s * m @ R.T, w)  # (J, 3) = t + s R o_j
+            t = c[paired].mean(axis=0)
+            offsets = (c - t) @ R / s
+        else:
+            src = m + _offset_seq(offsets, offset_mode, m, rots)
+            R, t, s = kabsch(src[finite], y[finite], w[finite], scale=scale)
             offsets = solve_offsets(R, t, s, w)
         r, pred = residuals(R, t, s, offsets)
         rf = r[finite]
         sigma = max(1.4826 * float(np.median(rf)), min_scale)
-        if it < stage_trim:
+        if it < stage_trim and offset_mode != "body":
             cut = np.quantile(rf, trim_fraction)
             w = np.where(finite, (r <= cut).astype(float), 0.0)
         else:

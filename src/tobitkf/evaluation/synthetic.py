@@ -89,6 +89,12 @@ def _smoothstep(x: NDArray) -> NDArray:
     return x * x * (3 - 2 * x)
 
 
+def _whole_cycles(t: NDArray, period: float) -> float:
+    """The period closest to ``period`` that fits a whole number of cycles in ``t``."""
+    span = t[-1] - t[0] + (t[1] - t[0] if len(t) > 1 else 0.0)
+    return span / max(round(span / period), 1)
+
+
 def _params(kind: str, n: int, fps: float, rng: np.random.Generator) -> dict[str, NDArray]:
     """Per-frame angles (rad) and pelvis motion for one movement."""
     t = np.arange(n) / fps
@@ -113,7 +119,7 @@ def _params(kind: str, n: int, fps: float, rng: np.random.Generator) -> dict[str
         p["forward"] = np.cumsum(speed * env) / fps
         p["yaw"] = np.radians(rng.uniform(-4, 4)) * np.sin(w / 2) * env
     elif kind == "arms":
-        period = rng.uniform(3.0, 4.5)
+        period = _whole_cycles(t, rng.uniform(3.0, 4.5))
         lift = 0.5 - 0.5 * np.cos(2 * np.pi * t / period)
         top = np.radians(rng.uniform(130, 160))
         p["sabd_l"] = top * lift * env
@@ -121,7 +127,7 @@ def _params(kind: str, n: int, fps: float, rng: np.random.Generator) -> dict[str
         p["elbow_l"] = p["elbow_r"] = np.radians(rng.uniform(5, 20)) * env
         p["sflex_l"] = p["sflex_r"] = np.radians(10) * lift * env
     elif kind == "squat":
-        period = rng.uniform(3.0, 4.0)
+        period = _whole_cycles(t, rng.uniform(3.0, 4.0))
         depth = 0.5 - 0.5 * np.cos(2 * np.pi * t / period)
         kmax = np.radians(rng.uniform(85, 110))
         p["knee_l"] = p["knee_r"] = kmax * depth * env
@@ -371,7 +377,8 @@ def bvh_to_kinect(
     Joints are mapped by :data:`BVH_TO_KINECT`, resampled from the file's rate to ``fps`` by
     linear interpolation, and placed in Kinect camera space: BVH y up stays y up, the
     subject is turned to face the sensor (180° about y), its mean position is put
-    ``distance`` metres in front of the sensor and the lowest foot point on ``floor_y``.  Units are taken as metres (the scaled CMU file).
+    ``distance`` metres in front of the sensor and the lowest foot point on ``floor_y``.
+    Units are taken as metres (the scaled CMU file).
 
     Returns
     -------
