@@ -44,6 +44,7 @@ from tobitkf.io.registry import (
     load,
     register_format,
     save,
+    unregister_format,
 )
 
 __all__ = [
@@ -55,6 +56,7 @@ __all__ = [
     "load",
     "register_format",
     "save",
+    "unregister_format",
 ]
 
 register_format(

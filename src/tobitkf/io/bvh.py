@@ -208,6 +208,10 @@ def read_bvh(
     lines = read_lines(path)
     if not any(line.strip() for line in lines):
         raise ReadError(path, None, "empty file: expected a BVH HIERARCHY")
+    first = next(i for i, ln in enumerate(lines) if ln.strip())
+    if lines[first].split()[0].upper() != "HIERARCHY":
+        shown = lines[first].strip()[:40]
+        raise ReadError(path, first + 1, f"expected HIERARCHY, found {shown!r}")
     motion = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), -1)
     if motion < 0:
         raise ReadError(path, len(lines), "expected a MOTION section, found none")

@@ -9,7 +9,7 @@ suffixes). Up axis z (Vicon/Qualisys convention).
 
 * ``"all"`` (default): every entry, including model outputs;
 * ``"markers"``: real markers only: no Plug-in Gait segment frames (``…O/…A/…L/…P``
-  quadruples) and no model outputs (``…Angles``, ``…Force``, ``…Moment``, ``…Power``,
+  quadruples) and no model outputs (``…Angle(s)``, ``…Force``, ``…Moment``, ``…Power``, ``…GRF``,
   ``CentreOfMass…``);
 * ``"joint_centres"``: the origins (``…O``) of the Plug-in Gait segment frames (PELO,
   LFEO, LTIO, LHUO, ...), usable as joint centres.
@@ -30,7 +30,7 @@ from tobitkf.skeleton.topology import Topology
 __all__ = ["classify_labels", "read_c3d", "sniff_c3d"]
 
 _UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1, "in": 0.0254}
-_MODEL_OUTPUTS = ("angles", "force", "moment", "power", "centreofmass", "centerofmass")
+_MODEL_OUTPUTS = ("angle", "force", "moment", "power", "centreofmass", "centerofmass", "grf")
 
 
 def _import_c3d():

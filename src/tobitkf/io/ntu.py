@@ -63,7 +63,7 @@ class _Cursor:
         self.path = path
         self.rows, self.numbers = nonempty(lines)
         self.pos = 0
-        self.last_line = len(lines)
+        self.last_line = self.numbers[-1] if self.numbers else len(lines)
 
     def take(self, what: str) -> tuple[str, int]:
         if self.pos >= len(self.rows):

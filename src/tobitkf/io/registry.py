@@ -26,6 +26,7 @@ __all__ = [
     "load",
     "register_format",
     "save",
+    "unregister_format",
 ]
 
 Reader = Callable[..., list[SkeletonSequence]]
@@ -86,6 +87,13 @@ def register_format(
     for a in aliases:
         _ALIASES[a] = name
     return spec
+
+
+def unregister_format(name: str) -> None:
+    """Remove a registered format (and its aliases)."""
+    _FORMATS.pop(name, None)
+    for alias in [a for a, n in _ALIASES.items() if n == name]:
+        del _ALIASES[alias]
 
 
 def formats() -> dict[str, FormatSpec]:

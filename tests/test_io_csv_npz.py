@@ -1,0 +1,169 @@
+"""Generic CSV and NPZ: documented layout, exact round trips, multi-body."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from conftest import data_file
+from tobitkf.io import ReadError, detect_format, load, save
+from tobitkf.io.generic_csv import read_csv
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology, get_topology
+
+
+def _assert_same(a: SkeletonSequence, b: SkeletonSequence, *, metadata: bool = False):
+    np.testing.assert_array_equal(a.positions, b.positions)
+    if a.tracking_state is None:
+        assert b.tracking_state is None
+    else:
+        np.testing.assert_array_equal(a.tracking_state, b.tracking_state)
+    if a.timestamps is None:
+        assert b.timestamps is None
+    else:
+        np.testing.assert_array_equal(a.timestamps, b.timestamps)
+    assert a.fps == b.fps
+    assert a.body_id == b.body_id
+    assert a.topology == b.topology
+
+
+def test_handwritten_csv(tmp_path):
+    p = tmp_path / "walk.csv"
+    p.write_text(
+        "timestamp,Pelvis_x,Pelvis_y,Pelvis_z,Pelvis_state,LeftKnee_X,LeftKnee_Y,LeftKnee_Z\n"
+        "0.0,1,2,3,2,4,5,6\n"
+        "0.04,1.5,,3,1,4,5,nan\n"
+    )
+    assert detect_format(p) == "csv"
+    (s,) = load(p)
+    assert s.joint_names == ("Pelvis", "LeftKnee")
+    np.testing.assert_array_equal(s.timestamps, [0.0, 0.04])
+    np.testing.assert_array_equal(s.positions[0], [[1, 2, 3], [4, 5, 6]])
+    assert np.isnan(s.positions[1, 0, 1]) and np.isnan(s.positions[1, 1, 2])
+    np.testing.assert_array_equal(s.tracking_state[:, 0], [2, 1])
+    assert (s.tracking_state[:, 1] == 2).all()  # no state column: tracked
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "match"),
+    [
+        ("time,a_x,a_y\n", 1, "expected columns"),
+        ("a_x,a_y,a_z\n1,2\n", 2, "expected 3 values"),
+        ("a_x,a_y,a_z\n1,2,x\n", 2, "field 3"),
+        ("a_x,a_y,a_z,foo\n1,2,3,4\n", 1, "unexpected column 'foo'"),
+        ("time,a_x,a_y,a_z\n1,0,0,0\n0.5,0,0,0\n", 3, "non-decreasing"),
+        ("a_x,a_y,a_z,a_state\n1,2,3,7\n", 2, "state 0, 1 or 2"),
+    ],
+)
+def test_csv_errors(tmp_path, text, line, match):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(ReadError, match=match) as e:
+        read_csv(p)
+    assert e.value.line == line
+
+
+def test_csv_empty(tmp_path):
+    p = tmp_path / "e.csv"
+    p.write_text("\n\n# topology: kinect_v2\n")
+    with pytest.raises(ReadError, match="empty"):
+        read_csv(p)
+
+
+def _random_sequence(rng, T, topo, *, state=True, times=True, fps=30.0, body_id=None):
+    pos = rng.normal(size=(T, topo.n_joints, 3))
+    pos[rng.random(pos.shape[:2]) < 0.1] = np.nan
+    st_ = rng.integers(0, 3, size=(T, topo.n_joints)) if state else None
+    ts = np.cumsum(rng.uniform(0.01, 0.1, size=T)) if times else None
+    return SkeletonSequence(pos, topo, st_, ts, fps, body_id, {"source": "x"})
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 12), st.booleans(), st.booleans(), st.integers(0, 2**32),
+       st.sampled_from(["kinect_v2", "kinect_v2_21", "ui_prmd", "custom"]))  # fmt: skip
+def test_csv_round_trip_property(tmp_path_factory, T, state, times, seed, topo_name):
+    rng = np.random.default_rng(seed)
+    topo = (
+        Topology.from_names(["a", "b"], up_axis=2, name="custom")
+        if topo_name == "custom"
+        else get_topology(topo_name)
+    )
+    s = _random_sequence(rng, T, topo, state=state, times=times)
+    p = tmp_path_factory.mktemp("csv") / "r.csv"
+    save(s, p)
+    (r,) = load(p)
+    _assert_same(s, r)
+
+
+def test_csv_multibody_round_trip(tmp_path):
+    rng = np.random.default_rng(5)
+    topo = get_topology("kinect_v2")
+    seqs = [_random_sequence(rng, 4, topo, body_id=b) for b in (11, 12)]
+    p = tmp_path / "m.csv"
+    save(seqs, p, format="csv")
+    back = load(p)
+    assert len(back) == 2
+    for a, b in zip(seqs, back, strict=True):
+        _assert_same(a, b)
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 6), st.just(25), st.just(3)),
+        elements=st.floats(-5, 5) | st.just(np.nan),
+    ),
+    st.one_of(st.none(), st.integers(-(2**62), 2**62), st.text(max_size=5)),
+)
+def test_npz_round_trip_property(tmp_path_factory, pos, body_id):
+    T = pos.shape[0]
+    meta = {
+        "source": "s",
+        "orientations": np.arange(T * 25 * 4, dtype=float).reshape(T, 25, 4),
+        "nested": {"a": [1, 2.5, None, "x", (3, 4)], "arr": np.array([1, 2], dtype=np.int8)},
+        "nan": float("nan"),
+    }
+    s = SkeletonSequence(pos, "kinect_v2", np.full((T, 25), 1), None, 15.0, body_id, meta)
+    p = tmp_path_factory.mktemp("npz") / "r.npz"
+    save(s, p)
+    assert detect_format(p) == "npz"
+    (r,) = load(p)
+    _assert_same(s, r)
+    np.testing.assert_array_equal(r.metadata["orientations"], meta["orientations"])
+    assert r.metadata["nested"]["a"] == [1, 2.5, None, "x", (3, 4)]
+    assert r.metadata["nested"]["arr"].dtype == np.int8
+    assert np.isnan(r.metadata["nan"])
+
+
+def test_npz_real_multibody_kimore_and_keraal(tmp_path):
+    kim = load(data_file("kimore/JointPositionExercise1.csv"))[0]
+    ker = load(data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt"))[0].replace(body_id="b")
+    p = tmp_path / "two.npz"
+    save([kim, ker], p)
+    a, b = load(p)
+    _assert_same(kim, a)
+    _assert_same(ker, b)
+    np.testing.assert_array_equal(b.metadata["orientations"], ker.metadata["orientations"])
+
+
+def test_npz_garbage(tmp_path):
+    p = tmp_path / "x.npz"
+    p.write_bytes(b"PK\x03\x04garbage")
+    with pytest.raises(ReadError):
+        load(p)
+    np.savez(p, a=np.zeros(3))
+    with pytest.raises(ReadError, match="tobitkf"):
+        load(p)
+
+
+def test_csv_from_real_krajjat(tmp_path):
+    (s,) = load(data_file("krajjat/sequence_ainhoa_trimmed.tsv"))
+    p = tmp_path / "k.csv"
+    save(s, p)
+    (r,) = load(p)
+    _assert_same(s, r)
+    assert r.topology.name == "kinect_v2_21"

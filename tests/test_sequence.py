@@ -1,0 +1,139 @@
+"""SkeletonSequence: validation, time axis, joint selection, largest jumps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.topology import Topology, get_topology
+
+V2 = get_topology("kinect_v2")
+
+
+def _seq(T=5, **kw):
+    rng = np.random.default_rng(0)
+    return SkeletonSequence(positions=rng.normal(size=(T, 25, 3)), topology=V2, **kw)
+
+
+def test_tracking_state_codes_match_kinect_sdk():
+    assert int(TrackingState.NOT_TRACKED) == 0
+    assert int(TrackingState.INFERRED) == 1
+    assert int(TrackingState.TRACKED) == 2
+
+
+def test_basic_properties_and_topology_by_name():
+    s = SkeletonSequence(np.zeros((4, 25, 3)), "kinect_v2", fps=30)
+    assert s.topology is V2
+    assert (s.n_frames, s.n_joints) == (4, 25)
+    assert s.joint_names[0] == "SpineBase"
+    np.testing.assert_allclose(s.times(), [0, 1 / 30, 2 / 30, 3 / 30])
+    np.testing.assert_allclose(s.dt(), np.full(3, 1 / 30))
+    assert s.metadata == {}
+
+
+def test_timestamps_take_precedence():
+    ts = np.array([0.0, 0.05, 0.2, 0.21, 0.3])
+    s = _seq(timestamps=ts, fps=30)
+    np.testing.assert_array_equal(s.times(), ts)
+    np.testing.assert_allclose(s.dt(), [0.05, 0.15, 0.01, 0.09])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"positions": np.zeros((4, 25))}, "shape"),
+        ({"positions": np.zeros((4, 24, 3))}, "24 joints"),
+        ({"positions": np.full((2, 25, 3), np.inf)}, "inf"),
+        ({"tracking_state": np.zeros((3, 25))}, "tracking_state"),
+        ({"tracking_state": np.full((4, 25), 3)}, "0, 1 or 2"),
+        ({"timestamps": np.arange(3.0)}, "timestamps"),
+        ({"timestamps": np.array([0.0, 0.2, 0.1, 0.3])}, "non-decreasing"),
+        ({"fps": 0.0}, "fps"),
+        ({"fps": -30}, "fps"),
+        ({"fps": float("nan")}, "fps"),
+    ],
+)
+def test_validation(kwargs, match):
+    base = {"positions": np.zeros((4, 25, 3)), "topology": V2}
+    base.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        SkeletonSequence(**base)
+
+
+def test_frozen_and_replace_revalidates():
+    s = _seq(fps=30)
+    with pytest.raises(AttributeError):
+        s.fps = 10  # type: ignore[misc]
+    r = s.replace(fps=60.0)
+    assert r.fps == 60.0 and s.fps == 30.0
+    np.testing.assert_array_equal(r.positions, s.positions)
+    with pytest.raises(ValueError):
+        s.replace(fps=-1)
+
+
+def test_state_cast_to_int8():
+    s = _seq(tracking_state=np.full((5, 25), 2, dtype=np.int64))
+    assert s.tracking_state.dtype == np.int8
+
+
+def test_select_joints_slices_everything():
+    T = 6
+    rng = np.random.default_rng(1)
+    pos = rng.normal(size=(T, 25, 3))
+    state = rng.integers(0, 3, size=(T, 25))
+    orient = rng.normal(size=(T, 25, 4))
+    s = SkeletonSequence(pos, V2, tracking_state=state, metadata={"orientations": orient, "k": 1})
+    sub = s.select_joints(["HandRight", "ElbowRight", "SpineBase"])
+    assert sub.joint_names == ("HandRight", "ElbowRight", "SpineBase")
+    np.testing.assert_array_equal(sub.positions, pos[:, [11, 9, 0]])
+    np.testing.assert_array_equal(sub.tracking_state, state[:, [11, 9, 0]])
+    np.testing.assert_array_equal(sub.metadata["orientations"], orient[:, [11, 9, 0]])
+    assert sub.metadata["k"] == 1
+    # dropped parents: HandRight -> ElbowRight, ElbowRight -> SpineBase (nearest kept)
+    assert sub.topology.parents == (1, 2, -1)
+
+
+def test_largest_jumps_brute_force_with_nan():
+    T = 7
+    rng = np.random.default_rng(2)
+    pos = rng.normal(size=(T, 25, 3))
+    pos[3, 4] = np.nan
+    pos[:, 7] = np.nan
+    pos[1:, 8] = np.nan  # only one sample: no pair
+    s = SkeletonSequence(pos, V2)
+    jumps, frames = s.largest_jumps()
+    for j in range(25):
+        best, at = np.nan, -1
+        for t in range(1, T):
+            d = pos[t, j] - pos[t - 1, j]
+            if np.isnan(d).any():
+                continue
+            n = float(np.sqrt(np.sum(d**2)))
+            if np.isnan(best) or n > best:
+                best, at = n, t
+        if at < 0:
+            assert np.isnan(jumps[j]) and frames[j] == -1
+        else:
+            assert jumps[j] == pytest.approx(best) and frames[j] == at
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 8), st.just(3), st.just(3)),
+        elements=st.floats(-10, 10),
+    ),
+    st.floats(1.0, 500.0),
+)
+def test_times_uniform_property(pos, fps):
+    s = SkeletonSequence(pos, Topology.from_names(["a", "b", "c"]), fps=fps)
+    t = s.times()
+    assert t.shape == (pos.shape[0],)
+    np.testing.assert_allclose(np.diff(t), 1 / fps, rtol=1e-12)
+    assert s.dt().shape == (pos.shape[0] - 1,)
+    assert s.missing().shape == pos.shape[:2]
