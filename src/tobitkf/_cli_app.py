@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -241,3 +242,406 @@ def methods():
         defaults = method_defaults(name)
         rows.append([name, ", ".join(f"{k}={v}" for k, v in defaults.items())])
     _print_table("smoothing methods", ["method", "defaults"], rows)
+
+
+# --------------------------------------------------------------------------- evaluate
+def _load_one(path: str, what: str):
+    from tobitkf.io import load
+
+    try:
+        seqs = load(path)
+    except (ValueError, OSError, ImportError) as exc:
+        _fail(f"cannot read {what} {path}: {exc}")
+    if not seqs:
+        _fail(f"{what} {path} holds no skeleton")
+    if len(seqs) > 1:
+        err_console.print(f"{path}: {len(seqs)} bodies; using the first ({seqs[0].body_id})")
+    return seqs[0]
+
+
+def _method_list(text: str | None) -> list[str] | None:
+    if not text:
+        return None
+    names = [m.strip() for m in text.split(",") if m.strip()]
+    if not names:
+        raise click.BadParameter("no method named", param_hint="--methods")
+    return names
+
+
+@app.command()
+@click.argument("tracks", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-t",
+    "--truth",
+    "truths",
+    multiple=True,
+    type=click.Path(exists=True, dir_okay=False),
+    help="Motion-capture file, one per TRACK, in the same order.",
+)
+@click.option(
+    "--methods",
+    default=None,
+    help="Comma-separated methods (default: raw,kf,atkf,atkf2016,sgf,kf+rts,"
+    "one_euro,kinect and our robust methods). `<name>+rts` = offline smoother.",
+)
+@click.option(
+    "--pairs",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="CSV pairing table: track_joint,mocap_point[+mocap_point...].",
+)
+@click.option(
+    "--fixed-delay",
+    default=0,
+    show_default=True,
+    help="Delay (frames) used for every method in the fixed-delay angle RMSE.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON.")
+@click.option(
+    "-o",
+    "--out",
+    "outdir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Also write results.json (and per-recording tables) here.",
+)
+def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
+    """Score smoothing methods on TRACK against motion capture (or without it).
+
+    With --truth: per-method RMSE (pooled, per joint group, by raw glitch class), p95,
+    max, frames over 10 cm, smoothness M, hand lag and joint-angle RMSE; several
+    TRACK/--truth pairs also get a pooled table. Without --truth: the paper's Table 3
+    (smoothness M) and the largest jumps.
+    """
+    from tobitkf.evaluation.evaluate import (
+        DEFAULT_METHODS,
+        evaluate_methods,
+        evaluate_without_truth,
+        pool_scores,
+        prepare_truth,
+    )
+    from tobitkf.skeleton.smooth import METHODS
+
+    method_specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    if truths and len(truths) != len(tracks):
+        _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
+    results: dict[str, Any] = {}
+    tables = []
+    for i, path in enumerate(tracks):
+        track = _load_one(path, "track")
+        try:
+            if truths:
+                mocap = _load_one(truths[i], "truth")
+                gt = prepare_truth(track, mocap, pairs=pairs)
+                table = evaluate_methods(track, gt, method_specs, fixed_delay=fixed_delay)
+                tables.append(table)
+            else:
+                table = evaluate_without_truth(track, method_specs)
+        except (ValueError, KeyError) as exc:
+            _fail(f"{path}: {exc}")
+        results[path] = table.to_dict()
+        if not as_json:
+            console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
+            console.print(table.to_text(), highlight=False, soft_wrap=True)
+    pooled = pool_scores(tables) if len(tables) > 1 else None
+    if pooled is not None:
+        results["pooled"] = pooled
+        if not as_json:
+            cols = [c for c in pooled[0] if c != "method"]
+            _print_table(
+                f"pooled over {len(tables)} recordings (cm)",
+                ["method", *cols],
+                [[r["method"], *[r[c] for c in cols]] for r in pooled],
+            )
+    if outdir:
+        out = Path(outdir)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "results.json").write_text(dumps(results))
+        if not as_json:
+            console.print(f"wrote {out / 'results.json'}")
+    if as_json:
+        click.echo(dumps(results))
+
+
+def _default_eval_methods(defaults, registry) -> list[str]:
+    extra = [m for m in ("robust", "robust_online") if m in registry]
+    return [*defaults, *extra]
+
+
+# --------------------------------------------------------------------------- report
+@app.command()
+@click.argument("track", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-t",
+    "--truth",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="Motion-capture file recorded together with TRACK.",
+)
+@click.option(
+    "-o",
+    "--output",
+    default="report.html",
+    show_default=True,
+    type=click.Path(dir_okay=False),
+    help="HTML file to write.",
+)
+@click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
+@click.option(
+    "--pairs",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="CSV pairing table for --truth.",
+)
+@click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
+def report(track, truth, output, methods, pairs, no_gif):
+    """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
+    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
+    from tobitkf.report import track_report
+    from tobitkf.skeleton.smooth import METHODS
+
+    raw = _load_one(track, "track")
+    mocap = _load_one(truth, "truth") if truth else None
+    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    with console.status("evaluating and drawing..."):
+        try:
+            path, table = track_report(
+                raw, output, mocap=mocap, methods=specs, pairs=pairs, gif=not no_gif
+            )
+        except ImportError as exc:
+            _fail(str(exc))
+        except (ValueError, KeyError) as exc:
+            _fail(f"{track}: {exc}")
+    console.print(table.to_text(), highlight=False, soft_wrap=True)
+    console.print(f"report written to {Path(path).resolve()}")
+
+
+# --------------------------------------------------------------------------- benchmark
+@app.command()
+@click.option("--seed", default=0, show_default=True, help="Seed of motion and corruption.")
+@click.option(
+    "--seeds",
+    default=1,
+    show_default=True,
+    type=click.IntRange(1, 1000),
+    help="Repeat over this many consecutive seeds and average.",
+)
+@click.option(
+    "--motion",
+    default="mixed",
+    show_default=True,
+    type=click.Choice(["mixed", "walk", "arms", "squat"]),
+)
+@click.option(
+    "--source",
+    default="generator",
+    show_default=True,
+    help="'generator' (built in) or the path of a BVH file.",
+)
+@click.option("--duration", default=10.0, show_default=True, help="Seconds of motion.")
+@click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+def benchmark(seed, seeds, motion, source, duration, methods, as_json):
+    """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
+    from tobitkf.evaluation.benchmark import run_benchmark
+    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
+    from tobitkf.skeleton.smooth import METHODS
+
+    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    tables = []
+    for s in range(seed, seed + seeds):
+        try:
+            tables.append(
+                run_benchmark(
+                    seed=s, methods=specs, motion=motion, source=source, duration=duration
+                )
+            )
+        except (ValueError, OSError) as exc:
+            _fail(str(exc))
+    if as_json:
+        click.echo(dumps([t.to_dict() for t in tables]))
+        return
+    if seeds == 1:
+        console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
+        return
+    import numpy as np
+
+    rows = []
+    for i, r0 in enumerate(tables[0].rows):
+        keys = ["rmse", *r0.rmse_by_label]
+        vals = []
+        for k in keys:
+            v = np.array(
+                [t.rows[i].rmse if k == "rmse" else t.rows[i].rmse_by_label[k] for t in tables]
+            )
+            vals.append(f"{100 * np.nanmean(v):.2f} ± {100 * np.nanstd(v):.2f}")
+        rows.append([r0.method, *vals])
+    _print_table(
+        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}",
+        ["method", "rmse", *tables[0].rows[0].rmse_by_label],
+        rows,
+    )
+
+
+# --------------------------------------------------------------------------- reproduce
+@app.group()
+def reproduce():
+    """Regenerate the 2020 paper's synthetic results, next to what the paper printed."""
+
+
+@reproduce.command("covariance-example")
+@click.option(
+    "--samples", default=1_000_000, show_default=True, help="Monte Carlo samples for eq. 23."
+)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@click.option(
+    "--out",
+    "outdir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Write figures (PNG) here.",
+)
+def covariance_example_cmd(samples, seed, as_json, outdir):
+    """Section 3.4: exact censored covariance vs the standard TKF's vs Monte Carlo."""
+    from tobitkf.evaluation.paper import covariance_example
+
+    result = covariance_example(samples=samples, seed=seed)
+    if as_json:
+        click.echo(dumps(result.to_dict()))
+    else:
+        console.print(result.format_text(), highlight=False, soft_wrap=True)
+    if outdir:
+        from tobitkf.evaluation.paper_figures import covariance_example_figure
+
+        for p in covariance_example_figure(result, outdir):
+            err_console.print(f"wrote {p}")
+
+
+@reproduce.command("oscillator")
+@click.option("--runs", default=100, show_default=True, help="Monte Carlo runs.")
+@click.option("--steps", default=1000, show_default=True, help="Time steps per run.")
+@click.option("--seed", default=0, show_default=True, help="First seed.")
+@click.option(
+    "--seeds",
+    default=1,
+    show_default=True,
+    type=click.IntRange(1, 1000),
+    help="Repeat with this many seeds and report the spread.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@click.option(
+    "--out",
+    "outdir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Write Fig. 2 and Fig. 3 (PNG) here.",
+)
+def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir):
+    """Section 4.1: Tables 1 and 2 (RMSE and NCI) for TKF, TKF^c and the KF."""
+    from tobitkf.evaluation.oscillator import oscillator_experiment
+
+    with (
+        console.status(f"{runs} runs x {steps} steps x {seeds} seed(s)...")
+        if not as_json
+        else nullcontext()
+    ):
+        result = oscillator_experiment(runs=runs, steps=steps, seed=seed, seeds=seeds)
+    if as_json:
+        click.echo(dumps(result.to_dict()))
+    else:
+        console.print(result.format_text(), highlight=False, soft_wrap=True)
+    if outdir:
+        from tobitkf.evaluation.paper_figures import oscillator_figures
+
+        for p in oscillator_figures(result, outdir):
+            err_console.print(f"wrote {p}")
+
+
+# --------------------------------------------------------------------------- fit
+@app.command()
+@click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option("--per-joint", is_flag=True, help="One Q per joint instead of one shared Q.")
+@click.option(
+    "--structure",
+    "q_structure",
+    default="scalar",
+    show_default=True,
+    type=click.Choice(["scalar", "diagonal", "full"]),
+    help="Structure of Q.",
+)
+@click.option("--fit-r", is_flag=True, help="Also estimate R (R = r I).")
+@click.option(
+    "--form",
+    default="corrected",
+    show_default=True,
+    type=click.Choice(["corrected", "standard", "gaussian"]),
+    help="Likelihood: censored with S (corrected), with R (standard), or plain KF.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+def fit(paths, per_joint, q_structure, fit_r, form, as_json):
+    """Maximum-likelihood estimate of the process noise Q of skeleton recordings."""
+    from tobitkf.likelihood import fit_skeleton_noise
+
+    results: dict[str, Any] = {}
+    for path in paths:
+        seq = _load_one(path, "recording")
+        kwargs: dict[str, Any] = {
+            "per_joint": per_joint,
+            "q_structure": q_structure,
+            "fit_r": fit_r,
+            "form": form,
+        }
+        if form == "gaussian":
+            kwargs["c"] = None
+        with console.status(f"fitting {path}...") if not as_json else nullcontext():
+            try:
+                res = fit_skeleton_noise(seq, **kwargs)
+            except ValueError as exc:
+                _fail(f"{path}: {exc}")
+        results[path] = (
+            {k: v.to_dict() for k, v in res.items()} if isinstance(res, dict) else res.to_dict()
+        )
+        if not as_json:
+            console.rule(f"[bold]{path}")
+            if isinstance(res, dict):
+                for joint, r in res.items():
+                    console.print(f"[bold]{joint}[/bold]")
+                    console.print(r.format_text(), highlight=False)
+            else:
+                console.print(res.format_text(), highlight=False)
+    if as_json:
+        click.echo(dumps(results))
+
+
+# --------------------------------------------------------------------------- demo
+@app.command()
+@click.option(
+    "-o",
+    "--out",
+    "outdir",
+    default="demo-output",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Folder for the recordings and report.",
+)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
+def demo(outdir, seed, no_gif):
+    """The main job end to end on the built-in synthetic recording (no files needed)."""
+    from tobitkf.demo import run_demo
+    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
+    from tobitkf.skeleton.smooth import METHODS
+
+    with console.status("generating, smoothing, scoring, drawing..."):
+        result = run_demo(
+            outdir,
+            seed=seed,
+            gif=not no_gif,
+            methods=_default_eval_methods(DEFAULT_METHODS, METHODS),
+        )
+    console.print("[bold]RMSE against the known truth, by glitch type (cm)[/bold]")
+    console.print(result.table.to_text(), highlight=False, soft_wrap=True)
+    for f in result.files:
+        console.print(f"wrote {f}")
+    console.print(f"report: {result.report.resolve()}")

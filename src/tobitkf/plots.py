@@ -142,15 +142,15 @@ def plot_skeleton_frames(
     frame_labels: Sequence[str] | None = None,
     title: str = "",
 ):
-    """Skeletons at a few frames, one row per method (like Fig. 5 of the 2020 paper).
+    """Skeletons at a few frames, one column per method (like Fig. 5 of the 2020 paper).
 
     Parameters
     ----------
     frames : mapping name -> (T, J, 3) positions
-    frame_indices : frames to draw (columns)
+    frame_indices : frames to draw (rows)
     parents : (J,) parent index per joint, -1 for the root
     up_axis : which coordinate points up (drawn vertically)
-    frame_labels : column titles (default "frame k")
+    frame_labels : row labels (default "frame k")
     title : figure title
 
     Returns
@@ -167,13 +167,13 @@ def plot_skeleton_frames(
     finite = allpts[np.all(np.isfinite(allpts), axis=1)]
     lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
     hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
-    ncol = len(frame_indices)
+    nrow = len(frame_indices)
     fig, axes = plt.subplots(
-        len(names), ncol, figsize=(2.3 * ncol, 2.6 * len(names)), squeeze=False
+        nrow, len(names), figsize=(1.5 * len(names) + 0.6, 2.4 * nrow), squeeze=False
     )
-    for r, name in enumerate(names):
+    for c, name in enumerate(names):
         pos = np.asarray(frames[name], dtype=float)
-        for c, t in enumerate(frame_indices):
+        for r, t in enumerate(frame_indices):
             ax = axes[r, c]
             p = pos[t]
             for j, par in enumerate(parents):
@@ -186,9 +186,9 @@ def plot_skeleton_frames(
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
-                ax.set_title(frame_labels[c] if frame_labels else f"frame {t}", fontsize=9)
+                ax.set_title(name, fontsize=9)
             if c == 0:
-                ax.set_ylabel(name)
+                ax.set_ylabel(frame_labels[r] if frame_labels else f"frame {t}", fontsize=9)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
