@@ -304,10 +304,14 @@ def fit_registration(
         den = ww.sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
             out = num / den[:, None]
+        empty = den <= 1e-9
+        if not empty.any():
+            return out
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # unpaired joints: all NaN
-            med = np.nanmedian(np.where(finite[..., None], a, np.nan), axis=0)
-        return np.where(den[:, None] > 1e-9, out, np.nan_to_num(med))
+            med = np.nanmedian(np.where(finite[:, empty, None], a[:, empty], np.nan), axis=0)
+        out[empty] = np.nan_to_num(med)
+        return out
 
     def solve_offsets(R, t, s, w):
         # residual in mocap frame: R^T (y - t)/s - m  ≈ offset (world), Q^T of it (body)

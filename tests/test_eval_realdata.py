@@ -1,0 +1,84 @@
+"""Real Kinect vs Vicon recordings: KERAAL (3 pairs) and UI-PRMD (squat episodes).
+
+The numbers asserted are ranges from outside the project (issue 5: pooled raw RMSE about
+11.6 cm over 21 joints; the paper's ATKF does not beat raw Kinect) and from the data
+README (KERAAL: common time zero within ±1 frame; UI-PRMD squats: 80–100 Hz effective).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import data_file
+from tobitkf.evaluation.evaluate import evaluate_methods, pool_scores, prepare_truth
+
+KERAAL = ("CTK", "ELK", "RTK")
+METHODS = ("raw", "kf", "atkf", "sgf", "kf+rts")
+
+
+def _load(path):
+    from tobitkf.io import load
+
+    return load(path)[0]
+
+
+@pytest.fixture(scope="module")
+def keraal():
+    out = {}
+    for ex in KERAAL:
+        k = _load(data_file(f"keraal/G3-Kinect-{ex}-P1T1-Unknown-C-0.txt"))
+        v = _load(data_file(f"keraal/G3-Vicon-{ex}-P1T1-Unknown-C-0.txt"))
+        gt = prepare_truth(k, v)
+        out[ex] = (gt, evaluate_methods(k, gt, METHODS))
+    return out
+
+
+def test_keraal_pairs_timing_and_quaternion_order(keraal) -> None:
+    for gt, tab in keraal.values():
+        assert len(tab.paired_joints) == 21
+        # the documented common time zero holds: the fitted offset is within one Kinect frame
+        assert abs(gt.fitted_time_alignment.offset_s) < 1 / 30
+        assert gt.fitted_time_alignment.correlation > 0.8
+        # the Vicon target quaternions are (x, y, z, w), as the dataset documentation says
+        assert gt.notes["quaternion_order"] == "xyzw"
+        fit = gt.notes["quaternion_order_fit_rms_m"]
+        assert fit["xyzw"] < fit["wxyz"]
+        # body-frame offsets explain the clean samples to a few centimetres
+        assert gt.registration.residual_rms < 0.04
+
+
+def test_keraal_pooled_raw_rmse_is_plausible_and_atkf_does_not_beat_raw(keraal) -> None:
+    pooled = {r["method"]: r for r in pool_scores([tab for _, tab in keraal.values()])}
+    raw = pooled["raw"]["rmse_cm"]
+    assert 5.0 < raw < 20.0
+    # the story of issue 5: the paper's ATKF is no better than raw by any meaningful margin
+    assert pooled["atkf"]["rmse_cm"] > raw - 0.5
+    # the error sits in sustained failures, not in fine samples or short spikes
+    assert pooled["raw"]["sustained_cm"] > 3 * pooled["raw"]["fine_cm"]
+    assert pooled["raw"]["hands_cm"] > pooled["raw"]["legs_cm"]
+
+
+def test_keraal_elk_hand_failure_is_found(keraal) -> None:
+    _, tab = keraal["ELK"]
+    # the outside measurement: the right hand about 1 m off for 42 frames
+    hand = [e for e in tab.episodes if e[0] == "HandRight"]
+    assert max(b - a for _, a, b in hand) >= 35
+    assert tab.score("raw").max > 0.8  # a hand about 1 m off
+
+
+UIPRMD = "ui-prmd/Segmented Movements/{kind}/Positions/m01_s01_{ep}_positions.txt.gz"
+
+
+@pytest.mark.parametrize("ep", ["e01", "e02", "e03"])
+def test_uiprmd_squat_offset_rate_and_rmse(ep: str) -> None:
+    k = _load(data_file(UIPRMD.format(kind="Kinect", ep=ep)))
+    v = _load(data_file(UIPRMD.format(kind="Vicon", ep=ep)))
+    gt = prepare_truth(k, v)
+    ta = gt.time_alignment
+    assert ta.rate_fitted and 78.0 < ta.rate_hz < 100.0
+    assert ta.correlation > 0.98 and ta.overlap > 0.8
+    tab = evaluate_methods(k, gt, ["raw", "sgf"])
+    raw = tab.score("raw")
+    assert 0.02 < raw.rmse < 0.08
+    assert np.isfinite(raw.angles["left_knee"].rmse_best)
