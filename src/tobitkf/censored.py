@@ -221,6 +221,14 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
             d_hi[far] = m_rel  # b - mu = -x1 + x1 + m_rel
             d_lo[far] = np.where(fin2, gap - m_rel, np.inf)
 
+        # Empty interval (α = β, e.g. both limits at the same infinity): P_un = 0 and the
+        # conditional law is the point mass at α.
+        empty = a == b
+        lp = np.where(empty, -np.inf, lp)
+        mu = np.where(empty, a, mu)
+        var = np.where(empty, 0.0, var)
+        d_lo = np.where(empty, 0.0, d_lo)
+        d_hi = np.where(empty, 0.0, d_hi)
         var = np.maximum(var, 0.0)
         mu_t = np.where(flip, -mu, mu)
         dl = np.where(flip, d_hi, d_lo)
@@ -341,7 +349,8 @@ def _diag_parts(m: NDArray, v: NDArray, lo: NDArray, up: NDArray) -> dict[str, N
             + np.where(fb & (p_un > 0), p_up * p_un * core["d_upper"] ** 2, 0.0)
             + np.where(fa & fb, p_lo * p_up * (beta - alpha) ** 2, 0.0)
         )
-        mean_y = m + s * ef
+        # E[clip(Y)] lies in [a, b]; clipping only removes rounding at the ulp level
+        mean_y = np.clip(m + s * ef, lo, up)
         var_y = v * vf
         # exact pass-through for unbounded components
         both = np.isneginf(lo) & np.isposinf(up)

@@ -1,0 +1,499 @@
+"""Clipped-normal moments (tobitkf.censored): reference file, high-precision values,
+Monte Carlo, properties, tails, likelihood."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import norm, truncnorm
+
+from tobitkf.censored import (
+    ClippedMoments,
+    TruncatedStats,
+    censored_logpdf,
+    clipped_normal_moments,
+    clipped_normal_moments_diag,
+    clipped_normal_variance_diag,
+    truncated_standard_normal,
+)
+
+INF = np.inf
+REFERENCE = (
+    Path(__file__).resolve().parents[1]
+    / ".."
+    / "shared"
+    / "reference"
+    / "clipped_normal_cases.json"
+).resolve()
+
+
+def _reference_cases() -> list:
+    """Cases of ../shared/reference/clipped_normal_cases.json ([None] when missing)."""
+    if not REFERENCE.exists():
+        return [None]
+    return json.loads(REFERENCE.read_text())["cases"]
+
+
+def _arr(x) -> np.ndarray:
+    return np.array(x, dtype=float)  # the file writes infinities as "inf" / "-inf"
+
+
+# ---------------------------------------------------------------------------------------
+# Reference file
+# ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "case", _reference_cases(), ids=lambda c: "missing" if c is None else c["name"]
+)
+def test_reference_cases(case):
+    if case is None:
+        msg = f"reference file not found: {REFERENCE}"
+        if os.environ.get("TOBITKF_REQUIRE_DATA") == "1":
+            pytest.fail(msg + " (TOBITKF_REQUIRE_DATA=1)")
+        pytest.skip(msg)
+    S = _arr(case["cov_latent"])
+    res = clipped_normal_moments(
+        _arr(case["mean_latent"]), S, _arr(case["lower"]), _arr(case["upper"])
+    )
+    var_scale = float(np.max(np.diag(S)))
+    sd_scale = np.sqrt(var_scale)
+    # means: relative 1e-9, absolute floor 1e-12 x the latent standard-deviation scale
+    np.testing.assert_allclose(res.mean, _arr(case["mean"]), rtol=1e-9, atol=1e-12 * sd_scale)
+    # probabilities: relative 1e-9 only (tail probabilities down to 1e-300 must match)
+    for key in ("p_uncensored", "p_lower", "p_upper"):
+        np.testing.assert_allclose(getattr(res, key), _arr(case[key]), rtol=1e-9, atol=0.0)
+    # (co)variances: relative 1e-7, absolute floor 1e-12 x the latent variance scale. The
+    # floor matters for one case only: far_lower_tail's variance in the file
+    # (8.334216631886e-303) is 1.2e-7 relative below the exact 8.334217629428e-303 (80-digit
+    # mpmath, by the closed form and by quadrature; see test_univariate_high_precision).
+    np.testing.assert_allclose(res.cov, _arr(case["cov"]), rtol=1e-7, atol=1e-12 * var_scale)
+    assert isinstance(res, ClippedMoments)
+
+
+# ---------------------------------------------------------------------------------------
+# Independent high-precision values (mpmath, computed once offline)
+# ---------------------------------------------------------------------------------------
+
+# (alpha, beta, log P_un, mu_T, v_T) from the closed forms of MATH.md §2 evaluated in
+# 80-digit mpmath at the exact binary values of alpha and beta (cancellation is harmless
+# at that precision). They cover the far-tail branch, both sides of its 3-sd switch, both
+# sides of the narrow-interval switch, P_un far below the float range, width 1e-6.
+TRUNCATED_MP = [
+    (-INF, -37, -689.03058557689059, -37.02698768612699, 0.00072727809887751334),
+    (9, INF, -43.628149113332115, 9.1085231050028688, 0.011514790654717133),
+    (40, 41, -804.60844201375379, 40.024968847207264, 0.00062266837859138626),
+    (40, INF, -804.60844201375379, 40.024968847207264, 0.00062266837859138877),
+    (-1000, -999, -499008.32569431385, -999.001000998995, 1.0019969799951863e-6),
+    (36, 36.000001, -662.73446709363983, 36.000000499996999, 8.3333332907137674e-14),
+    (-9, -8.000000000001, -35.013618593445272, -8.1211889929807816, 0.014148542782743739),
+    (-9, -7.999999999999, -35.013618593429025, -8.1211889929788126, 0.014148542782752483),
+    (-1.5, -0.500000000001, -1.4199324821580827, -0.92064460522264795, 0.076942097942303552),
+    (-1.5, -0.499999999999, -1.4199324821551699, -0.92064460522142269, 0.076942097942594832),
+    (0.1, 0.100001, -14.739449141168113, 0.10000049999999167, 8.3333333333497195e-14),
+    (-3e-7, 5e-7, -14.957592642483188, 9.9999999999994662e-8, 5.3333333333332191e-14),
+    (-2, 3, -0.024395187554887346, 0.050782989674878974, 0.87314863997540568),
+    (-0.5, INF, -0.36894641528865639, 0.50916043383703349, 0.4861754356963671),
+    (8.2, 10.2, -36.657428609686717, 8.3185675145129114, 0.013687955648491003),
+    (-20, -19.99, -205.42246011261057, -19.994833486476576, 8.3166737711185236e-6),
+    (-3.0, -2.9, -7.5695680138074889, -2.9475460408656944, 0.00082944546438804041),
+]
+
+
+@pytest.mark.parametrize(("a", "b", "logp", "mu", "v"), TRUNCATED_MP)
+def test_truncated_standard_normal_high_precision(a, b, logp, mu, v):
+    t = truncated_standard_normal(a, b)
+    assert abs(t.log_p_uncensored - logp) <= 1e-13 * max(1.0, abs(logp))
+    assert abs(t.mu_t - mu) <= 1e-13 * max(1.0, abs(mu))
+    assert abs(t.v_t - v) <= 1e-11 * v
+    assert np.isclose(t.p_uncensored, np.exp(logp), rtol=1e-11, atol=0)
+
+
+# (m, s, a, b, E clip, Var clip): the reference file's tail cases, exact values from
+# 80-digit mpmath (closed form; far_lower_tail also by quadrature).
+UNIVARIATE_MP = [
+    (0.0, 1.0, -INF, -37.0, -37.0, 8.3342176294277234e-303),
+    (0.0, 1.0, 9.0, INF, 9.0, 2.6287143194699957e-21),
+    (-4.6, 0.5, -0.5, 0.5, -0.5, 8.3372964885058043e-19),
+    (0.2, 1.0, 0.3, 0.30000099999999996, 0.30000046017196422, 2.4841366139598671e-13),
+]
+
+
+@pytest.mark.parametrize(("m", "s", "a", "b", "mean", "var"), UNIVARIATE_MP)
+def test_univariate_high_precision(m, s, a, b, mean, var):
+    for res in (
+        clipped_normal_moments([m], [[s * s]], [a], [b]),
+        clipped_normal_moments_diag([m], [s * s], [a], [b]),
+    ):
+        assert abs(res.mean[0] - mean) <= 1e-15 * max(1.0, abs(mean))
+        assert abs(res.cov[0, 0] - var) <= 1e-12 * var
+
+
+# (rho, a1, b1, a2, b2, Cov) for standardised components: exact covariance from 40/60-digit
+# mpmath as E[f1 f2] - E f1 E f2 with E[f1 f2] = ∫ φ(z) clip(z) E[clip(Z2) | Z1 = z] dz
+# (1-D quadrature of the closed-form conditional clipped mean), independent of the
+# Hoeffding/Plackett route used by the library. Tails, high correlation, narrow intervals.
+BIVARIATE_MP = [
+    (0.5, 7.0, INF, -1.0, 1.0, 1.7597949132046438e-13),
+    (0.95, 7.0, INF, -1.0, 1.0, 1.7603260116374831e-13),
+    (0.95, 7.0, INF, 6.0, INF, 1.5970077012428723e-13),
+    (0.99, 8.0, 9.0, 8.0, INF, 1.3682633182318784e-17),
+    (-0.95, 7.0, INF, -INF, -6.5, -7.5304846599967242e-14),
+    (0.5, -1.0, 1.0, -0.5, 2.0, 0.23122577740983613),
+    (0.999, -1.0, 0.7, -0.8, 1.2, 0.44352900756652421),
+    (0.3, 7.0, INF, 7.0, INF, 7.1889389125350547e-21),
+    (0.93, 3.0, INF, 3.0, INF, 0.00013881610915796377),
+    (0.999999, 3.0, INF, 3.0, INF, 0.00020328769033378837),
+    (0.6, 0.1, 0.100001, -0.3, 0.5, 7.8854929600860472e-8),
+    (0.97, 0.1, 0.100001, 0.1, 0.100002, 4.1905333348366841e-13),
+    (-0.7, -2.0, -1.999999, 1.0, 1.000001, -1.4825985318442262e-14),
+    (-0.999999999, -0.5, 0.3, -1.0, 0.2, -0.14803624541659347),
+    (0.9, 8.0, INF, 8.0, INF, 1.7531562714407615e-18),
+    (0.8, 6.0, INF, 7.0, INF, 2.9172316643205014e-14),
+    (0.9, 10.0, INF, 10.0, INF, 4.800142983075209e-27),
+    (0.7, -INF, -9.0, -INF, -8.0, 5.0718924726584243e-23),
+    (0.85, 6.0, 8.0, 6.0, 8.0, 5.6268517112176699e-12),
+    (0.92, 12.0, INF, 12.0, INF, 5.4030022333201884e-37),
+    (0.5, 4.0, INF, -INF, -4.0, 5.1054717578451693e-11),
+    (0.2, 8.0, INF, 8.5, INF, 1.4121146402224732e-29),
+]
+
+
+@pytest.mark.parametrize(("rho", "a1", "b1", "a2", "b2", "cov"), BIVARIATE_MP)
+def test_bivariate_covariance_high_precision(rho, a1, b1, a2, b2, cov):
+    # scale the problem (s1 = 2, s2 = 0.5, shifted means) so standardisation is exercised
+    m = np.array([1.0, -3.0])
+    s = np.array([2.0, 0.5])
+    S = np.array([[4.0, rho * 1.0], [rho * 1.0, 0.25]])
+    lo = m + s * np.array([a1, a2])
+    up = m + s * np.array([b1, b2])
+    res = clipped_normal_moments(m, S, lo, up)
+    # measured worst relative error 1.9e-11 (rho = 0.99, far tail, large-|rho| route)
+    assert abs(res.cov[0, 1] - cov * s[0] * s[1]) <= 1e-9 * abs(cov * s[0] * s[1])
+    assert res.cov[0, 1] == res.cov[1, 0]
+
+
+def test_stein_identity_for_unbounded_partner():
+    # Cov(clip(Y1), Y2) = S12 P(a1 < Y1 < b1) (Stein's lemma); here P = Q(37) ~ 5.7e-300
+    res = clipped_normal_moments([0.0, 0.0], [[1.0, 0.8], [0.8, 1.0]], [37.0, -INF], [INF, INF])
+    assert abs(res.cov[0, 1] - 0.8 * norm.sf(37.0)) <= 1e-12 * 0.8 * norm.sf(37.0)
+    assert res.cov[1, 1] == 1.0 and res.mean[1] == 0.0
+
+
+# ---------------------------------------------------------------------------------------
+# Monte Carlo
+# ---------------------------------------------------------------------------------------
+
+
+def _mc_case(seed: int, p: int):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(p, p))
+    S = A @ A.T + 0.3 * np.eye(p)
+    m = rng.normal(0.0, 1.0, p)
+    sd = np.sqrt(np.diag(S))
+    lo = m + sd * rng.uniform(-1.5, 0.3, p)
+    up = lo + sd * rng.uniform(0.4, 2.5, p)
+    lo[rng.uniform(size=p) < 0.2] = -INF
+    up[rng.uniform(size=p) < 0.2] = INF
+    return m, S, lo, up
+
+
+@pytest.mark.parametrize(("seed", "p"), [(1, 2), (2, 2), (3, 2), (4, 3), (5, 3), (6, 3)])
+def test_monte_carlo(seed, p):
+    """Exact moments vs 400 000 samples, within 4 standard errors.
+
+    SE of a mean: sd(y_i)/sqrt(N); of a covariance: sd of (y_i - ȳ_i)(y_j - ȳ_j) over
+    sqrt(N) (the delta-method SE of the sample covariance); of a probability:
+    sqrt(p (1 - p)/N).
+    """
+    m, S, lo, up = _mc_case(seed, p)
+    n = 400_000
+    rng = np.random.default_rng(1000 + seed)
+    Y = rng.multivariate_normal(m, S, size=n)
+    y = np.clip(Y, lo, up)
+    res = clipped_normal_moments(m, S, lo, up)
+    ybar = y.mean(axis=0)
+    se_mean = y.std(axis=0) / np.sqrt(n)
+    assert np.all(np.abs(res.mean - ybar) <= 4 * se_mean + 1e-12)
+    d = y - ybar
+    prod = d[:, :, None] * d[:, None, :]
+    cov_mc = prod.mean(axis=0)
+    se_cov = prod.std(axis=0) / np.sqrt(n)
+    assert np.all(np.abs(res.cov - cov_mc) <= 4 * se_cov + 1e-12)
+    for key, frac in (
+        ("p_lower", (Y <= lo).mean(axis=0)),
+        ("p_upper", (Y >= up).mean(axis=0)),
+        ("p_uncensored", ((Y > lo) & (Y < up)).mean(axis=0)),
+    ):
+        exact = getattr(res, key)
+        se = np.sqrt(exact * (1 - exact) / n)
+        assert np.all(np.abs(exact - frac) <= 4 * se + 1e-12), key
+
+
+# ---------------------------------------------------------------------------------------
+# Properties (hypothesis)
+# ---------------------------------------------------------------------------------------
+
+
+@st.composite
+def problems(draw, max_p: int = 3):
+    """A latent N(m, S) with 1..max_p components and limits (some infinite)."""
+    p = draw(st.integers(1, max_p))
+    fl = st.floats(-3.0, 3.0, allow_nan=False)
+    L = np.array([[draw(fl) for _ in range(p)] for _ in range(p)])
+    S = L @ L.T + np.diag([draw(st.floats(0.01, 2.0)) for _ in range(p)])
+    m = np.array([draw(st.floats(-5.0, 5.0)) for _ in range(p)])
+    lo = np.empty(p)
+    up = np.empty(p)
+    for i in range(p):
+        kind = draw(st.sampled_from(["both", "lower", "upper", "none"]))
+        a = draw(st.floats(-6.0, 6.0))
+        w = draw(st.sampled_from([1e-6, 1e-3, 0.1, 0.5, 1.0, 3.0, 10.0]))
+        lo[i] = a if kind in ("both", "lower") else -INF
+        up[i] = a + w if kind in ("both", "upper") else INF
+    return m, S, lo, up
+
+
+def _scale(S: np.ndarray) -> float:
+    return float(np.max(np.diag(S)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems())
+def test_reflection_symmetry(prob):
+    m, S, lo, up = prob
+    r = clipped_normal_moments(m, S, lo, up)
+    f = clipped_normal_moments(-m, S, -up, -lo)
+    sc = _scale(S)
+    np.testing.assert_allclose(f.mean, -r.mean, rtol=1e-12, atol=1e-12 * np.sqrt(sc))
+    np.testing.assert_allclose(f.cov, r.cov, rtol=1e-9, atol=1e-13 * sc)
+    np.testing.assert_allclose(f.p_lower, r.p_upper, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(f.p_uncensored, r.p_uncensored, rtol=1e-12, atol=0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems())
+def test_symmetric_psd_and_bounds(prob):
+    m, S, lo, up = prob
+    r = clipped_normal_moments(m, S, lo, up)
+    C = r.cov
+    assert np.all(np.isfinite(C)) and np.all(np.isfinite(r.mean))
+    np.testing.assert_array_equal(C, C.T)
+    assert np.linalg.eigvalsh(C).min() >= -1e-14 * _scale(S)
+    var = np.diag(C)
+    assert np.all(var >= 0)
+    # clipping is a 1-Lipschitz contraction, so Var(clip Y) <= Var(Y); Popoviciu's
+    # inequality bounds the variance of a variable in [a, b] by (b - a)^2 / 4
+    assert np.all(var <= np.diag(S) * (1 + 1e-12))
+    assert np.all(var <= (up - lo) ** 2 / 4 * (1 + 1e-12) + 1e-300)
+    assert np.all((r.mean >= lo) & (r.mean <= up))
+    total = r.p_lower + r.p_uncensored + r.p_upper
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=4e-16)
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems(), st.lists(st.booleans(), min_size=3, max_size=3))
+def test_infinite_limits_return_latent_moments_exactly(prob, free):
+    m, S, lo, up = prob
+    free = np.array(free[: len(m)])
+    lo = np.where(free, -INF, lo)
+    up = np.where(free, INF, up)
+    r = clipped_normal_moments(m, S, lo, up)
+    # bit for bit: the mean of every unbounded component and the block among them
+    np.testing.assert_array_equal(r.mean[free], m[free])
+    np.testing.assert_array_equal(r.cov[np.ix_(free, free)], S[np.ix_(free, free)])
+    np.testing.assert_array_equal(r.p_uncensored[free], 1.0)
+    if free.all():
+        np.testing.assert_array_equal(r.cov, S)
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems(), st.floats(-5.0, 5.0))
+def test_shift_equivariance(prob, delta):
+    m, S, lo, up = prob
+    r = clipped_normal_moments(m, S, lo, up)
+    s = clipped_normal_moments(m + delta, S, lo + delta, up + delta)
+    sc = _scale(S)
+    tol_mean = 1e-12 * (np.sqrt(sc) + np.abs(m).max() + np.abs(delta) + 10)
+    np.testing.assert_allclose(s.mean, r.mean + delta, rtol=0, atol=tol_mean)
+    np.testing.assert_allclose(s.cov, r.cov, rtol=1e-8, atol=1e-12 * sc)
+    np.testing.assert_allclose(s.p_uncensored, r.p_uncensored, rtol=1e-8, atol=1e-15)
+
+
+@settings(max_examples=30, deadline=None)
+@given(problems(), st.floats(0.01, 100.0))
+def test_scale_equivariance(prob, c):
+    m, S, lo, up = prob
+    r = clipped_normal_moments(m, S, lo, up)
+    s = clipped_normal_moments(c * m, c * c * S, c * lo, c * up)
+    sc = _scale(S)
+    np.testing.assert_allclose(s.mean, c * r.mean, rtol=1e-9, atol=1e-12 * c * np.sqrt(sc))
+    np.testing.assert_allclose(s.cov, c * c * r.cov, rtol=1e-8, atol=1e-12 * c * c * sc)
+
+
+@settings(max_examples=30, deadline=None)
+@given(problems(), st.randoms(use_true_random=False))
+def test_permutation_equivariance(prob, rnd):
+    m, S, lo, up = prob
+    perm = list(range(len(m)))
+    rnd.shuffle(perm)
+    perm = np.array(perm)
+    r = clipped_normal_moments(m, S, lo, up)
+    q = clipped_normal_moments(m[perm], S[np.ix_(perm, perm)], lo[perm], up[perm])
+    sc = _scale(S)
+    np.testing.assert_allclose(q.mean, r.mean[perm], rtol=1e-14, atol=0)
+    np.testing.assert_allclose(q.cov, r.cov[np.ix_(perm, perm)], rtol=1e-12, atol=1e-15 * sc)
+
+
+@settings(max_examples=30, deadline=None)
+@given(problems())
+def test_diagonal_path_matches_general_path(prob):
+    m, S, lo, up = prob
+    v = np.diag(S).copy()
+    g = clipped_normal_moments(m, np.diag(v), lo, up)
+    d = clipped_normal_moments_diag(m, v, lo, up)
+    np.testing.assert_array_equal(d.mean, g.mean)
+    np.testing.assert_array_equal(d.cov, g.cov)
+    np.testing.assert_array_equal(d.p_uncensored, g.p_uncensored)
+    mean, var, _, pu, _ = clipped_normal_variance_diag(m, v, lo, up)
+    np.testing.assert_array_equal(var, np.diag(d.cov))
+    np.testing.assert_array_equal(mean, d.mean)
+    np.testing.assert_array_equal(pu, d.p_uncensored)
+
+
+def test_batch_equals_elementwise():
+    cases = [_mc_case(seed, 3) for seed in range(10, 22)]
+    m = np.stack([c[0] for c in cases]).reshape(3, 4, 3)
+    S = np.stack([c[1] for c in cases]).reshape(3, 4, 3, 3)
+    lo = np.stack([c[2] for c in cases]).reshape(3, 4, 3)
+    up = np.stack([c[3] for c in cases]).reshape(3, 4, 3)
+    res = clipped_normal_moments(m, S, lo, up)
+    assert res.mean.shape == (3, 4, 3) and res.cov.shape == (3, 4, 3, 3)
+    for k, (mi, Si, li, ui) in enumerate(cases):
+        one = clipped_normal_moments(mi, Si, li, ui)
+        i, j = divmod(k, 4)
+        np.testing.assert_allclose(res.mean[i, j], one.mean, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(res.cov[i, j], one.cov, rtol=1e-14, atol=1e-300)
+    # limits broadcast from (p,) and a shared covariance broadcast over the batch
+    shared = clipped_normal_moments(m, S[0, 0], [-1.0, -INF, 0.0], [1.0, 2.0, INF])
+    assert shared.cov.shape == (3, 4, 3, 3)
+
+
+# ---------------------------------------------------------------------------------------
+# Tails
+# ---------------------------------------------------------------------------------------
+
+
+def test_tail_sweep_is_finite_and_consistent():
+    # means from 60 sd below to 60 sd above, widths 1e-8 .. 100 sd, one- and two-sided
+    mean = np.linspace(-60.0, 60.0, 241)[:, None]
+    width = np.logspace(-8, 2, 41)[None, :]
+    for lo, up in ((0.0 * width, width), (-width, 0.0 * width + INF), (-INF + 0 * width, width)):
+        lo_b, up_b, _ = np.broadcast_arrays(lo, up, mean)
+        res = clipped_normal_moments_diag(mean, 1.0, lo_b, up_b)
+        var = np.diagonal(res.cov, axis1=-2, axis2=-1)
+        assert np.all(np.isfinite(res.mean)) and np.all(np.isfinite(var))
+        assert np.all(var >= 0) and np.all(var <= 1.0)
+        assert np.all((res.mean >= lo_b) & (res.mean <= up_b))
+        fin = np.isfinite(lo_b) & np.isfinite(up_b)
+        assert np.all(var[fin] <= (up_b - lo_b)[fin] ** 2 / 4 * (1 + 1e-12))
+        total = res.p_lower + res.p_uncensored + res.p_upper
+        np.testing.assert_allclose(total, 1.0, rtol=0, atol=4e-16)
+
+
+def test_uncensored_probability_1e_300():
+    # P(Y > 37) = 5.7e-300: probability, mean and variance keep full relative precision
+    r = clipped_normal_moments([0.0, 0.0], [[1.0, 0.6], [0.6, 1.0]], [-INF, -1.0], [-37.0, 1.0])
+    assert abs(r.p_uncensored[0] / 5.7255712225245768e-300 - 1) < 1e-12
+    assert abs(r.cov[0, 0] / 8.3342176294277234e-303 - 1) < 1e-12
+    assert np.all(np.isfinite(r.cov)) and np.linalg.eigvalsh(r.cov).min() >= 0
+
+
+def test_mean_40_sd_outside_the_interval():
+    # P_un = Phi(-40) - Phi(-41) ~ 4e-350 underflows: log P stays exact, moments are finite
+    for m, edge in ((-40.0, 0.0), (41.0, 1.0)):
+        r = clipped_normal_moments([m, 0.0], [[1.0, 0.9], [0.9, 1.0]], [0.0, -1.0], [1.0, 1.0])
+        assert r.mean[0] == edge and r.cov[0, 0] >= 0 and r.cov[0, 0] < 1e-300
+        assert np.all(np.isfinite(r.cov)) and np.linalg.eigvalsh(r.cov).min() >= -1e-300
+        t = truncated_standard_normal(0.0 - m, 1.0 - m)
+        assert abs(t.log_p_uncensored - (-804.60844201375379)) < 1e-12 * 804.6
+        assert np.isfinite(t.mu_t) and edge - 1 <= t.mu_t + m <= edge + 1 and t.v_t > 0
+
+
+def test_interval_width_1e_6_sd_both_components():
+    # both components in intervals of width 1e-6 sd, correlation 0.97 (exact: mpmath)
+    m = np.zeros(2)
+    S = np.array([[1.0, 0.97], [0.97, 1.0]])
+    r = clipped_normal_moments(m, S, [0.1, 0.1], [0.100001, 0.100002])
+    assert abs(r.cov[0, 1] / 4.1905333348366841e-13 - 1) < 1e-9
+    assert np.linalg.eigvalsh(r.cov).min() >= 0
+
+
+def test_zero_variance_and_degenerate_intervals():
+    r = clipped_normal_moments(
+        [0.5, 2.0, 0.3], [[0.0, 0, 0], [0, 0.0, 0], [0, 0, 1.0]], [0.0, 0.0, 0.2], [1.0, 1.0, 0.2]
+    )
+    np.testing.assert_array_equal(r.mean, [0.5, 1.0, 0.2])
+    np.testing.assert_array_equal(r.cov, np.zeros((3, 3)))
+    np.testing.assert_array_equal(r.p_uncensored, [1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(r.p_upper[:2], [0.0, 1.0])
+
+
+def test_truncated_matches_scipy_truncnorm_in_the_bulk():
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-3, 2, 50)
+    b = a + rng.uniform(0.05, 4, 50)
+    t = truncated_standard_normal(a, b)
+    mu, v = truncnorm.stats(a, b, moments="mv")
+    np.testing.assert_allclose(t.mu_t, mu, rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(t.v_t, v, rtol=1e-10)
+    np.testing.assert_allclose(t.p_uncensored, norm.cdf(b) - norm.cdf(a), rtol=1e-12)
+    np.testing.assert_allclose(t.log_p_lower, norm.logcdf(a), rtol=1e-14)
+    np.testing.assert_allclose(t.log_p_upper, norm.logsf(b), rtol=1e-14)
+    assert isinstance(t, TruncatedStats) and t.mu_t.shape == (50,)
+
+
+def test_input_validation():
+    with pytest.raises(ValueError, match="lower <= upper"):
+        clipped_normal_moments([0.0], [[1.0]], [1.0], [0.0])
+    with pytest.raises(ValueError, match=">= 0"):
+        clipped_normal_moments_diag([0.0], [-1.0], [0.0], [1.0])
+    with pytest.raises(ValueError, match="cov must have shape"):
+        clipped_normal_moments([0.0, 1.0], np.eye(3), 0.0, 1.0)
+    with pytest.raises(ValueError, match="alpha <= beta"):
+        truncated_standard_normal(1.0, 0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# Censored log-likelihood
+# ---------------------------------------------------------------------------------------
+
+
+def test_censored_logpdf_against_scipy():
+    rng = np.random.default_rng(8)
+    n = 200
+    m = rng.normal(0, 2, n)
+    s2 = rng.uniform(0.1, 3, n)
+    lo = rng.uniform(-3, 0, n)
+    up = lo + rng.uniform(0.5, 4, n)
+    y = np.clip(rng.normal(m, np.sqrt(s2)), lo, up)
+    y[:5] = np.nan
+    out = censored_logpdf(y, m, s2, lo, up)
+    s = np.sqrt(s2)
+    expected = np.where(
+        y <= lo,
+        norm.logcdf((lo - m) / s),
+        np.where(y >= up, norm.logcdf((m - up) / s), norm.logpdf(y, m, s)),
+    )
+    expected[:5] = 0.0
+    assert np.sum(y[5:] <= lo[5:]) > 5 and np.sum(y[5:] >= up[5:]) > 5
+    np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-14)
+    # far tail: still finite, equal to log Phi(-50)
+    v = censored_logpdf(-50.0, 0.0, 1.0, -50.0, 1.0)
+    assert np.isfinite(v) and abs(v - norm.logcdf(-50.0)) < 1e-12 * abs(v)
