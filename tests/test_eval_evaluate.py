@@ -18,12 +18,9 @@ from tobitkf.evaluation.evaluate import (
 from tobitkf.evaluation.pairs import Pair, PairingTable
 from tobitkf.evaluation.synthetic import generate_motion
 from tobitkf.skeleton.sequence import SkeletonSequence
-from tobitkf.skeleton.topology import Topology
+from tobitkf.skeleton.topology import Topology, get_topology
 
-NAMES = ("SpineBase", "SpineMid", "Neck", "Head", "ShoulderLeft", "ElbowLeft", "WristLeft",
-         "HandLeft", "ShoulderRight", "ElbowRight", "WristRight", "HandRight", "HipLeft",
-         "KneeLeft", "AnkleLeft", "FootLeft", "HipRight", "KneeRight", "AnkleRight",
-         "FootRight", "SpineShoulder", "HandTipLeft", "ThumbLeft", "HandTipRight", "ThumbRight")  # fmt: skip
+NAMES = get_topology("kinect_v2").joints
 MARKERS = tuple(f"M_{n}" for n in NAMES)
 TABLE = PairingTable("test", tuple(Pair(n, (m,)) for n, m in zip(NAMES, MARKERS, strict=True)))
 
