@@ -16,11 +16,6 @@ from tobitkf.skeleton.smooth import (
 from tobitkf.skeleton.topology import Topology
 
 ALL_METHODS = sorted(METHODS)
-KALMAN = ["atkf", "atkf2016", "tkf", "tkfc", "kf"]
-
-
-def _needs_tobit():
-    pytest.importorskip("tobitkf.tobit", reason="tobitkf.tobit not available yet")
 
 
 def _seq(pos, up_axis=1, **kw):
@@ -122,8 +117,6 @@ def test_check_params_fills_defaults():
 
 @pytest.mark.parametrize("method", ALL_METHODS)
 def test_still_joint_stays_still(method):
-    if method in ("atkf", "atkf2016", "tkf", "tkfc"):
-        _needs_tobit()
     truth, pos = _still()
     out = smooth(_seq(pos, fps=30.0), method).positions
     assert np.isfinite(out).all()
@@ -195,8 +188,6 @@ def test_nan_and_not_tracked_frames_are_filled_by_prediction():
 
 @pytest.mark.parametrize("method", ALL_METHODS)
 def test_no_nan_where_input_is_finite_and_metadata_kept(method):
-    if method in ("atkf", "atkf2016", "tkf", "tkfc"):
-        _needs_tobit()
     rng = np.random.default_rng(2)
     pos = np.array([0.1, 0.4, 2.2]) + np.cumsum(rng.normal(scale=0.01, size=(50, 4, 3)), axis=0)
     pos[7, 2] = np.nan
@@ -259,7 +250,6 @@ def test_fps_other_than_30_scales_q():
 
 
 def test_atkf_reduces_a_one_frame_spike():
-    _needs_tobit()
     truth, pos = _still(T=60, J=2, sigma=0.005)
     pos[30, 0, 0] += 0.5  # horizontal
     pos[30, 1, 1] += 0.5  # vertical
@@ -268,16 +258,19 @@ def test_atkf_reduces_a_one_frame_spike():
     kf = smooth(_seq(pos, fps=30.0), "kf").positions
     dev_atkf = np.abs(out[30, 0, 0] - truth[0]), np.abs(out[30, 1, 1] - truth[1])
     dev_kf = np.abs(kf[30, 0, 0] - truth[0]), np.abs(kf[30, 1, 1] - truth[1])
-    for a, k in zip(dev_atkf, dev_kf, strict=True):
-        assert a < 0.5 * k
-        assert a < 0.1
+    # raw deviation 0.5 m. The plain KF (gain ~0.39 at steady state) follows ~0.2 m; ATKF
+    # clips the measurement to the prior +- c (0.34 m horizontal, 0.18 m vertical) first,
+    # so it follows at most about gain * c (~0.13 m and ~0.07 m)
+    for a, k, c in zip(dev_atkf, dev_kf, (0.34, 0.18), strict=True):
+        assert a < 0.3 * 0.5
+        assert a < 0.75 * k
+        assert a < 0.5 * c
     diag = res.metadata["diagnostics"]
     assert diag["clipped_fraction"][0] >= 1 / 60 and diag["clipped_fraction"][1] >= 1 / 60
     assert diag["params"]["c"] == pytest.approx((0.34, 0.18, 0.34))
 
 
 def test_atkf_vertical_limit_follows_the_up_axis():
-    _needs_tobit()
     _, pos = _still(T=40, J=1, sigma=0.002)
     pos[20:, 0, 2] += 0.25  # a real 25 cm step on z
     z_up = smooth(_seq(pos, up_axis=2, fps=30.0), "atkf")
@@ -291,7 +284,6 @@ def test_atkf_vertical_limit_follows_the_up_axis():
 
 
 def test_atkf_irregular_steps_match_explicit_q_seq_and_c_seq():
-    _needs_tobit()
     from tobitkf.model import LinearGaussian
     from tobitkf.tobit import adaptive_tobit_filter
 
@@ -319,7 +311,6 @@ def test_atkf_irregular_steps_match_explicit_q_seq_and_c_seq():
 
 
 def test_tkf_device_limits_clip_far_measurements():
-    _needs_tobit()
     _, pos = _still(T=40, J=1, sigma=0.005)
     pos[:, 0, 2] = 5.0 + 0.3  # beyond the 5 m depth limit: the sensor would report 5.0
     pos[:, 0, 2] = np.minimum(pos[:, 0, 2], 5.0)
@@ -340,6 +331,7 @@ KINECT_FILES = [
     "keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt",
     "keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt",
     "keraal/G3-Kinect-RTK-P1T1-Unknown-C-0.txt",
+    "krajjat/sequence_ainhoa_trimmed.tsv",  # irregular timestamps, ~16.7 Hz
 ]
 
 
@@ -351,7 +343,8 @@ def _load_kinect(rel: str) -> SkeletonSequence:
 
         return load(path)[0]
     except ImportError:
-        pass
+        if not rel.startswith(("kimore", "keraal")):
+            pytest.skip("tobitkf.io not available")
     lines = [ln.strip().rstrip(",") for ln in path.read_text().splitlines() if ln.strip()]
     if rel.startswith("kimore"):
         data = np.array([ln.split(",") for ln in lines], dtype=float).reshape(len(lines), 25, 4)
@@ -374,8 +367,6 @@ def _cached(rel: str) -> SkeletonSequence:
 @pytest.mark.parametrize("method", ALL_METHODS)
 @pytest.mark.parametrize("rel", KINECT_FILES)
 def test_every_method_on_real_kinect_files(rel, method):
-    if method in ("atkf", "atkf2016", "tkf", "tkfc"):
-        _needs_tobit()
     seq = _cached(rel)
     finite = np.isfinite(seq.positions).all(axis=-1)
     out = smooth(seq, method).positions
@@ -392,7 +383,6 @@ def test_every_method_on_real_kinect_files(rel, method):
     ],
 )
 def test_atkf_removes_real_jumps(rel, hands):
-    _needs_tobit()
     seq = _load_kinect(rel)
     out = smooth(seq, "atkf")
     idx = seq.topology.indices(hands)
@@ -403,7 +393,6 @@ def test_atkf_removes_real_jumps(rel, hands):
 
 
 def test_atkf_keeps_a_still_joint_still_on_kimore():
-    _needs_tobit()
     seq = _load_kinect("kimore/JointPositionExercise1.csv")
     out = smooth(seq, "atkf")
     for name in ("SpineBase", "FootLeft"):
