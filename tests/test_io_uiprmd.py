@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from conftest import data_file
-from tobitkf.io import ReadError, detect_format, load
+from tobitkf.io import ReadError, detect_format, is_companion_file, load
 from tobitkf.io.uiprmd import angles_path_for, euler_zxy, reconstruct_uiprmd
 
 KINECT = "ui-prmd/Segmented Movements/Kinect/Positions/{}_positions.txt.gz"
@@ -143,8 +143,23 @@ def test_angles_file_location_and_missing_angles(tmp_path):
         fh.write(",".join(["0"] * 66) + "\n")
     with pytest.raises(ReadError, match="expected 73 frames"):
         load(lone / kpath.name)
-    with pytest.raises(ReadError, match="angles file"):
-        load(a, format="uiprmd_kinect")
+    # an angles file on its own has no positions: clear error
+    lone_angles = tmp_path / "solo" / "Angles"
+    lone_angles.mkdir(parents=True)
+    shutil.copy(a, lone_angles / a.name)
+    with pytest.raises(ReadError, match="positions file was expected"):
+        load(lone_angles / a.name, format="uiprmd_kinect")
+
+
+def test_angles_file_is_a_companion_that_loads_the_pair():
+    kpath = data_file(KINECT.format("m07_s01_e01"))
+    a = angles_path_for(kpath)
+    assert is_companion_file(a) and not is_companion_file(kpath)
+    assert detect_format(a) == "uiprmd_kinect"
+    (via_angles,) = load(a)
+    np.testing.assert_array_equal(
+        via_angles.positions, _load(KINECT.format("m07_s01_e01")).positions
+    )
 
 
 def test_corrupt_gzip(tmp_path):

@@ -23,6 +23,7 @@ __all__ = [
     "detect_format",
     "formats",
     "get_format",
+    "is_companion_file",
     "load",
     "register_format",
     "save",
@@ -94,6 +95,18 @@ def unregister_format(name: str) -> None:
     _FORMATS.pop(name, None)
     for alias in [a for a, n in _ALIASES.items() if n == name]:
         del _ALIASES[alias]
+
+
+def is_companion_file(path: str | os.PathLike[str]) -> bool:
+    """True when ``path`` is the second half of a recording read through another file
+    (a UI-PRMD Kinect ``..._angles`` file, whose ``..._positions`` sibling exists).
+
+    Loading a companion file works (it returns the pair's skeleton), but batch tools
+    walking a folder should skip it so that each recording is processed once.
+    """
+    from tobitkf.io.uiprmd import is_angles_file, positions_path_for
+
+    return is_angles_file(path) and positions_path_for(path).exists()
 
 
 def formats() -> dict[str, FormatSpec]:

@@ -29,6 +29,8 @@ from tobitkf.skeleton.topology import UI_PRMD_PARENTS, get_topology
 __all__ = [
     "angles_path_for",
     "euler_zxy",
+    "is_angles_file",
+    "positions_path_for",
     "read_uiprmd_kinect",
     "read_uiprmd_vicon",
     "reconstruct_uiprmd",
@@ -64,6 +66,23 @@ def angles_path_for(positions_path: str | os.PathLike[str]) -> Path:
         sibling = folder.parent / ("Angles" if folder.name == "Positions" else "angles")
         return sibling / angles_name
     return folder / angles_name
+
+
+def is_angles_file(path: str | os.PathLike[str]) -> bool:
+    """True for a UI-PRMD Kinect angles file (``..._angles.txt[.gz]``), the companion of a
+    positions file; batch tools should skip it (loading it reads the pair anyway)."""
+    return "_angles" in Path(path).name
+
+
+def positions_path_for(angles_path: str | os.PathLike[str]) -> Path:
+    """Inverse of :func:`angles_path_for`: ``.../Angles/X_angles...`` →
+    ``.../Positions/X_positions...``."""
+    p = Path(angles_path)
+    name = p.name.replace("_angles", "_positions")
+    folder = p.parent
+    if folder.name.lower() == "angles":
+        return folder.parent / ("Positions" if folder.name == "Angles" else "positions") / name
+    return folder / name
 
 
 def _rot_x(a: np.ndarray) -> np.ndarray:
@@ -145,10 +164,19 @@ def read_uiprmd_kinect(
     list with one SkeletonSequence: positions (T, 22, 3) metres, topology ``ui_prmd``,
     fps 30, ``metadata["euler_angles_deg"]`` (T, 22, 3).
     """
-    if "_angles" in Path(path).name:
-        raise ReadError(
-            path, None, "this is a UI-PRMD angles file; load the matching '_positions' file"
-        )
+    if angles_path is None and is_angles_file(path):
+        # the angles half of a pair: read the pair through its positions file
+        ppath = positions_path_for(path)
+        if not ppath.exists():
+            raise ReadError(
+                path,
+                None,
+                f"this is a UI-PRMD angles file; its positions file was expected at {ppath} "
+                "(not found)",
+            )
+        seqs = read_uiprmd_kinect(ppath, path, fps=fps)
+        seqs[0].metadata["opened_as"] = str(path)
+        return seqs
     apath = Path(angles_path) if angles_path is not None else angles_path_for(path)
     if not apath.exists():
         raise ReadError(
