@@ -15,6 +15,8 @@ from rich.table import Table
 from tobitkf.cli import dumps
 
 console = Console()
+if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
+    console = Console(width=160)
 err_console = Console(stderr=True)
 
 
@@ -350,7 +352,7 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
             cols = [c for c in pooled[0] if c != "method"]
             _print_table(
                 f"pooled over {len(tables)} recordings (cm)",
-                ["method", *cols],
+                ["method", *[c.removesuffix("_cm") for c in cols]],
                 [[r["method"], *[r[c] for c in cols]] for r in pooled],
             )
     if outdir:

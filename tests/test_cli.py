@@ -1,0 +1,140 @@
+"""The command-line tool, driven through click's runner (the CLI only parses and calls)."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+
+import numpy as np
+import pytest
+
+click = pytest.importorskip("click")
+from click.testing import CliRunner  # noqa: E402
+
+from conftest import data_file  # noqa: E402
+from tobitkf._cli_app import app  # noqa: E402
+from tobitkf.io import load, save  # noqa: E402
+from tobitkf.skeleton.sequence import SkeletonSequence  # noqa: E402
+from tobitkf.skeleton.topology import get_topology  # noqa: E402
+
+
+def _run(*args: str) -> click.testing.Result:
+    return CliRunner().invoke(app, list(args), catch_exceptions=False)
+
+
+def _recording(T: int = 60, seed: int = 0) -> SkeletonSequence:
+    """A still Kinect V2 body with 1 cm jitter and one 0.6 m one-frame hand spike."""
+    rng = np.random.default_rng(seed)
+    topo = get_topology("kinect_v2")
+    n = len(topo.joints)
+    base = rng.uniform(-0.5, 0.5, size=(n, 3)) + np.array([0.0, 0.0, 2.5])
+    pos = base + rng.normal(scale=0.01, size=(T, n, 3))
+    pos[30, topo.index("HandRight")] += [0.6, 0.0, 0.0]
+    return SkeletonSequence(positions=pos, topology=topo, fps=30.0)
+
+
+def test_smooth_folder_writes_outputs_atomically_and_reports_bad_files(tmp_path):
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    save([_recording()], src / "a.csv", format="csv")
+    save([_recording(seed=1)], src / "sub" / "b.csv", format="csv")
+    (src / "broken.csv").write_text("time,Head_x\n0.0,abc\n")
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["smooth", str(src), "-o", str(out), "--glob", "*.csv"])
+    assert res.exit_code == 1, res.output  # one bad file -> non-zero status
+    assert "broken.csv" in res.output
+    produced = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert produced == ["a.atkf.csv", "sub/b.atkf.csv"]  # no temporary files left behind
+    # the spike is removed: the output's largest hand jump is far below the input's 0.6 m
+    hand = get_topology("kinect_v2").index("HandRight")
+    smoothed = load(out / "a.atkf.csv")[0].positions[:, hand]
+    raw = load(src / "a.csv")[0].positions[:, hand]
+    jump = lambda p: np.nanmax(np.linalg.norm(np.diff(p, axis=0), axis=-1))  # noqa: E731
+    assert jump(raw) > 0.55 and jump(smoothed) < 0.5 * jump(raw)
+
+
+def test_smooth_never_overwrites_and_rejects_unknown_parameters(tmp_path):
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    before = (tmp_path / "a.csv").read_bytes()
+    res = _run("smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path), "-m", "kf")
+    assert res.exit_code == 0
+    assert (tmp_path / "a.csv").read_bytes() == before
+    assert (tmp_path / "a.kf.csv").exists()
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "-p", "bogus=1"])
+    assert res.exit_code == 2 and "bogus" in res.output
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "-m", "nope"])
+    assert res.exit_code != 0 and "unknown method" in res.output
+
+
+def test_smooth_json_summary_and_parallel_jobs(tmp_path):
+    for i in range(3):
+        save([_recording(seed=i)], tmp_path / f"r{i}.csv", format="csv")
+    res = _run(
+        "smooth", str(tmp_path), "-o", str(tmp_path / "o"), "-j", "2", "--json", "-m", "one_euro"
+    )
+    rows = json.loads(res.output)
+    assert [r["ok"] for r in rows] == [True] * 3
+    assert all(r["frames"] == 60 and r["joints"] == 25 for r in rows)
+
+
+def test_info_reports_frames_and_largest_jump(tmp_path):
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    res = _run("info", str(tmp_path / "a.csv"), "--json")
+    info = json.loads(res.output)
+    body = info["sequences"][0]
+    assert body["frames"] == 60 and body["joints"] == 25
+    top = body["jumps"][0]
+    assert top["joint"] == "HandRight" and top["frame"] in (30, 31)
+    assert top["largest_jump_m"] > 0.55
+
+
+def test_reproduce_covariance_example_json_keys_and_paper_agreement():
+    res = _run("reproduce", "covariance-example", "--samples", "20000", "--json")
+    d = json.loads(res.output)
+    assert {"exact", "standard_tkf", "monte_carlo", "monte_carlo_se", "paper"} <= set(d)
+    # eq. 24 and eq. 25 as printed in the 2020 paper (4 decimals), transcribed here
+    eq24 = [[0.4651, 0.6962, 0.5085], [0.6962, 4.7747, 1.9189], [0.5085, 1.9189, 1.4379]]
+    eq25 = [[0.2724, 0.4719, 0.5151], [0.4719, 5.0000, 3.2744], [0.5151, 3.2744, 3.2002]]
+    assert np.abs(np.array(d["exact"]) - eq24).max() <= 5e-5 + 1e-12
+    assert np.abs(np.array(d["standard_tkf"]) - eq25).max() <= 5e-5 + 1e-12
+    # Monte Carlo within 4 standard errors of the exact matrix
+    z = np.abs(np.array(d["monte_carlo"]) - d["exact"]) / np.array(d["monte_carlo_se"])
+    assert z.max() < 4
+
+
+def test_reproduce_oscillator_json_keys():
+    res = _run("reproduce", "oscillator", "--runs", "4", "--steps", "100", "--json")
+    d = json.loads(res.output)
+    text = json.dumps(d)
+    for key in ("rmse_x1", "rmse_x2", "nci_abs", "nci_signed"):
+        assert key in text
+
+
+def _embedded_images(html: str) -> list[bytes]:
+    return [base64.b64decode(b) for b in re.findall(r"src='data:image/\w+;base64,([^']+)'", html)]
+
+
+def test_report_with_ground_truth_embeds_nonempty_figures(tmp_path):
+    kinect = data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt")
+    vicon = data_file("keraal/G3-Vicon-ELK-P1T1-Unknown-C-0.txt")
+    out = tmp_path / "report.html"
+    res = _run(
+        "report", str(kinect), "--truth", str(vicon), "-o", str(out), "--methods", "raw,atkf,kf+rts"
+    )
+    assert res.exit_code == 0
+    html = out.read_text()
+    images = _embedded_images(html)
+    assert len(images) >= 5  # traces of 3 joints, skeleton snapshots, animation
+    assert all(len(img) > 2000 for img in images)
+    assert sum(img.startswith(b"GIF8") for img in images) == 1
+    assert "Accuracy against ground truth" in html
+
+
+def test_demo_runs_on_builtin_recording(tmp_path):
+    res = _run("demo", "-o", str(tmp_path / "d"), "--no-gif")
+    assert res.exit_code == 0
+    assert "report:" in res.output
+    assert (tmp_path / "d" / "report.html").stat().st_size > 10_000
+    raw = load(tmp_path / "d" / "synthetic_kinect.csv")[0]
+    assert raw.n_joints == 25 and raw.n_frames > 100
