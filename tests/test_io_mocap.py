@@ -83,7 +83,7 @@ def test_c3d_real_file():
     pytest.importorskip("c3d")
     path = data_file(C3D)
     assert detect_format(path) == "c3d"
-    s = _load(C3D)
+    s = _load(C3D, points="all")
     assert s.positions.shape == (315, 193, 3)
     assert s.fps == 100.0 and s.topology.up_axis == 2
     assert s.metadata["units_in_file"] == "mm"
@@ -109,6 +109,15 @@ def test_c3d_real_file():
 def test_c3d_point_selection():
     pytest.importorskip("c3d")
     path = data_file(C3D)
+    everything = _load(C3D, points="all").joint_names
+    default = load(path)[0]
+    outputs = [
+        n
+        for n in everything
+        if any(k in n for k in ("Angle", "Force", "Moment", "Power", "GRF", "CentreOfMass"))
+    ]
+    assert set(default.joint_names) == set(everything) - set(outputs)
+    assert len(outputs) > 50 and "LFHD" in default.joint_names and "PELO" in default.joint_names
     markers = load(path, points="markers")[0]
     expected = set(
         "RFHD LBHD RBHD C7 T10 CLAV STRN RBAK LSHO LELB LWRA LWRB LFIN RSHO RELB RWRA RWRB "

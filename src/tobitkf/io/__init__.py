@@ -35,7 +35,7 @@ from tobitkf.io import npz as _npz
 from tobitkf.io import ntu as _ntu
 from tobitkf.io import qualisys as _qualisys
 from tobitkf.io import uiprmd as _uiprmd
-from tobitkf.io.errors import ReadError
+from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import (
     FormatSpec,
     detect_format,
@@ -50,6 +50,7 @@ from tobitkf.io.registry import (
 
 __all__ = [
     "FormatSpec",
+    "OptionError",
     "ReadError",
     "detect_format",
     "formats",

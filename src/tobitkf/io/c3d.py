@@ -7,7 +7,10 @@ suffixes). Up axis z (Vicon/Qualisys convention).
 
 ``points`` selects which POINT entries to return:
 
-* ``"all"`` (default): every entry, including model outputs;
+* ``"positions"`` (default): real markers and Plug-in Gait segment-frame points, i.e.
+  every entry except the model outputs (which are angles, forces, moments, powers or
+  centre-of-mass values, not marker positions);
+* ``"all"``: every entry, model outputs included (converted with the same unit factor);
 * ``"markers"``: real markers only: no Plug-in Gait segment frames (``…O/…A/…L/…P``
   quadruples) and no model outputs (``…Angle(s)``, ``…Force``, ``…Moment``, ``…Power``, ``…GRF``,
   ``CentreOfMass…``);
@@ -23,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io.errors import ReadError
+from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -79,13 +82,13 @@ def _unique(labels: list[str]) -> list[str]:
 
 
 def read_c3d(
-    path: str | os.PathLike[str], points: str = "all", units: str | None = None
+    path: str | os.PathLike[str], points: str = "positions", units: str | None = None
 ) -> list[SkeletonSequence]:
     """Read the POINT data of a C3D file.
 
     Parameters
     ----------
-    points : {"all", "markers", "joint_centres"}
+    points : {"positions", "all", "markers", "joint_centres"}
         Which POINT entries to return (see module docstring).
     units : str, optional
         Override ``POINT:UNITS`` (``"mm"``, ``"cm"``, ``"m"``).
@@ -95,8 +98,10 @@ def read_c3d(
     list with one SkeletonSequence: positions (T, P, 3) metres (NaN where the residual is
     negative), fps = POINT:RATE, ``metadata["labels"]``, ``metadata["residuals"]`` (T, P).
     """
-    if points not in ("all", "markers", "joint_centres"):
-        raise ValueError(f"points must be 'all', 'markers' or 'joint_centres', found {points!r}")
+    if points not in ("positions", "all", "markers", "joint_centres"):
+        raise OptionError(
+            f"points must be 'positions', 'all', 'markers' or 'joint_centres', found {points!r}"
+        )
     c3d = _import_c3d()
     try:
         with open(path, "rb") as fh:
@@ -142,6 +147,8 @@ def read_c3d(
         keep = [i for i, k in enumerate(kinds) if k == "marker"]
     elif points == "joint_centres":
         keep = [i for i, k in enumerate(kinds) if k == "segment_origin"]
+    elif points == "positions":
+        keep = [i for i, k in enumerate(kinds) if k != "model_output"]
     else:
         keep = list(range(len(labels)))
     if not keep:

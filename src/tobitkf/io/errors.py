@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["ReadError"]
+__all__ = ["OptionError", "ReadError"]
 
 
 class ReadError(ValueError):
@@ -30,3 +30,7 @@ class ReadError(ValueError):
 
     def __reduce__(self):  # picklable across process pools
         return (type(self), (self.path, self.line, self.reason))
+
+
+class OptionError(ValueError):
+    """An invalid reader or writer option (a caller error, not a content error)."""

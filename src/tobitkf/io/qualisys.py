@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
-from tobitkf.io.errors import ReadError
+from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -56,7 +56,7 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
     names (z up), fps = FREQUENCY, timestamps from the ``Time`` column when present.
     """
     if units not in _UNIT_SCALE:
-        raise ValueError(f"units must be one of {sorted(_UNIT_SCALE)}, found {units!r}")
+        raise OptionError(f"units must be one of {sorted(_UNIT_SCALE)}, found {units!r}")
     lines = read_lines(path)
     if not any(line.strip() for line in lines):
         raise ReadError(path, None, "empty file: expected a QTM TSV header")

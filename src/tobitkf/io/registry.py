@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from tobitkf.io._text import read_head
-from tobitkf.io.errors import ReadError
+from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = [
@@ -204,7 +204,7 @@ def load(
         raise ValueError(f"format {spec.name!r} has no reader")
     try:
         result = spec.reader(p, **options)
-    except (ReadError, ImportError, OSError, TypeError):
+    except (ReadError, OptionError, ImportError, OSError, TypeError):
         raise
     except (ValueError, IndexError, KeyError, ArithmeticError) as exc:  # safety net
         raise ReadError(p, None, f"invalid {spec.name} content ({exc})") from exc
