@@ -108,3 +108,13 @@ def test_parse_param_rejects_malformed():
 def test_parse_param_float_round_trip(x):
     key, value = parse_param(f"q={x!r}")
     assert key == "q" and float(value) == x
+
+
+def test_discover_skips_companion_files_only_inside_folders(tmp_path):
+    rec = _touch(tmp_path / "in" / "x_positions.csv")
+    comp = _touch(tmp_path / "in" / "x_angles.csv")
+    skipped: list[Path] = []
+    found = discover_inputs([tmp_path / "in"], skip=lambda p: "_angles" in p.name, skipped=skipped)
+    assert [f for f, _ in found] == [rec] and skipped == [comp]
+    # a file named explicitly is never skipped
+    assert [f for f, _ in discover_inputs([comp], skip=lambda p: True)] == [comp]

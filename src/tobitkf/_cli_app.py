@@ -121,7 +121,7 @@ def app() -> None:
 def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs, as_json):
     """Smooth skeleton recordings (files or folders, searched recursively)."""
     from tobitkf.batch import discover_inputs, plan_jobs, run_jobs
-    from tobitkf.io import detect_format
+    from tobitkf.io import detect_format, is_companion_file
     from tobitkf.skeleton.smooth import METHODS, check_params
 
     if method not in METHODS:
@@ -131,10 +131,16 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
+    companions: list[Path] = []
     try:
-        pairs = discover_inputs(inputs, pattern)
+        pairs = discover_inputs(inputs, pattern, skip=is_companion_file, skipped=companions)
     except FileNotFoundError as exc:
         _fail(str(exc))
+    if companions and not as_json:
+        err_console.print(
+            f"skipped {len(companions)} companion file(s) read together with their recording "
+            f"(e.g. {companions[0].name})"
+        )
     if not pairs:
         _fail("no input files found")
     job_list, refused = plan_jobs(

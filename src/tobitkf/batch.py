@@ -62,13 +62,20 @@ def strip_extension(name: str) -> str:
 
 
 def discover_inputs(
-    inputs: Sequence[str | Path], pattern: str = "*", *, recursive: bool = True
+    inputs: Sequence[str | Path],
+    pattern: str = "*",
+    *,
+    recursive: bool = True,
+    skip: Callable[[Path], bool] | None = None,
+    skipped: list[Path] | None = None,
 ) -> list[tuple[Path, Path]]:
     """Expand files and folders into ``(file, base)`` pairs.
 
-    A folder contributes every file below it (recursively) whose name matches ``pattern``;
-    ``base`` is the folder, so outputs can keep the relative layout. A file is taken as
-    given (the pattern does not filter explicit files); its base is its own folder.
+    A folder contributes every file below it (recursively) whose name matches ``pattern``
+    and for which ``skip`` (e.g. :func:`tobitkf.io.is_companion_file`) is not true; the
+    skipped files are appended to ``skipped`` when given. ``base`` is the folder, so
+    outputs can keep the relative layout. A file is taken as given (neither the pattern
+    nor ``skip`` filters explicit files); its base is its own folder.
 
     Raises
     ------
@@ -85,6 +92,10 @@ def discover_inputs(
             walker = path.rglob("*") if recursive else path.glob("*")
             for f in sorted(walker):
                 if f.is_file() and fnmatch.fnmatch(f.name, pattern) and not f.name.startswith("."):
+                    if skip is not None and skip(f):
+                        if skipped is not None:
+                            skipped.append(f)
+                        continue
                     if f.resolve() not in seen:
                         seen.add(f.resolve())
                         found.append((f, path))
