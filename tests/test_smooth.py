@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import data_file
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
@@ -400,3 +402,44 @@ def test_atkf_keeps_a_still_joint_still_on_kimore():
         raw_mean = np.nanmean(seq.positions[:, j], axis=0)
         new_mean = np.nanmean(out.positions[:, j], axis=0)
         assert np.max(np.abs(new_mean - raw_mean)) < 0.005
+
+
+@settings(deadline=None, max_examples=40)
+@given(
+    method=st.sampled_from(ALL_METHODS),
+    T=st.integers(1, 25),
+    J=st.integers(1, 3),
+    seed=st.integers(0, 10_000),
+    nan_rate=st.sampled_from([0.0, 0.2, 0.6]),
+    with_states=st.booleans(),
+    timing=st.sampled_from(["none", "fps", "timestamps", "duplicated"]),
+    offline=st.booleans(),
+)
+def test_fuzz_any_method_finite_where_observed(
+    method, T, J, seed, nan_rate, with_states, timing, offline
+):
+    rng = np.random.default_rng(seed)
+    pos = np.array([0.2, 0.5, 2.5]) + np.cumsum(rng.normal(scale=0.05, size=(T, J, 3)), axis=0)
+    pos[rng.random((T, J)) < nan_rate] = np.nan
+    kw: dict = {}
+    if with_states:
+        kw["tracking_state"] = rng.choice([0, 1, 2], size=(T, J))
+    if timing == "fps":
+        kw["fps"] = float(rng.choice([15.0, 30.0, 60.0, 120.0]))
+    elif timing in ("timestamps", "duplicated"):
+        steps = rng.uniform(0.01, 0.1, size=T)
+        if timing == "duplicated":
+            steps[rng.random(T) < 0.3] = 0.0
+        kw["timestamps"] = np.cumsum(steps)
+    seq = _seq(pos, **kw)
+    res = smooth(seq, method, offline=offline)
+    out = res.positions
+    assert out.shape == pos.shape
+    observed = np.isfinite(pos).all(axis=-1)
+    if with_states:
+        observed &= kw["tracking_state"] != TrackingState.NOT_TRACKED
+    assert np.isfinite(out[observed]).all()
+    diag = res.metadata["diagnostics"]
+    for key in ("clipped_fraction", "filled_fraction"):
+        assert diag[key].shape == (J,)
+        assert np.all((diag[key] >= 0) & (diag[key] <= 1))

@@ -115,10 +115,10 @@ def savgol(
     Each series (one column of the flattened batch) is filtered over the span between
     its first and last finite sample. Interior gaps are linearly interpolated before
     filtering, so their output is an estimate; NaN is restored where nothing could be
-    estimated: before the first and after the last finite sample, in gaps longer than
-    ``max_gap`` frames (when given), and in series with fewer than ``polyorder + 1``
-    finite samples. When a span is shorter than ``window`` the window shrinks to the
-    largest odd length that fits (and exceeds ``polyorder``).
+    estimated: before the first and after the last finite sample, and in gaps longer
+    than ``max_gap`` frames (when given). When a span is shorter than ``window`` the
+    window shrinks to the largest odd length that fits and the order to at most
+    ``window - 1`` (a span of 1 or 2 frames is returned unchanged).
 
     The filter works on sample index: it assumes (approximately) uniform sampling.
     Edges use ``mode="interp"`` (polynomial fit to the first / last window), so a
@@ -155,7 +155,7 @@ def savgol(
     groups: dict[tuple[int, int], list[int]] = {}
     for col in range(flat.shape[1]):
         valid = np.flatnonzero(finite[:, col])
-        if valid.size < polyorder + 1:
+        if valid.size == 0:
             continue
         groups.setdefault((int(valid[0]), int(valid[-1])), []).append(col)
     for (first, last), cols in groups.items():
@@ -167,9 +167,8 @@ def savgol(
             seg[~ok, c] = np.interp(seg_idx[~ok], seg_idx[ok], seg[ok, c])
         n = last - first + 1
         w = min(window, n if n % 2 == 1 else n - 1)
-        if w <= polyorder:
-            continue
-        out[first : last + 1, cols] = savgol_filter(seg, w, polyorder, axis=0, mode="interp")
+        order = min(polyorder, w - 1)
+        out[first : last + 1, cols] = savgol_filter(seg, w, order, axis=0, mode="interp")
     if max_gap is not None:
         long_gap = _long_gaps(finite, int(max_gap))
         out[long_gap] = np.nan

@@ -408,23 +408,21 @@ def _inferred_factor(value: Any) -> float:
 def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
     """Time step before each frame, ``(T,)`` seconds, the nominal step, and irregularity.
 
-    ``steps[0]`` is the nominal step. Returns ``is_reference`` True when every step equals
-    1/30 s (no scaling needed).
+    ``steps[0]`` is the nominal step: the median positive timestamp difference, else
+    1/fps, else 1/30 s. Zero differences (duplicated stamps) become a tenth of it.
+    ``is_reference`` is True when every step equals 1/30 s (no scaling needed).
     """
     T = sequence.n_frames
     ts = sequence.timestamps
+    fps = sequence.fps if sequence.fps is not None else 30.0
+    nominal = 1.0 / float(fps)
+    steps = np.full(T, nominal)
     if ts is not None and T > 1:
         d = np.diff(np.asarray(ts, dtype=float))
         positive = d[d > 0]
-        if positive.size == 0:
-            raise ValueError("timestamps never increase: cannot derive time steps")
-        nominal = float(np.median(positive))
-        d = np.maximum(d, 0.1 * nominal)
-        steps = np.concatenate([[nominal], d])
-    else:
-        fps = sequence.fps if sequence.fps is not None else 30.0
-        nominal = 1.0 / float(fps)
-        steps = np.full(T, nominal)
+        if positive.size:  # else: all stamps equal, fall back to the frame rate
+            nominal = float(np.median(positive))
+            steps = np.concatenate([[nominal], np.maximum(d, 0.1 * nominal)])
     is_reference = bool(np.allclose(steps, REFERENCE_DT, rtol=1e-9, atol=0.0))
     return steps, nominal, is_reference
 
