@@ -361,10 +361,17 @@ def test_missing_component_equals_reduced_model(variant):
 
 
 @settings(max_examples=12, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), method=st.sampled_from(["tkf", "tkfc", "atkf"]))
-def test_long_runs_with_wild_measurements_stay_finite_psd(seed, method):
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    method=st.sampled_from(["tkf", "tkfc", "atkf"]),
+    diagonal=st.booleans(),
+)
+def test_long_runs_with_wild_measurements_stay_finite_psd(seed, method, diagonal):
     rng = np.random.default_rng(seed)
-    m = _general_model(rng, n=2, p=2, batch=(3,))
+    if diagonal:
+        m = _diag_model(rng, n=2, batch=(3,), a_identity=bool(rng.integers(2)))
+    else:
+        m = _general_model(rng, n=2, p=2, batch=(3,))
     T = 40
     ys = rng.normal(size=(T, 3, 2)) * rng.choice([0.1, 1.0, 50.0, 1e4], size=(T, 3, 2))
     ys[rng.uniform(size=ys.shape) < 0.1] = np.nan
@@ -459,3 +466,39 @@ def test_input_errors():
         adaptive_tobit_filter(m, ys)
     with pytest.raises(ValueError, match="either c or c_seq"):
         adaptive_tobit_filter(m, ys, c=1.0, c_seq=np.ones((4, 3)))
+
+
+# ---------------------------------------------------------------------------- real data
+
+
+@pytest.mark.realdata
+def test_atkf_on_real_kinect_glitches():
+    """KERAAL ELK (Kinect V2, 30 Hz): the right hand tip / thumb jump by ~1 m in one frame
+    (data README). With the paper's defaults (eq. 30, 33, 35) ATKF must damp those jumps
+    far more than the KF, leave the trunk untouched by censoring, and the streaming filter
+    must reproduce the batch run exactly."""
+    from conftest import data_file
+
+    raw = np.loadtxt(data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt"))
+    ys = raw.reshape(raw.shape[0], 25, 7)[..., :3]  # positions (T, 25, 3), y up
+    model = LinearGaussian.skeleton(ys=ys)
+    c = np.array([0.34, 0.18, 0.34])
+    at = adaptive_tobit_filter(model, ys, c=c)
+    kf = kalman_filter(model, ys)
+
+    def max_jump(x):
+        return np.linalg.norm(np.diff(x, axis=0), axis=-1).max(axis=0)
+
+    raw_j, kf_j, at_j = max_jump(ys), max_jump(kf.means), max_jump(at.means)
+    tips = [23, 24]  # HandTipRight, ThumbRight
+    assert np.all(raw_j[tips] > 0.8)
+    assert np.all(at_j[tips] < 0.5 * kf_j[tips])
+    assert np.all(at_j[tips] < 0.25 * raw_j[tips])
+    assert not at.clipped[:, [0, 1, 12, 16]].any()  # SpineBase, SpineMid, hips: no clipping
+    assert np.all(np.isfinite(at.means)) and np.all(at.covs >= 0)
+    from tobitkf.streaming import StreamingFilter
+
+    f = StreamingFilter(model, "atkf", c=c)
+    for t in range(ys.shape[0]):
+        mean, _ = f.step(ys[t])
+        np.testing.assert_array_equal(mean, at.means[t])
