@@ -288,6 +288,14 @@ class FilterResult:
         Transition used in the prediction of every step (None: ``model.A`` throughout).
     method : str
         "kf", "tkf", "tkfc" or "atkf".
+
+    Notes
+    -----
+    All arrays are read-only. Quantities that do not vary over the batch (e.g. the
+    variances of a diagonal model without missing data, the KF's censoring
+    probabilities, constant limits) are stored once and exposed as broadcast views of the
+    documented shape; ``np.array(x)`` gives a dense copy. With A = I the predicted means
+    share memory with the filtered ones (x̂⁻_t = x̂_{t-1}).
     """
 
     means: Array
@@ -307,7 +315,11 @@ class FilterResult:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for a in (self.means, self.predicted_means, self.cov_data, self.predicted_cov_data):
+        for a in (
+            self.means, self.predicted_means, self.cov_data, self.predicted_cov_data,
+            self.loglik, self.p_lower, self.p_uncensored, self.p_upper, self.clipped,
+            self.lower, self.upper,
+        ):  # fmt: skip
             _readonly(a)
 
     @cached_property
