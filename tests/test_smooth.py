@@ -285,6 +285,28 @@ def test_atkf_vertical_limit_follows_the_up_axis():
     np.testing.assert_allclose(over.positions, z_up.positions)
 
 
+def test_atkf_limits_widen_after_a_gap():
+    from tobitkf.model import LinearGaussian
+    from tobitkf.tobit import adaptive_tobit_filter
+
+    _, pos = _still(T=60, J=1, sigma=0.003)
+    pos[20:50] = np.nan  # one second unobserved ...
+    pos[50:, 0, 0] += 0.6  # ... during which the joint moved 0.6 m (> c = 0.34)
+    out = smooth(_seq(pos, fps=30.0), "atkf").positions
+    # reference: the filter with c_seq = c * (time since the last measurement) / (1/30)
+    c = np.array([0.34, 0.18, 0.34])
+    n = np.ones(60)
+    n[50] = 31.0  # frame 50 comes 31 frames after frame 19
+    c_seq = (c[None, :] * n[:, None])[:, None, :]
+    R = 0.01 * np.eye(3)
+    model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=0.0025 * np.eye(3), R=R, x0=pos[0], P0=R)
+    ref = adaptive_tobit_filter(model, pos, None, c_seq=c_seq).means
+    np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-12)
+    # the reappearing joint is not censored: after a 1 s gap the predicted variance is
+    # large and the filter jumps most of the way at once
+    assert out[50, 0, 0] - out[49, 0, 0] > 0.4
+
+
 def test_atkf_irregular_steps_match_explicit_q_seq_and_c_seq():
     from tobitkf.model import LinearGaussian
     from tobitkf.tobit import adaptive_tobit_filter

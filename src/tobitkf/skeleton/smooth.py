@@ -28,6 +28,11 @@ median step of the timestamps). Zero steps (duplicated timestamps) are raised to
 of the nominal step so no limit collapses to zero. Without timestamps or fps, 30 fps is
 assumed.
 
+Gaps. ``c`` bounds the displacement per 1/30 s, so the ATKF limits of a joint that
+reappears after missing frames widen with the time elapsed since its last measurement
+(``c · elapsed / (1/30)``); otherwise a joint that moved during an occlusion would crawl
+back at ``gain · c`` per frame.
+
 Up axis. The vertical entry of ``c`` (0.18 m) goes on the topology's ``up_axis`` (y for
 Kinect camera space, z for most optical systems); ``up_axis=`` overrides it. An explicit
 ``c=(cx, cy, cz)`` is used as given, in the sequence's axes. The Kinect device limits of
@@ -463,6 +468,24 @@ def _atkf_c(params: Mapping[str, Any], up_axis: int) -> Array:
     return c
 
 
+def _elapsed_since_valid(steps: Array, valid: NDArray[np.bool_]) -> Array:
+    """Time from each joint's last valid frame before k to frame k, ``(T, *batch)``.
+
+    ``steps[k]`` when frame k-1 was valid (or k is before the first valid frame); after a
+    gap it is the whole time since the last measurement.
+    """
+    T = steps.shape[0]
+    times = np.cumsum(steps)
+    shape = (T,) + (1,) * (valid.ndim - 1)
+    idx = np.where(valid, np.arange(T).reshape(shape), -1)
+    last = np.maximum.accumulate(idx, axis=0)  # last valid index <= k
+    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1), last[:-1]], axis=0)
+    t_k = np.broadcast_to(times.reshape(shape), valid.shape)
+    st_k = np.broadcast_to(steps.reshape(shape), valid.shape)
+    t_prev = times[np.maximum(prev, 0)]
+    return np.where(prev >= 0, t_k - t_prev, st_k)
+
+
 def _run_kalman(
     spec: MethodSpec,
     params: Mapping[str, Any],
@@ -501,10 +524,11 @@ def _run_kalman(
         from tobitkf.tobit import adaptive_tobit_filter
 
         c = _atkf_c(params, batch.up_axis)
-        if batch.is_reference:
+        elapsed = _elapsed_since_valid(batch.steps, valid)  # (T, *batch)
+        if np.all(elapsed == REFERENCE_DT):
             result = adaptive_tobit_filter(model, ys, c, **kwargs)
         else:
-            c_seq = c * ratio.reshape((T,) + (1,) * len(bshape) + (1,))  # (T, 1.., 3)
+            c_seq = c * (elapsed / REFERENCE_DT)[..., None]  # (T, *batch, 3)
             result = adaptive_tobit_filter(model, ys, None, c_seq=c_seq, **kwargs)
     else:
         if kind == "kf":
