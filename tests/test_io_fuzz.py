@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from conftest import DATA_DIR
 from tobitkf.io import ReadError, load
 from tobitkf.io.bvh import read_bvh
+from tobitkf.io.c3d import read_c3d
 from tobitkf.io.generic_csv import read_csv
 from tobitkf.io.keraal import read_keraal_kinect, read_keraal_vicon
 from tobitkf.io.kimore import read_kimore
@@ -20,7 +21,7 @@ from tobitkf.io.krajjat import read_krajjat
 from tobitkf.io.npz import read_npz
 from tobitkf.io.ntu import read_ntu
 from tobitkf.io.qualisys import read_qualisys
-from tobitkf.io.uiprmd import read_uiprmd_vicon
+from tobitkf.io.uiprmd import read_uiprmd_kinect, read_uiprmd_vicon
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 READERS = {
@@ -29,6 +30,8 @@ READERS = {
     "keraal_kinect": (read_keraal_kinect, ".txt"),
     "keraal_vicon": (read_keraal_vicon, ".txt"),
     "uiprmd_vicon": (read_uiprmd_vicon, ".txt.gz"),
+    # the same file serves as positions and angles: exercises the parser and reconstruction
+    "uiprmd_kinect": (lambda p: read_uiprmd_kinect(p, angles_path=p), "_positions.txt"),
     "krajjat": (read_krajjat, ".tsv"),
     "qualisys": (read_qualisys, ".tsv"),
     "bvh": (read_bvh, ".bvh"),
@@ -146,6 +149,7 @@ REAL = [
     ("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt", read_keraal_kinect),
     ("krajjat/test_sequence_qtm_2.tsv", read_qualisys),
     ("cmu-mocap/scaled_131_01.bvh", read_bvh),
+    ("btkdata/PiG_Motion-FlatFoot-Full.c3d", read_c3d),
 ]
 
 
@@ -158,14 +162,16 @@ def test_mutated_real_files(tmp_path, rel, reader, data):
     src = DATA_DIR / rel
     if not src.exists():
         pytest.skip(f"missing {src}")
-    raw = bytearray(src.read_bytes()[:6000])
+    if src.suffix == ".c3d":
+        pytest.importorskip("c3d")
+    raw = bytearray(src.read_bytes()[:6000] if src.suffix != ".c3d" else src.read_bytes())
     n = len(raw)
     cut = data.draw(st.integers(0, n))
     raw = raw[:cut]
     for _ in range(data.draw(st.integers(0, 3))):
         if not raw:
             break
-        k = data.draw(st.integers(0, len(raw) - 1))
+        k = data.draw(st.integers(0, min(len(raw), 12000) - 1))
         raw[k] = data.draw(st.sampled_from(b"0x,\t \n.-e\x00\xff9"))
     p = tmp_path / f"m{src.suffix}"
     p.write_bytes(bytes(raw))

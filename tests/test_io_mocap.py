@@ -134,11 +134,15 @@ def test_c3d_point_selection():
         load(path, points="bones")
 
 
-def test_c3d_garbage_is_a_read_error(tmp_path):
+def test_c3d_garbage_and_truncation_are_read_errors(tmp_path):
     pytest.importorskip("c3d")
     p = tmp_path / "x.c3d"
     p.write_bytes(b"\x02\x50" + b"\x00" * 100)
     with pytest.raises(ReadError):
+        load(p)
+    raw = data_file(C3D).read_bytes()
+    p.write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(ReadError, match="truncated C3D file: expected 315 frames"):
         load(p)
 
 

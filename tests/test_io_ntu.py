@@ -201,3 +201,17 @@ def test_multibody_round_trip_property(tmp_path_factory, presence, seed):
     q = d / "w.skeleton"
     write_ntu(seqs, q)
     assert [float(v) for v in q.read_text().split()] == [float(v) for v in p.read_text().split()]
+
+
+def test_keraal_kinect_to_ntu_keeps_quaternions(tmp_path):
+    from conftest import data_file
+
+    (k,) = load(data_file("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt"))
+    p = tmp_path / "keraal.skeleton"
+    save(k, p)
+    (r,) = load(p)
+    np.testing.assert_array_equal(r.positions, k.positions)
+    np.testing.assert_array_equal(r.metadata["orientations"], k.metadata["orientations"])
+    # orientation columns 8-11 of a joint line are w, x, y, z (README layout)
+    line = p.read_text().split("\n")[4].split()
+    np.testing.assert_array_equal([float(v) for v in line[7:11]], k.metadata["orientations"][0, 0])

@@ -21,7 +21,7 @@ suffixes). Up axis z (Vicon/Qualisys convention).
 from __future__ import annotations
 
 import os
-import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -103,31 +103,29 @@ def read_c3d(
             f"points must be 'positions', 'all', 'markers' or 'joint_centres', found {points!r}"
         )
     c3d = _import_c3d()
+    caught: list[warnings.WarningMessage] = []
     try:
-        with open(path, "rb") as fh:
+        with open(path, "rb") as fh, warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # kept in metadata["reader_warnings"]
             reader = c3d.Reader(fh)
             labels = [str(lab).strip() for lab in reader.point_labels]
             rate = float(reader.point_rate)
             unit_param = reader.get("POINT:UNITS")
             file_units = unit_param.string_value.strip() if unit_param is not None else "mm"
-            frames = []
-            for _, pts, _analog in reader.read_frames():
-                frames.append(np.array(pts[:, :4], dtype=float))
-    except (
-        ValueError,
-        struct.error,
-        EOFError,
-        IndexError,
-        KeyError,
-        AssertionError,
-        UnicodeDecodeError,
-        TypeError,
-    ) as exc:
+            expected = int(reader.frame_count)
+            frames = [np.array(pts[:, :4], dtype=float) for _, pts, _an in reader.read_frames()]
+    except FileNotFoundError:
+        raise
+    except Exception as exc:  # the third-party binary parser fails in many ways on bad input
         raise ReadError(
             path, None, f"not a readable C3D file ({type(exc).__name__}: {exc})"
         ) from None
     if not frames:
         raise ReadError(path, None, "C3D file holds no frames")
+    if len(frames) != expected:
+        raise ReadError(
+            path, None, f"truncated C3D file: expected {expected} frames, found {len(frames)}"
+        )
     data = np.stack(frames)  # (T, P, 4)
     unit = (units or file_units or "mm").lower()
     if unit not in _UNITS:
@@ -165,6 +163,7 @@ def read_c3d(
             "point_kinds": [kinds[i] for i in keep],
             "units_in_file": unit,
             "residuals": np.ascontiguousarray(residual[:, keep]),
+            "reader_warnings": [str(w.message) for w in caught],
         },
     )
     return [seq]
