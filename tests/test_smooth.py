@@ -465,3 +465,17 @@ def test_fuzz_any_method_finite_where_observed(
     for key in ("clipped_fraction", "filled_fraction"):
         assert diag[key].shape == (J,)
         assert np.all((diag[key] >= 0) & (diag[key] <= 1))
+
+
+def test_atkf_keeps_still_feet_still_on_keraal():
+    # CTK ("hiding face"): the feet stand still; raw jitter is a few millimetres
+    seq = _load_kinect("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt")
+    out = smooth(seq, "atkf")
+    for name in ("AnkleLeft", "AnkleRight", "FootLeft"):
+        j = seq.topology.index(name)
+        raw = seq.positions[:, j]
+        raw_mean = raw.mean(axis=0)
+        new = out.positions[:, j]
+        assert np.max(np.abs(new.mean(axis=0) - raw_mean)) < 0.001
+        assert np.max(np.abs(new - raw_mean)) < 0.015  # every frame within 1.5 cm
+        assert np.all(new.std(axis=0) <= raw.std(axis=0) + 1e-12)
