@@ -17,10 +17,13 @@ Markers and rigid-body targets sit on the skin, not at joint centres, so some of
 always needed; a target that rotates with its segment (KERAAL) keeps a fixed offset in its
 own frame.  The fit alternates a weighted Kabsch/Umeyama solve for ``(R, shift)`` with a
 weighted mean for the offsets, inside an iteratively reweighted least-squares loop (Tukey
-bisquare on the residual norm, scale from the median absolute residual), started from a
-trimmed least-squares fit so that tracking glitches (e.g. a hand 1 m off for 40 frames) do
-not pull the transform.  It is fitted once, on the raw track, and then held fixed for
-every smoothing method (:func:`RigidRegistration.truth_in_track_frame`).
+bisquare on the residual norm) whose scale is annealed from 0.5 m down to the robust scale
+(1.4826 × median residual), so that tracking glitches (e.g. a hand 1 m off for 40 frames)
+do not pull the transform, yet nothing is rejected before the fit is close.  World-frame
+offsets are solved in closed form per joint (per-joint centring) after an offset-free
+start; body-frame offsets start from the world-frame fit.  It is fitted once, on the raw
+track, and then held fixed for every smoothing method
+(:func:`RigidRegistration.truth_in_track_frame`).
 """
 
 from __future__ import annotations
@@ -240,8 +243,9 @@ def fit_registration(
     offset_mode: OffsetMode = "world",
     target_rotations: ArrayLike | None = None,
     scale: bool = False,
-    trim_fraction: float = 0.6,
     tukey_c: float = 4.685,
+    anneal_start: float = 0.5,
+    anneal_rate: float = 0.7,
     min_scale: float = 0.005,
     max_iter: int = 100,
     tol: float = 1e-7,
@@ -257,9 +261,13 @@ def fit_registration(
     offset_mode : ``"none"``, ``"world"`` (default) or ``"body"``.
     target_rotations : (T, J, 3, 3) target rotations (mocap frame) for ``"body"``.
     scale : also fit a global scale (Umeyama).  Default ``False``.
-    trim_fraction : fraction of samples kept (smallest residuals) in the trimmed start.
-    tukey_c : Tukey bisquare constant in units of the robust scale
-        ``1.4826 · median(|residual|)``, floored at ``min_scale`` metres.
+    tukey_c : Tukey bisquare constant in units of the residual scale.
+    anneal_start, anneal_rate : graduated non-convexity: the residual scale starts at
+        ``anneal_start`` metres (so the first solve is plain least squares) and shrinks by
+        ``anneal_rate`` per iteration down to the robust scale
+        ``1.4826 · median(|residual|)`` (floored at ``min_scale``).  Rejecting samples only
+        gradually keeps the fit from locking onto a wrong start, e.g. from discarding the
+        one moving arm that pins the rotation down when everything else stands still.
     max_iter, tol : IRLS stopping rule (max change of the transformed points, metres).
     quaternion_order : label stored in the result (for reporting only).
 
@@ -275,8 +283,8 @@ def fit_registration(
         raise ValueError(f"mocap must have the track's shape {y.shape}, got {m.shape}")
     if offset_mode not in ("none", "world", "body"):
         raise ValueError(f"offset_mode must be 'none', 'world' or 'body', got {offset_mode!r}")
-    if not 0.2 <= trim_fraction <= 1.0:
-        raise ValueError(f"trim_fraction must be in [0.2, 1], got {trim_fraction}")
+    if not (anneal_start > 0 and 0 < anneal_rate < 1):
+        raise ValueError("anneal_start must be > 0 and anneal_rate in (0, 1)")
     T, J, _ = y.shape
     rots = None
     if offset_mode == "body":
@@ -325,24 +333,34 @@ def fit_registration(
         return np.linalg.norm(y - pred, axis=-1), pred
 
     paired = finite.any(axis=0)
+    if offset_mode == "world":
+        # start from the offset-free fit: the whole skeleton's shape pins the rotation down,
+        # whereas per-joint offsets leave only the motion to do it (little when most joints
+        # stand still, e.g. one arm raised), so a random start could lock onto noise
+        init = fit_registration(
+            y, m, offset_mode="none", scale=scale, tukey_c=tukey_c, anneal_start=anneal_start,
+            anneal_rate=anneal_rate, min_scale=min_scale, max_iter=max_iter, tol=tol,
+        )  # fmt: skip
     if offset_mode == "body":
         # start from the world-offset fit: its rotation, weights and (time-median) offsets
         init = fit_registration(
-            y, m, offset_mode="world", scale=scale, trim_fraction=trim_fraction,
-            tukey_c=tukey_c, min_scale=min_scale, max_iter=max_iter, tol=tol,
+            y, m, offset_mode="world", scale=scale, tukey_c=tukey_c, anneal_start=anneal_start,
+            anneal_rate=anneal_rate, min_scale=min_scale, max_iter=max_iter, tol=tol,
         )  # fmt: skip
-        R, t, s, w = init.rotation, init.translation, init.scale, init.weights
+        R, t, s = init.rotation, init.translation, init.scale
         offsets = solve_offsets(R, t, s, np.zeros_like(w))  # plain medians
-    stage_trim = 6  # trimmed iterations before IRLS
     for it in range(max_iter):
         n_it = it + 1
         if offset_mode == "none":
             R, t, s = kabsch(m[finite], y[finite], w[finite], scale=scale)
         elif offset_mode == "world":
-            # per-joint centring removes the (unknown) offsets from the rotation fit
-            mc = m - wmean(m, w)
-            yc = y - wmean(y, w)
-            R, _, s = kabsch(mc[finite], yc[finite], w[finite], scale=scale)
+            if it == 0:
+                R, s = init.rotation, init.scale
+            else:
+                # per-joint centring removes the (unknown) offsets from the rotation fit
+                mc = m - wmean(m, w)
+                yc = y - wmean(y, w)
+                R, _, s = kabsch(mc[finite], yc[finite], w[finite], scale=scale)
             c = wmean(y - s * m @ R.T, w)  # (J, 3) = t + s R o_j
             t = c[paired].mean(axis=0)
             offsets = (c - t) @ R / s
@@ -352,13 +370,11 @@ def fit_registration(
             offsets = solve_offsets(R, t, s, w)
         r, pred = residuals(R, t, s, offsets)
         rf = r[finite]
-        sigma = max(1.4826 * float(np.median(rf)), min_scale)
-        if it < stage_trim and offset_mode != "body":
-            cut = np.quantile(rf, trim_fraction)
-            w = np.where(finite, (r <= cut).astype(float), 0.0)
-        else:
-            w = np.where(finite, _tukey(np.where(finite, r, np.inf), tukey_c * sigma), 0.0)
-        if prev is not None and it >= stage_trim:
+        robust = max(1.4826 * float(np.median(rf)), min_scale)
+        annealing = anneal_start * anneal_rate**it
+        sigma = max(robust, annealing)
+        w = np.where(finite, _tukey(np.where(finite, r, np.inf), tukey_c * sigma), 0.0)
+        if prev is not None and annealing < robust:
             change = float(np.nanmax(np.abs(pred - prev)))
             if change < tol:
                 break
