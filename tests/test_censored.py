@@ -497,3 +497,59 @@ def test_censored_logpdf_against_scipy():
     # far tail: still finite, equal to log Phi(-50)
     v = censored_logpdf(-50.0, 0.0, 1.0, -50.0, 1.0)
     assert np.isfinite(v) and abs(v - norm.logcdf(-50.0)) < 1e-12 * abs(v)
+
+
+@st.composite
+def extreme_problems(draw):
+    """Standardised latent pairs/triples with far tails, near-singular correlations and
+    very narrow intervals."""
+    p = draw(st.integers(2, 3))
+    rho_abs = draw(st.sampled_from([0.0, 0.3, 0.8, 0.93, 0.999, 1 - 1e-6, 1 - 1e-12, 1.0]))
+    sign = draw(st.sampled_from([-1.0, 1.0]))
+    base = rho_abs * sign if p == 2 else abs(rho_abs) * 0.999  # keep 3x3 equicorrelation PSD
+    S = np.full((p, p), base)
+    np.fill_diagonal(S, 1.0)
+    lo = np.empty(p)
+    up = np.empty(p)
+    for i in range(p):
+        a = draw(st.floats(-60.0, 60.0))
+        w = draw(st.sampled_from([1e-8, 1e-6, 1e-3, 0.5, 5.0, INF]))
+        lo[i] = draw(st.sampled_from([a, -INF]))
+        up[i] = a + w
+    return np.zeros(p), S, lo, up
+
+
+@settings(max_examples=60, deadline=None)
+@given(extreme_problems())
+def test_extreme_inputs_finite_psd_cauchy_schwarz(prob):
+    m, S, lo, up = prob
+    r = clipped_normal_moments(m, S, lo, up)
+    C = r.cov
+    assert np.all(np.isfinite(C)) and np.all(np.isfinite(r.mean))
+    np.testing.assert_array_equal(C, C.T)
+    var = np.diag(C)
+    assert np.all(var >= 0)
+    assert np.all((r.mean >= lo) & (r.mean <= up))
+    # |Cov_ij| <= sqrt(Var_i Var_j): the clipped correlation is a correlation
+    bound = np.outer(np.sqrt(var), np.sqrt(var))
+    assert np.all(np.abs(C) <= bound * (1 + 1e-9) + 1e-300)
+    # PSD relative to each entry's own scale (diagonal scaling)
+    d = np.where(var > 0, np.sqrt(var), 1.0)
+    assert np.linalg.eigvalsh(C / np.outer(d, d)).min() >= -1e-9
+
+
+def test_unit_correlation_is_continuous():
+    # rho = ±1 exactly (singular latent pair) agrees with rho = ±(1 - 1e-12)
+    for r in (1.0, -1.0):
+        exact = clipped_normal_moments([0.1, 0.2], [[1, r], [r, 1]], [-1, -0.5], [0.5, 1.5])
+        near = clipped_normal_moments(
+            [0.1, 0.2], [[1, r * (1 - 1e-12)], [r * (1 - 1e-12), 1]], [-1, -0.5], [0.5, 1.5]
+        )
+        np.testing.assert_allclose(exact.cov, near.cov, rtol=1e-10, atol=1e-12)
+        assert np.linalg.eigvalsh(exact.cov).min() >= 0
+
+
+def test_nan_inputs_propagate_without_error():
+    r = clipped_normal_moments([np.nan, 0.2, 0.0], np.eye(3) + 0.5, [-1, -0.5, 0], [0.5, 1.5, 1])
+    assert np.isnan(r.mean[0]) and np.all(np.isnan(r.cov[0])) and np.isnan(r.p_uncensored[0])
+    assert np.all(np.isfinite(r.cov[1:, 1:])) and np.all(np.isfinite(r.mean[1:]))

@@ -56,6 +56,7 @@ _GL10_X, _GL10_W = np.polynomial.legendre.leggauss(10)
 # Beyond this many standard deviations the far-tail (continued fraction) branch is used.
 _FAR = 3.0
 _CF_TERMS = 60
+_RHO_MAX = 1.0 - 2.0**-49
 
 
 def _log_phi(z: NDArray) -> NDArray:
@@ -147,15 +148,25 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
     it propagates).
     """
     with np.errstate(invalid="ignore", over="ignore", under="ignore", divide="ignore"):
-        lp_lower = log_ndtr(alpha)
-        lp_upper = log_ndtr(-beta)
+        # ndtr keeps full relative precision in the lower tail down to underflow; log_ndtr
+        # is only needed (and twice as slow) where the probability underflows.
+        p_lower = ndtr(alpha)
+        p_upper = ndtr(-beta)
+        lp_lower = np.log(p_lower)
+        lp_upper = np.log(p_upper)
+        tiny = (p_lower < 1e-300) & (alpha > -np.inf)
+        if np.any(tiny):
+            lp_lower[tiny] = log_ndtr(alpha[tiny])
+        tiny = (p_upper < 1e-300) & (beta < np.inf)
+        if np.any(tiny):
+            lp_upper[tiny] = log_ndtr(-beta[tiny])
 
         # Reflect so that the interval's midpoint is <= 0: (a, b) = (-β, -α) if α + β > 0.
         flip = (alpha + beta) > 0  # NaN (−inf + inf) -> False
         a = np.where(flip, -beta, alpha)
         b = np.where(flip, -alpha, beta)
-        lpa = np.where(flip, lp_upper, lp_lower)  # log P(Z < a) in the reflected frame
-        lpb = np.where(flip, lp_lower, lp_upper)  # log P(Z > b)
+        pa = np.where(flip, p_upper, p_lower)  # P(Z < a) in the reflected frame
+        qb = np.where(flip, p_lower, p_upper)  # P(Z > b)
 
         c = 0.5 * (a + b)
         h = 0.5 * (b - a)
@@ -163,11 +174,11 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
         narrow = finite & (h * (1.0 + np.abs(c)) <= 1.0)
         far = ~narrow & (b <= -_FAR)
 
-        # --- general branch ------------------------------------------------------------
-        lb = log_ndtr(b)
-        lp_neg = lb + np.log(-np.expm1(lpa - lb))  # b <= 0: Φ(b) - Φ(a)
-        lp_mid = np.log1p(-(np.exp(lpa) + np.exp(lpb)))  # a < 0 < b
-        lp = np.where(b <= 0, lp_neg, lp_mid)
+        # --- general branch (b > -3 and not narrow: P_un > 1e-3 / 5, no underflow) ------
+        # b <= 0: Φ(b) - Φ(a) with Φ(a) <= Φ(b) e^{-1} (not narrow), no cancellation;
+        # a < 0 < b (not narrow): 1 - Φ(a) - Q(b) >= 0.38.
+        p_un = np.where(b <= 0, ndtr(b) - pa, (1.0 - pa) - qb)
+        lp = np.log(p_un)
         ra = np.exp(_log_phi(a) - lp)  # φ(a)/P
         rb = np.exp(_log_phi(b) - lp)
         mu = ra - rb
@@ -186,6 +197,7 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
             m1 = (e * x) @ _GL12_W / s0
             v1 = (e * (x - m1[:, None]) ** 2) @ _GL12_W / s0
             lp[narrow] = np.log(hn) + _log_phi(cn) + np.log(s0)
+            p_un[narrow] = np.exp(lp[narrow])
             mu[narrow] = cn + hn * m1
             var[narrow] = hn * hn * v1
             d_lo[narrow] = hn * (1.0 + m1)
@@ -200,6 +212,7 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
             lq2 = log_ndtr(-x2)
             ratio = np.exp(lq2 - lq1)  # Q(x2)/Q(x1) in [0, 1)
             lp[far] = lq1 + np.log1p(-ratio)
+            p_un[far] = np.exp(lp[far])
             # Two-sided: signed mixture of Z|Z>x1 (weight w1) and Z|Z>x2 (weight w2),
             # w1 - w2 = 1. Infinite x2 gives w2 = 0 exactly.
             w2 = ratio / (1.0 - ratio)
@@ -225,6 +238,7 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
         # conditional law is the point mass at α.
         empty = a == b
         lp = np.where(empty, -np.inf, lp)
+        p_un = np.where(empty, 0.0, p_un)
         mu = np.where(empty, a, mu)
         var = np.where(empty, 0.0, var)
         d_lo = np.where(empty, 0.0, d_lo)
@@ -238,10 +252,14 @@ def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
         mu_t = np.where(both, 0.0, mu_t)
         var = np.where(both, 1.0, var)
         lp = np.where(both, 0.0, lp)
+        p_un = np.where(both, 1.0, p_un)
     return {
         "lp_lower": lp_lower,
         "lp_un": lp,
         "lp_upper": lp_upper,
+        "p_lower": p_lower,
+        "p_un": p_un,
+        "p_upper": p_upper,
         "mu_t": mu_t,
         "v_t": var,
         "d_lower": dl,
@@ -282,9 +300,9 @@ def truncated_standard_normal(alpha: ArrayLike, beta: ArrayLike) -> TruncatedSta
         log_p_lower=core["lp_lower"],
         log_p_uncensored=core["lp_un"],
         log_p_upper=core["lp_upper"],
-        p_lower=np.exp(core["lp_lower"]),
-        p_uncensored=np.exp(core["lp_un"]),
-        p_upper=np.exp(core["lp_upper"]),
+        p_lower=core["p_lower"],
+        p_uncensored=core["p_un"],
+        p_upper=core["p_upper"],
         mu_t=core["mu_t"],
         v_t=core["v_t"],
     )
@@ -330,9 +348,9 @@ def _diag_parts(m: NDArray, v: NDArray, lo: NDArray, up: NDArray) -> dict[str, N
             k: val.reshape(alpha.shape)
             for k, val in _truncated_core(alpha.ravel(), beta.ravel()).items()
         }
-        p_lo = np.exp(core["lp_lower"])
-        p_un = np.exp(core["lp_un"])
-        p_up = np.exp(core["lp_upper"])
+        p_lo = core["p_lower"]
+        p_un = core["p_un"]
+        p_up = core["p_upper"]
         fa = np.isfinite(alpha)
         fb = np.isfinite(beta)
         mu_t = core["mu_t"]
@@ -359,6 +377,12 @@ def _diag_parts(m: NDArray, v: NDArray, lo: NDArray, up: NDArray) -> dict[str, N
         # zero variance: a point mass at clip(m)
         mean_y = np.where(zero, np.clip(m, lo, up), mean_y)
         var_y = np.where(zero, 0.0, var_y)
+        # NaN anywhere in a component's inputs gives NaN moments and probabilities
+        bad = np.isnan(m) | np.isnan(v) | np.isnan(lo) | np.isnan(up)
+        if np.any(bad):
+            mean_y, var_y, p_lo, p_un, p_up = (
+                np.where(bad, np.nan, x) for x in (mean_y, var_y, p_lo, p_un, p_up)
+            )
     return {
         "mean": mean_y,
         "var": var_y,
@@ -423,21 +447,6 @@ def clipped_normal_variance_diag(
 # --------------------------------------------------------------------------------------
 
 
-def _j_small(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
-    """``J(h, k; ρ) = ∫_0^ρ (ρ - r) φ₂(h, k; r) dr`` for ``|ρ| < 0.925``, finite h, k.
-
-    With ``r = sin θ``: ``φ₂ dr = exp(-(h² + k² - 2 hk sin θ)/(2 cos² θ)) dθ / (2π)``;
-    20-point Gauss–Legendre in θ (the integrand is smooth for ``|ρ| < 0.925``).
-    """
-    t = np.arcsin(rho)
-    th = 0.5 * t[..., None] * (_GL20_X + 1.0)
-    sn = np.sin(th)
-    hk = (h * k)[..., None]
-    hs = ((h * h + k * k) / 2.0)[..., None]
-    f = (rho[..., None] - sn) * np.exp((sn * hk - hs) / (1.0 - sn * sn))
-    return 0.5 * t * (f @ _GL20_W) / _TWOPI
-
-
 def _j_large(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
     """``J(h, k; ρ)`` for ``|ρ| >= 0.925`` from the closed form ``K(h, k) - ρ Q(h) Q(k)``.
 
@@ -461,18 +470,46 @@ def _j_large(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
     return m12 - mh * mk - rho * qh * qk
 
 
-def _j(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
-    """``J(h, k; ρ)``, 0 when h or k is infinite."""
-    out = np.zeros(np.broadcast_shapes(h.shape, k.shape, rho.shape))
-    h, k, rho = np.broadcast_arrays(h, k, rho)
-    fin = np.isfinite(h) & np.isfinite(k) & (rho != 0)
-    small = fin & (np.abs(rho) < 0.925)
-    large = fin & ~small
+def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray) -> NDArray:
+    """``Σ ± J(t_i, t_j; ρ)`` over the four corners, ``J(h, k; ρ) = ∫_0^ρ (ρ-r) φ₂(h, k; r) dr``.
+
+    1-D inputs of one length. Corners at an infinite limit contribute exactly 0.
+    For ``|ρ| < 0.925``, with ``r = sin θ``:
+    ``φ₂ dr = exp(-(h² + k² - 2 hk sin θ)/(2 cos² θ)) dθ / (2π)``, integrated with a
+    20-point Gauss–Legendre rule in θ whose nodes and weights are shared by the four
+    corners. For ``|ρ| >= 0.925``: :func:`_j_large`.
+    """
+    out = np.zeros(rho.shape)
+    H = np.stack([ai, ai, bi, bi])
+    K = np.stack([aj, bj, aj, bj])
+    signs = (1.0, -1.0, -1.0, 1.0)
+    fin = np.isfinite(H) & np.isfinite(K) & (rho != 0)
+    any_fin = fin.any(axis=0)
+    small = np.abs(rho) < 0.925
     with np.errstate(under="ignore", over="ignore", invalid="ignore", divide="ignore"):
-        if np.any(small):
-            out[small] = _j_small(h[small], k[small], rho[small])
-        if np.any(large):
-            out[large] = _j_large(h[large], k[large], rho[large])
+        sel = small & any_fin
+        if np.any(sel):
+            r = rho[sel]
+            t = np.arcsin(r)
+            sn = np.sin(0.5 * t[:, None] * (_GL20_X + 1.0))
+            inv = 0.5 / (1.0 - sn * sn)
+            wr = (r[:, None] - sn) * _GL20_W * (0.5 * t / _TWOPI)[:, None]
+            acc = np.zeros(r.shape)
+            for c in range(4):
+                f = fin[c, sel]
+                if not np.any(f):
+                    continue
+                h = np.where(f, H[c, sel], 0.0)
+                k = np.where(f, K[c, sel], 0.0)
+                e = np.exp((2.0 * sn * (h * k)[:, None] - (h * h + k * k)[:, None]) * inv)
+                acc += signs[c] * np.where(f, np.einsum("ij,ij->i", e, wr), 0.0)
+            out[sel] = acc
+        sel = ~small & any_fin
+        if np.any(sel):
+            for c in range(4):
+                m = sel & fin[c]
+                if np.any(m):
+                    out[m] += signs[c] * _j_large(H[c, m], K[c, m], rho[m])
     return out
 
 
@@ -521,7 +558,7 @@ def _pair_covariance(
     there the Hoeffding double integral is evaluated directly with a 10×10 Gauss–Legendre
     rule on the rectangle.
     """
-    corner = _j(ai, aj, rho) - _j(ai, bj, rho) - _j(bi, aj, rho) + _j(bi, bj, rho)
+    corner = _corner_sum(ai, bi, aj, bj, rho)
     with np.errstate(invalid="ignore", over="ignore"):
         sig = np.sqrt((1.0 - rho) * (1.0 + rho))
         ci, hi = 0.5 * (ai + bi), 0.5 * (bi - ai)
@@ -616,7 +653,9 @@ def clipped_normal_moments(
             denom = si * sj
             with np.errstate(divide="ignore", invalid="ignore"):
                 rho = np.where(denom > 0, sij / np.where(denom > 0, denom, 1.0), 0.0)
-            rho = np.clip(rho, -1.0, 1.0)
+            # |ρ| = 1 exactly (a singular latent pair) is evaluated at |ρ| = 1 - 2^-49: the
+            # moments are Lipschitz in ρ, so this changes them by ~1e-15 relative.
+            rho = np.clip(rho, -_RHO_MAX, _RHO_MAX)
             corner = _pair_covariance(
                 d["alpha"][..., i],
                 d["beta"][..., i],
@@ -644,22 +683,41 @@ def clipped_normal_moments(
 
 
 def _repair_psd(C: NDArray, skip: NDArray) -> NDArray:
-    """Clip negative eigenvalues (rounding only) of the correlation-scaled matrices."""
-    dg = np.diagonal(C, axis1=-2, axis2=-1)
-    sc = np.sqrt(dg)
-    sc_safe = np.where(sc > 0, sc, 1.0)
-    R = C / sc_safe[..., :, None] / sc_safe[..., None, :]
-    lam = np.linalg.eigvalsh(R)
-    bad = (lam[..., 0] < 0) & ~skip
+    """Enforce Cauchy–Schwarz and positive semi-definiteness against rounding.
+
+    ``C`` is (n, p, p) symmetric with a non-negative diagonal; elements flagged in ``skip``
+    (all components unbounded: the input covariance) are returned untouched. In the
+    correlation-scaled matrix ``R = D^-1/2 C D^-1/2``, off-diagonal entries are clipped to
+    ``[-1, 1]`` (to 0 against a zero-variance component); this only bites when both
+    variances are below the absolute accuracy of the cross term (~1e-16 of the latent
+    scale). For ``p >= 3`` any negative eigenvalue of ``R`` left over is set to 0 and the
+    matrix rebuilt. Entries that need no change keep their bits.
+    """
+    p = C.shape[-1]
+    sc = np.sqrt(np.diagonal(C, axis1=-2, axis2=-1))
+    pos = sc > 0
+    sc_safe = np.where(pos, sc, 1.0)
+    outer = sc_safe[..., :, None] * sc_safe[..., None, :]
+    R = C / outer
+    off = ~np.eye(p, dtype=bool)
+    lim = np.where(pos[..., :, None] & pos[..., None, :], 1.0, 0.0)
+    with np.errstate(invalid="ignore"):
+        Rc = np.clip(R, -lim, lim)
+        fix = off & (Rc != R) & ~np.isnan(R) & ~skip[..., None, None]
+    out = np.where(fix, Rc * outer, C)
+    if p < 3:
+        return out
+    R = np.where(fix, Rc, R)
+    ok = np.all(np.isfinite(R), axis=(-2, -1)) & ~skip  # NaN inputs propagate untouched
+    lam = np.linalg.eigvalsh(np.where(ok[..., None, None], R, 0.0))
+    bad = (lam[..., 0] < 0) & ok
     if not np.any(bad):
-        return C
+        return out
     lam_b, vec_b = np.linalg.eigh(R[bad])
     lam_b = np.maximum(lam_b, 0.0)
     Rb = (vec_b * lam_b[..., None, :]) @ np.swapaxes(vec_b, -1, -2)
     Rb = 0.5 * (Rb + np.swapaxes(Rb, -1, -2))
-    Cb = Rb * sc_safe[bad][..., :, None] * sc_safe[bad][..., None, :]
-    out = C.copy()
-    out[bad] = Cb
+    out[bad] = Rb * outer[bad]
     return out
 
 
