@@ -82,3 +82,21 @@ def test_uiprmd_squat_offset_rate_and_rmse(ep: str) -> None:
     raw = tab.score("raw")
     assert 0.02 < raw.rmse < 0.08
     assert np.isfinite(raw.angles["left_knee"].rmse_best)
+
+
+def test_evaluate_paths_with_and_without_truth() -> None:
+    from tobitkf.evaluation.evaluate import EvaluationTable, NoTruthTable, evaluate_paths
+
+    k = data_file("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt")
+    v = data_file("keraal/G3-Vicon-CTK-P1T1-Unknown-C-0.txt")
+    gt, tab = evaluate_paths(k, v, ["raw"])
+    assert isinstance(tab, EvaluationTable) and gt is not None
+    assert 0.01 < tab.score("raw").rmse < 0.1
+    none, tab2 = evaluate_paths(
+        data_file("kimore/JointPositionExercise3.csv"), None, ["raw", "sgf"]
+    )
+    assert none is None and isinstance(tab2, NoTruthTable)
+    raw, sgf = tab2.rows
+    # KIMORE Ex3: the data README reports a largest one-frame jump of 0.72 m
+    assert raw["max_jump_m"] == pytest.approx(0.72, abs=0.02)
+    assert sgf["M"] < raw["M"]

@@ -79,6 +79,7 @@ __all__ = [
     "MethodScore",
     "NoTruthTable",
     "evaluate_methods",
+    "evaluate_paths",
     "evaluate_without_truth",
     "pool_scores",
     "prepare_truth",
@@ -501,7 +502,8 @@ def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
     Returns
     -------
     list of dicts, one per method (in the first table's order): ``method``, ``rmse_cm``,
-    ``<group>_cm``, ``<class>_cm``, ``max_cm``, ``frames_over``, ``n_samples``.
+    ``<group>_cm``, ``<class>_cm``, ``M`` (sample-weighted mean of the recordings' M),
+    ``max_cm``, ``frames_over``, ``n_samples``.
     """
     if not tables:
         raise ValueError("pool_scores: no tables")
@@ -525,6 +527,12 @@ def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
             row["rmse_cm" if key == "all" else f"{key}_cm"] = (
                 100 * math.sqrt(num / den) if den else float("nan")
             )
+        n_all = [p.counts.get("all", 0) for p in parts]
+        row["M"] = (
+            sum(n * p.smoothness_M for n, p in zip(n_all, parts, strict=True)) / sum(n_all)
+            if sum(n_all)
+            else float("nan")
+        )
         row["max_cm"] = 100 * max(p.max for p in parts)
         row["frames_over"] = sum(p.frames_over for p in parts)
         row["n_samples"] = sum(p.counts.get("all", 0) for p in parts)
@@ -799,3 +807,38 @@ def evaluate_without_truth(
             }
         )
     return NoTruthTable(tuple(rows), track.n_frames)
+
+
+def evaluate_paths(
+    track_path: str | Path,
+    truth_path: str | Path | None = None,
+    methods: Sequence[MethodLike] = DEFAULT_METHODS,
+    *,
+    pairs: PairingTable | str | Path | None = None,
+    outputs: dict[str, Any] | None = None,
+    **truth_options: Any,
+) -> tuple[GroundTruth | None, EvaluationTable | NoTruthTable]:
+    """``tobitkf evaluate TRACK [--truth MOCAP]`` as a function (for the CLI).
+
+    Loads both files with :func:`tobitkf.io.load` (first body of each), then runs
+    :func:`prepare_truth` and :func:`evaluate_methods`, or, without ``truth_path``,
+    :func:`evaluate_without_truth`.  ``truth_options`` go to :func:`prepare_truth`
+    (``offset_mode``, ``time``, ``mocap_rate``, ``fit_rate``, ``rate_range``).
+
+    Returns
+    -------
+    (GroundTruth or None, EvaluationTable or NoTruthTable)
+    """
+    from tobitkf.io import load
+
+    tracks = load(track_path)
+    if not tracks:
+        raise ValueError(f"{track_path}: no skeleton in the file")
+    track = tracks[0]
+    if truth_path is None:
+        return None, evaluate_without_truth(track, methods, outputs=outputs)
+    mocaps = load(truth_path)
+    if not mocaps:
+        raise ValueError(f"{truth_path}: no motion-capture points in the file")
+    gt = prepare_truth(track, mocaps[0], pairs=pairs, **truth_options)
+    return gt, evaluate_methods(track, gt, methods, outputs=outputs)
