@@ -133,7 +133,10 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
     if not cur.rows:
         raise ReadError(path, None, "empty file: expected the number of frames")
     n_frames = cur.take_int("the number of frames")
-    bodies: dict[int, list[tuple[int, int, list, np.ndarray, int]]] = {}
+    bodies: dict[int, list[tuple[int, int, list, int]]] = {}
+    block_rows: list[str] = []  # joint lines of every body, parsed in one go below
+    block_numbers: list[int] = []
+    n_blocks = 0
     for f in range(n_frames):
         n_bodies = cur.take_int(f"the number of bodies of frame {f + 1}")
         seen: set[int] = set()
@@ -159,30 +162,35 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
                 _, jno = cur.rows[cur.pos - 1], cur.numbers[cur.pos - 1]
                 raise ReadError(path, jno, f"expected {N_JOINTS} joints, found {n_joints}")
             rows, numbers = cur.take_block(N_JOINTS, "12 joint values")
-            joints = parse_rows(
-                path,
-                rows,
-                numbers,
-                sep=None,
-                ncols=12,
-                what="x y z depthX depthY colorX colorY orientationW..Z trackingState",
-            )
-            state = joints[:, 11]
-            bad = ~np.isin(state, (0.0, 1.0, 2.0))
-            if bad.any():
-                k = int(np.flatnonzero(bad)[0])
-                raise ReadError(
-                    path,
-                    numbers[k],
-                    f"expected a joint tracking state 0, 1 or 2, found {state[k]!r}",
-                )
-            bodies.setdefault(body_id, []).append((f, b, values, joints, numbers[0]))
+            block_rows.extend(rows)
+            block_numbers.extend(numbers)
+            bodies.setdefault(body_id, []).append((f, b, values, n_blocks))
+            n_blocks += 1
     if cur.pos < len(cur.rows):
         raise ReadError(
             path,
             cur.numbers[cur.pos],
             f"expected end of file after {n_frames} frames, found more data",
         )
+    all_joints = np.zeros((0, N_JOINTS, 12))
+    if block_rows:
+        all_joints = parse_rows(
+            path,
+            block_rows,
+            block_numbers,
+            sep=None,
+            ncols=12,
+            what="x y z depthX depthY colorX colorY orientationW..Z trackingState",
+        ).reshape(-1, N_JOINTS, 12)
+        state = all_joints[:, :, 11].ravel()
+        bad = ~np.isin(state, (0.0, 1.0, 2.0))
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ReadError(
+                path,
+                block_numbers[k],
+                f"expected a joint tracking state 0, 1 or 2, found {state[k]!r}",
+            )
     topo = get_topology("kinect_v2")
     out = []
     for body_id, entries in bodies.items():
@@ -198,7 +206,8 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
             name: (np.zeros(F, dtype=np.int64) if typ is int else np.full(F, np.nan))
             for name, typ in BODY_FIELDS
         }
-        for f, b, values, joints, _ in entries:
+        for f, b, values, k in entries:
+            joints = all_joints[k]
             present[f] = True
             order[f] = b
             positions[f] = joints[:, 0:3]
