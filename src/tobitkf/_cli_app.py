@@ -127,6 +127,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
     if method not in METHODS:
         _fail(f"unknown method {method!r}; choose from: {', '.join(sorted(METHODS))}")
     kwargs = _parse_params(params)
+    offline = bool(kwargs.pop("offline", False)) or offline  # -p offline=true == --offline
     try:
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
