@@ -366,6 +366,8 @@ class MethodScore:
     angles : per angle (elbows, knees) the RMSE in degrees at the best and at a fixed delay.
     counts : number of scored samples: ``"all"``, per group and per raw class (for pooling
         several recordings with :func:`pool_scores`).
+    clipped_fraction : Tobit methods: mean over paired joints of the fraction of frames whose
+        measurement the filter's limits clipped (``metadata["diagnostics"]``); else None.
     """
 
     method: str
@@ -381,6 +383,7 @@ class MethodScore:
     lag_correlation: float | None
     angles: dict[str, AngleScore]
     counts: dict[str, int] = field(default_factory=dict)
+    clipped_fraction: float | None = None
 
     def row(self) -> dict[str, Any]:
         """Flat dict for a table (centimetres, degrees)."""
@@ -394,6 +397,7 @@ class MethodScore:
             **{f"{k}_cm": 100 * v for k, v in self.rmse_by_class.items()},
             "M": self.smoothness_M,
             "lag_frames": self.lag_frames,
+            "clipped_fraction": self.clipped_fraction,
         }
         for name, a in self.angles.items():
             r[f"{name}_best_deg"] = a.rmse_best
@@ -437,6 +441,7 @@ def score_estimate(
     fixed_delay: int = 0,
     max_delay: int = 10,
     truth_angles: Mapping[str, NDArray] | None = None,
+    clipped_fraction: float | None = None,
 ) -> MethodScore:
     """Score one (T, J, 3) estimate against ``truth`` (see :class:`MethodScore`)."""
     est = np.asarray(estimate, dtype=float)
@@ -489,6 +494,7 @@ def score_estimate(
         lag_correlation=lagc,
         angles=angles,
         counts=counts,
+        clipped_fraction=clipped_fraction,
     )
 
 
@@ -706,6 +712,11 @@ def evaluate_methods(
         if outputs is not None:
             outputs[label] = out
         est = out.positions if hasattr(out, "positions") else np.asarray(out, dtype=float)
+        diag = (getattr(out, "metadata", None) or {}).get("diagnostics") or {}
+        clipped = None
+        cf = diag.get("clipped_fraction")
+        if cf is not None and np.size(cf) == len(truth.paired):
+            clipped = float(np.mean(np.asarray(cf, dtype=float)[truth.paired]))
         scores.append(
             score_estimate(
                 label,
@@ -719,6 +730,7 @@ def evaluate_methods(
                 fixed_delay=fixed_delay,
                 max_delay=max_delay,
                 truth_angles=truth_angles,
+                clipped_fraction=clipped,
             )
         )
     ok = np.isfinite(raw_err)
