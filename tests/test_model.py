@@ -107,7 +107,7 @@ def test_embed_diagonal_and_lazy_covs():
     res = FilterResult(
         means=z, predicted_means=z, cov_data=v, predicted_cov_data=2 * v, diagonal=True,
         loglik=np.zeros((5, 2)), p_lower=z, p_uncensored=z + 1, p_upper=z,
-        clipped=z.astype(bool), lower=z - np.inf, upper=z + np.inf,
+        clipped=z.astype(bool), limits=(z - np.inf, z + np.inf),
     )  # fmt: skip
     np.testing.assert_array_equal(res.covs, full)
     np.testing.assert_array_equal(res.predicted_covs, 2 * full)

@@ -83,6 +83,9 @@ def test_streaming_equals_batch_exactly(method, kind):
         np.testing.assert_array_equal(f.loglik, res.loglik[t])
         np.testing.assert_array_equal(f.variances, res.variances[t])
         np.testing.assert_array_equal(f.last.x_pred, res.predicted_means[t])
+        shape = res.lower[t].shape
+        np.testing.assert_array_equal(np.broadcast_to(f.last.lower, shape), res.lower[t])
+        np.testing.assert_array_equal(np.broadcast_to(f.last.upper, shape), res.upper[t])
     assert f.t == T
     # reset: the same frames give the same results again
     f.reset()
@@ -160,3 +163,24 @@ def test_streaming_errors():
         f.step(np.zeros((4, 3)), lower=2.0)
     with pytest.raises(ValueError, match="Q: expected shape"):
         f.step(np.zeros((4, 3)), Q=np.eye(2))
+
+
+def test_streaming_equals_batch_atkf_constant_identity_model():
+    """The batch ATKF on a constant A = H = I model forms its limits after the loop from
+    the means; they must equal the ones the streaming filter forms at every step."""
+    rng = np.random.default_rng(31)
+    model = LinearGaussian.skeleton(x0=rng.normal(size=(5, 3)))
+    ys = _data(rng, 30, (5, 3)) * 0.3
+    c = np.array([0.34, 0.18, 0.34])
+    res = adaptive_tobit_filter(model, ys, c=c)
+    f = StreamingFilter(model, "atkf", c=c)
+    for t in range(30):
+        _assert_same(f.step(ys[t]), res, t)
+        shape = res.lower[t].shape
+        np.testing.assert_array_equal(np.broadcast_to(f.last.lower, shape), res.lower[t])
+        np.testing.assert_array_equal(np.broadcast_to(f.last.upper, shape), res.upper[t])
+        if t > 0:  # step 0 is a KF step (no censoring quantities)
+            u = f.last.update
+            np.testing.assert_array_equal(u.clipped, res.clipped[t])
+            np.testing.assert_array_equal(np.broadcast_to(u.p_lower, shape), res.p_lower[t])
+    assert res.clipped.any()

@@ -119,8 +119,8 @@ class StepOutput:
 
     x_pred: Array
     P_pred: Array
-    lower: Array
-    upper: Array
+    lower: Array | None
+    upper: Array | None
     update: UpdateOut
 
 
@@ -310,6 +310,7 @@ def filter_step(
     *,
     full: bool | None = None,
     out_x: Array | None = None,
+    need_limits: bool = True,
 ) -> StepOutput:
     """One frame of a filter: (adaptive limits), predict, update.
 
@@ -326,6 +327,9 @@ def filter_step(
     c : half-widths of the adaptive filter, broadcastable to (*batch, p).
     full : optional hint that y has no NaN (None: checked).
     out_x : optional buffer (*batch, n) the new mean is written to.
+    need_limits : False lets the adaptive filter skip forming its limits when its update
+        does not use them (diagonal path, A = I); ``StepOutput.lower/upper`` are then
+        None (the batch loop computes them afterwards from the means).
     """
     update = method.update
     if method.adaptive:
@@ -333,12 +337,15 @@ def filter_step(
             lower, upper = -np.inf, np.inf
             update = kf_update
         else:
-            if sm.diagonal:
-                centre = x if sm.h_identity else sm.H * x
+            if not need_limits and sm.diagonal and sm.a_identity:
+                lower = upper = None
             else:
-                centre = x @ sm.H.T
-            lower = centre - c
-            upper = centre + c
+                if sm.diagonal:
+                    centre = x if sm.h_identity else sm.H * x
+                else:
+                    centre = x @ sm.H.T
+                lower = centre - c
+                upper = centre + c
     xp, Pp = predict(x, P, sm)
     out = update(xp, Pp, y, sm, lower, upper, c, full, out_x)
     return StepOutput(xp, Pp, lower, upper, out)
@@ -603,14 +610,16 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
     if censoring:
         p_lo, p_un, p_up = _Store(T, full), _Store(T, full), _Store(T, full)
         clipped = _Store(T, full, bool)
-    if method.adaptive:
-        lo_out, up_out = _Store(T, full), _Store(T, full)
     constant_model = inp.A_seq is None and inp.Q_seq is None and inp.R_seq is None
     constant_model = constant_model and inp.R_scale is None
     sm = make_step_model(model, diagonal) if constant_model else None
     x, P = initial_state(model, batch, diagonal)
     # with A = I throughout, x⁻_t = x_{t-1}: one buffer holds both means
     shared = sm is not None and sm.a_identity
+    # adaptive limits of the diagonal A = I path: computed from the means when asked for
+    deferred = method.adaptive and shared and diagonal
+    if method.adaptive and not deferred:
+        lo_out, up_out = _Store(T, full), _Store(T, full)
     if shared:
         buf = np.empty((T + 1, *batch, n))
         buf[0] = x
@@ -635,7 +644,7 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
         out_x = means[t]
         st = filter_step(
             method, t == 0, x, P, ys[t], sm, lo, up, c,  # type: ignore[arg-type]
-            full=True if inp.finite_steps[t] else None, out_x=out_x,
+            full=True if inp.finite_steps[t] else None, out_x=out_x, need_limits=not deferred,
         )  # fmt: skip
         u = st.update
         if u.x is not out_x:
@@ -657,7 +666,7 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
                 p_un.put(t, u.p_uncensored)
                 p_up.put(t, u.p_upper)
                 clipped.put(t, u.clipped)
-        if method.adaptive:
+        if method.adaptive and not deferred:
             lo_out.put(t, st.lower)
             up_out.put(t, st.upper)
     if censoring:
@@ -668,13 +677,15 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
         p_uncensored = np.broadcast_to(1.0, (T, *full))
         p_upper = np.broadcast_to(0.0, (T, *full))
         clipped_arr = np.broadcast_to(False, (T, *full))
-    if method.adaptive:
-        lower, upper = lo_out.get(), up_out.get()
+    limits: Any
+    if deferred:
+        limits = _deferred_limits(means, inp, full, sm)  # type: ignore[arg-type]
+    elif method.adaptive:
+        limits = (lo_out.get(), up_out.get())
     elif inp.limits_seq:
-        lower, upper = inp.lower, inp.upper
+        limits = (inp.lower, inp.upper)
     else:
-        lower = np.broadcast_to(inp.lower, (T, *full))
-        upper = np.broadcast_to(inp.upper, (T, *full))
+        limits = (np.broadcast_to(inp.lower, (T, *full)), np.broadcast_to(inp.upper, (T, *full)))
     return FilterResult(
         means=means,
         predicted_means=pmeans,
@@ -686,11 +697,31 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
         p_uncensored=p_uncensored,
         p_upper=p_upper,
         clipped=clipped_arr,
-        lower=lower,
-        upper=upper,
+        limits=limits,
         A_seq=inp.A_seq,
         method=method.name,
     )
+
+
+def _deferred_limits(
+    means: Array, inp: RunInputs, full: tuple[int, ...], sm: StepModel
+) -> Callable[[], tuple[Array, Array]]:
+    """Adaptive limits H x̂_{t-1} ± c_t of the diagonal A = I path (±inf at t = 0), formed
+    with the same elementwise operations as :func:`filter_step` (identical numbers)."""
+
+    def limits() -> tuple[Array, Array]:
+        T = inp.T
+        lo = np.empty((T, *full))
+        up = np.empty((T, *full))
+        lo[0], up[0] = -np.inf, np.inf
+        if T > 1:
+            centre = means[:-1] if sm.h_identity else sm.H * means[:-1]
+            c = inp.c[1:] if inp.c_seq else inp.c
+            np.subtract(centre, c, out=lo[1:])
+            np.add(centre, c, out=up[1:])
+        return lo, up
+
+    return limits
 
 
 def kalman_filter(

@@ -13,6 +13,7 @@ matrices are built on first access of ``covs`` / ``predicted_covs``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -282,8 +283,13 @@ class FilterResult:
         Censoring probabilities used in the update (0, 1, 0 for the plain KF).
     clipped : ndarray of bool, shape (T, *batch, p)
         The (observed) measurement component was at or beyond a limit.
+    limits : (lower, upper) or a callable returning them
+        Storage of the limits; a callable is evaluated on first access of ``lower`` /
+        ``upper`` (the adaptive filter's limits are then computed from the means, in one
+        vectorised pass, only if asked for).
     lower, upper : ndarray, shape (T, *batch, p)
-        Limits used (adaptive filter: the adaptive ones; ±inf for the KF).
+        Properties: the limits used (adaptive filter: the adaptive ones, ±inf at the
+        first step; ±inf for the KF).
     A_seq : ndarray, shape (T, n, n), or None
         Transition used in the prediction of every step (None: ``model.A`` throughout).
     method : str
@@ -308,8 +314,7 @@ class FilterResult:
     p_uncensored: Array
     p_upper: Array
     clipped: NDArray[np.bool_]
-    lower: Array
-    upper: Array
+    limits: tuple[Array, Array] | Callable[[], tuple[Array, Array]]
     A_seq: Array | None = None
     method: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
@@ -318,9 +323,25 @@ class FilterResult:
         for a in (
             self.means, self.predicted_means, self.cov_data, self.predicted_cov_data,
             self.loglik, self.p_lower, self.p_uncensored, self.p_upper, self.clipped,
-            self.lower, self.upper,
         ):  # fmt: skip
             _readonly(a)
+
+    @cached_property
+    def _limits(self) -> tuple[Array, Array]:
+        lo, up = self.limits() if callable(self.limits) else self.limits
+        _readonly(lo)
+        _readonly(up)
+        return lo, up
+
+    @property
+    def lower(self) -> Array:
+        """Lower limits used, shape (T, *batch, p)."""
+        return self._limits[0]
+
+    @property
+    def upper(self) -> Array:
+        """Upper limits used, shape (T, *batch, p)."""
+        return self._limits[1]
 
     @cached_property
     def covs(self) -> Array:
