@@ -98,8 +98,9 @@ def clean():
     return generate_motion("mixed", duration=10.0, seed=11)
 
 
-def test_corruption_labels_match_what_was_done(clean) -> None:
-    c = corrupt(clean, seed=3)
+@pytest.mark.parametrize("seed", [0, 3, 7, 12])
+def test_corruption_labels_match_what_was_done(clean, seed: int) -> None:
+    c = corrupt(clean, seed=seed)
     err = np.linalg.norm(c.sequence.positions - c.truth, axis=-1)
     assert (c.truth == clean.positions[c.kept]).all()
     counts = c.counts()

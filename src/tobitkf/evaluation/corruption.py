@@ -237,7 +237,7 @@ def corrupt(
         rate = np.full(J, model.spike_rate * model.spike_group_factor.get("arms", 0.25))
         for g, idx in groups.items():
             rate[idx] = model.spike_rate * model.spike_group_factor.get(g, 0.25)
-        hit = (rng.random((T, J)) < rate[None, :]) & (labels != SUSTAINED)
+        hit = (rng.random((T, J)) < rate[None, :]) & (labels == CLEAN)
         t_idx, j_idx = np.nonzero(hit)
         size = rng.uniform(*model.spike_size, size=len(t_idx))
         pos[t_idx, j_idx] += size[:, None] * _unit(rng, len(t_idx))
