@@ -255,3 +255,15 @@ def test_krajjat_backwards_time_is_an_error(tmp_path):
     with pytest.raises(ReadError, match="non-decreasing") as e:
         load(p)
     assert e.value.line == 21
+
+
+def test_infinite_value_is_a_read_error(tmp_path):
+    lines = data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt").read_text().splitlines()
+    fields = lines[5].split()
+    fields[2] = "inf"
+    lines[5] = " ".join(fields)
+    p = tmp_path / "k.txt"
+    p.write_text("\n".join(lines))
+    with pytest.raises(ReadError, match="finite number in field 3, found 'inf'") as e:
+        read_keraal_kinect(p)
+    assert e.value.line == 6

@@ -147,10 +147,11 @@ def parse_rows(
             raise  # unreachable: _locate_bad_token always raises
     if not allow_inf and np.isinf(arr).any():
         k = int(np.flatnonzero(np.isinf(arr))[0])
+        row, col = divmod(k, expected)
         raise ReadError(
             path,
-            line_numbers[k // expected],
-            f"expected a finite number in field {k % expected + 1}, found {flat[k].strip()!r}",
+            line_numbers[row],
+            f"expected a finite number in field {col + 1}, found {tokens[row][col].strip()!r}",
         )
     return arr.reshape(len(rows), expected)
 
