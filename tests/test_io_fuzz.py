@@ -176,3 +176,37 @@ def test_mutated_real_files(tmp_path, rel, reader, data):
     p = tmp_path / f"m{src.suffix}"
     p.write_bytes(bytes(raw))
     _check(reader, p)
+
+
+GRIDS = {  # reader name -> (values per row, separator, trailing text)
+    "kimore": (100, ",", ","),
+    "keraal_kinect": (175, " ", " \r"),
+    "keraal_vicon": (119, " ", " \r"),
+    "uiprmd_vicon": (117, ",", ""),
+    "uiprmd_kinect": (66, ",", ""),
+}
+CELL = st.one_of(
+    st.sampled_from(["0", "1", "2", "0.5", "-3.25", "1e3"]),
+    st.sampled_from(["nan", "inf", "-inf", "1e400", "x", "", "1,5", "0x1", "--1", "١"]),
+)
+
+
+@pytest.mark.parametrize("name", sorted(GRIDS))
+@SETTINGS
+@given(data=st.data())
+def test_numeric_grids_with_bad_cells(tmp_path, name, data):
+    """Well-shaped grids with a few bad cells / short rows: ReadError or a clean result."""
+    reader, ext = READERS[name]
+    n, sep, tail = GRIDS[name]
+    n_rows = data.draw(st.integers(1, 4))
+    rows = []
+    for _ in range(n_rows):
+        cells = ["0.5"] * n
+        for _ in range(data.draw(st.integers(0, 3))):
+            cells[data.draw(st.integers(0, n - 1))] = data.draw(CELL)
+        if data.draw(st.integers(0, 9)) == 0:
+            cells = cells[: data.draw(st.integers(0, n))]
+        rows.append(sep.join(cells) + tail)
+    p = tmp_path / f"g{ext}"
+    p.write_text("\n".join(rows), encoding="utf-8")
+    _check(reader, p)
