@@ -78,6 +78,7 @@ def test_uiprmd_squat_offset_rate_and_rmse(ep: str) -> None:
     ta = gt.time_alignment
     assert ta.rate_fitted and 78.0 < ta.rate_hz < 100.0
     assert ta.correlation > 0.98 and ta.overlap > 0.8
+    assert "warnings" not in gt.notes
     tab = evaluate_methods(k, gt, ["raw", "sgf"])
     raw = tab.score("raw")
     assert 0.02 < raw.rmse < 0.08
@@ -100,3 +101,12 @@ def test_evaluate_paths_with_and_without_truth() -> None:
     # KIMORE Ex3: the data README reports a largest one-frame jump of 0.72 m
     assert raw["max_jump_m"] == pytest.approx(0.72, abs=0.02)
     assert sgf["M"] < raw["M"]
+
+
+def test_uiprmd_doubtful_pair_is_flagged() -> None:
+    # m02 e01: the Vicon file holds 105 frames (about 1 s) against 2 s of Kinect
+    path = "ui-prmd/Segmented Movements/{}/Positions/m02_s01_e01_positions.txt.gz"
+    gt = prepare_truth(
+        _load(data_file(path.format("Kinect"))), _load(data_file(path.format("Vicon")))
+    )
+    assert any("covers only" in w for w in gt.notes["warnings"])

@@ -108,7 +108,10 @@ class GroundTruth:
     time_alignment : the fitted mocap timing (None when given directly).
     fitted_time_alignment : the fitted timing even when a fixed one was used (KERAAL).
     pairs : the resolved pairing table.
-    notes : free-form facts for the report (quaternion order and scores, ...).
+    notes : free-form facts for the report: ``pairing_table``, ``quaternion_order`` and
+        ``quaternion_order_fit_rms_m`` (KERAAL), ``unresolved_pairs``, and ``warnings``
+        (doubtful time alignment: correlation < 0.9, overlap < 60 %, rate at the edge of
+        the searched range).
     """
 
     positions: NDArray[np.float64]
@@ -282,8 +285,24 @@ def prepare_truth(
         q_res = q_full[k]
     # ---- space
     notes: dict[str, Any] = {"pairing_table": table.name}
+    warnings_: list[str] = []
+    if not fitted.correlation >= 0.9:
+        warnings_.append(
+            f"time alignment is doubtful: signal correlation {fitted.correlation:.2f} < 0.9"
+        )
+    if fitted.overlap < 0.6:
+        warnings_.append(f"mocap covers only {100 * fitted.overlap:.0f} % of the track frames")
+    if fit_rate and rate_range is not None:
+        lo, hi = rate_range
+        if min(fitted.rate_hz - lo, hi - fitted.rate_hz) < 0.01 * (hi - lo):
+            warnings_.append(
+                f"fitted mocap rate {fitted.rate_hz:.1f} Hz is at the edge of the searched "
+                f"range {lo:.0f}-{hi:.0f} Hz"
+            )
     if resolved.missing:
         notes["unresolved_pairs"] = [r for _, r in resolved.missing]
+    if warnings_:
+        notes["warnings"] = warnings_
     mode = offset_mode
     if mode == "auto":
         mode = "body" if q_full is not None else "world"
