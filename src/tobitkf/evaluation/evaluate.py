@@ -17,6 +17,10 @@ Pipeline (:func:`prepare_truth`, then :func:`evaluate_methods`):
 4. **Metrics** per method (:class:`MethodScore`), the glitch classes coming from the raw
    track's error (:func:`~tobitkf.evaluation.metrics.classify_glitches`).
 
+Without ground truth, :func:`evaluate_without_truth` gives the paper's Table 3 (M per
+method) and the largest jumps.  :func:`evaluate_paths` does either from file paths (the
+``tobitkf evaluate`` command); :func:`pool_scores` pools several recordings.
+
 Methods are given as names understood by :func:`tobitkf.smooth` (``"atkf"``, ``"kf"``,
 ``"sgf"``, ...), ``"raw"`` (no smoothing), ``"<name>+rts"`` (the offline RTS smoother of a
 Kalman-type method, ``offline=True``), ``(label, name, params)`` tuples, or

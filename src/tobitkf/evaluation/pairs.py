@@ -30,6 +30,7 @@ __all__ = [
     "UIPRMD_PAIRS",
     "Pair",
     "PairingTable",
+    "ResolvedPairs",
     "builtin_pairs",
     "normalise_name",
     "read_pairs",
