@@ -239,6 +239,7 @@ class NoiseFit:
     params_cov : (k, k) approximate covariance of ``params`` (inverse Hessian).
     form, q_structure, fit_r : the settings used.
     n_obs : number of observed (finite) measurement components.
+    n_evals : log-likelihood evaluations (filter runs) used by the optimiser.
     """
 
     Q: np.ndarray
@@ -255,6 +256,7 @@ class NoiseFit:
     q_structure: str = "scalar"
     fit_r: bool = False
     n_obs: int = 0
+    n_evals: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -274,6 +276,7 @@ class NoiseFit:
             "q_structure": self.q_structure,
             "fit_r": self.fit_r,
             "n_obs": self.n_obs,
+            "n_evals": self.n_evals,
         }
 
     def format_text(self) -> str:
@@ -441,7 +444,10 @@ def fit_noise(
         model = LinearGaussian(A=A, H=H, Q=Qm, R=Rm, x0=x0, P0=P0)
         return censored_loglik(model, ys, lower, upper, form=form, c=c, **fk)
 
+    n_evals = [0]
+
     def objective(theta: np.ndarray) -> float:
+        n_evals[0] += 1
         with np.errstate(all="ignore"):
             val = -total_loglik(theta) / n_obs
         return float(val) if np.isfinite(val) else 1e10
@@ -452,13 +458,17 @@ def fit_noise(
         bounds.append((lo_b, hi_b) if name.startswith("log") else (None, None))
 
     if method == "L-BFGS-B":
+
+        def value_and_gradient(t: np.ndarray) -> tuple[float, np.ndarray]:
+            return objective(t), _central_gradient(objective, t, 1e-4)
+
         res = minimize(
-            objective,
+            value_and_gradient,
             theta0,
-            jac=lambda t: _central_gradient(objective, t, 1e-4),
+            jac=True,
             method="L-BFGS-B",
             bounds=bounds,
-            options={"maxiter": maxiter, "ftol": 1e-12, "gtol": 1e-7},
+            options={"maxiter": maxiter, "ftol": 1e-11, "gtol": 1e-6},
         )
     elif method == "Nelder-Mead":
         res = minimize(
@@ -524,6 +534,7 @@ def fit_noise(
         q_structure=q_structure,
         fit_r=fit_r,
         n_obs=n_obs,
+        n_evals=n_evals[0],
     )
 
 
