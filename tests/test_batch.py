@@ -118,3 +118,16 @@ def test_discover_skips_companion_files_only_inside_folders(tmp_path):
     assert [f for f, _ in found] == [rec] and skipped == [comp]
     # a file named explicitly is never skipped
     assert [f for f, _ in discover_inputs([comp], skip=lambda p: True)] == [comp]
+
+
+def test_not_a_recording_passes_over_docs_and_companions_but_not_bad_recordings(tmp_path):
+    from tobitkf.batch import not_a_recording
+
+    assert not_a_recording(_touch(tmp_path / "README.md"))
+    assert not_a_recording(_touch(tmp_path / "photo.png"))
+    assert not not_a_recording(_touch(tmp_path / "broken.csv"))
+    assert not not_a_recording(_touch(tmp_path / "x_positions.txt.gz"))
+    folder = tmp_path / "Kinect"
+    _touch(folder / "Positions" / "m01_positions.txt.gz")
+    angles = _touch(folder / "Angles" / "m01_angles.txt.gz")
+    assert not_a_recording(angles)  # read together with its positions file

@@ -37,8 +37,11 @@ _EXPORTS: dict[str, str] = {
     "TrackingState": "tobitkf.skeleton.sequence",
     "smooth": "tobitkf.skeleton.smooth",
     "fit_limits": "tobitkf.skeleton.limits",
+    "LimitsFit": "tobitkf.skeleton.limits",
     "load": "tobitkf.io",
     "save": "tobitkf.io",
+    "detect_format": "tobitkf.io",
+    "ReadError": "tobitkf.io",
 }
 
 __all__ = ["__version__", *_EXPORTS]

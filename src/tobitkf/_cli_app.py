@@ -120,8 +120,8 @@ def app() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs, as_json):
     """Smooth skeleton recordings (files or folders, searched recursively)."""
-    from tobitkf.batch import discover_inputs, plan_jobs, run_jobs
-    from tobitkf.io import detect_format, is_companion_file
+    from tobitkf.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
+    from tobitkf.io import detect_format
     from tobitkf.skeleton.smooth import METHODS, check_params
 
     if method not in METHODS:
@@ -132,15 +132,17 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
-    companions: list[Path] = []
+    passed_over: list[Path] = []
     try:
-        pairs = discover_inputs(inputs, pattern, skip=is_companion_file, skipped=companions)
+        pairs = discover_inputs(inputs, pattern, skip=not_a_recording, skipped=passed_over)
     except FileNotFoundError as exc:
         _fail(str(exc))
-    if companions and not as_json:
+    if passed_over and not as_json:
+        names = ", ".join(p.name for p in passed_over[:3])
+        more = f" and {len(passed_over) - 3} more" if len(passed_over) > 3 else ""
         err_console.print(
-            f"skipped {len(companions)} companion file(s) read together with their recording "
-            f"(e.g. {companions[0].name})"
+            f"passed over {len(passed_over)} file(s) that are not recordings or are read "
+            f"together with one: {names}{more}"
         )
     if not pairs:
         _fail("no input files found")

@@ -105,6 +105,21 @@ def discover_inputs(
     return found
 
 
+def not_a_recording(path: Path) -> bool:
+    """True for files a folder walk should pass over: companion files read with their
+    recording (UI-PRMD angles) and files whose extension no registered reader claims
+    (README.md, images, ...). A bad file with a known extension is not passed over: it
+    is read and reported with its reason.
+    """
+    from tobitkf.io import formats, is_companion_file
+
+    name = path.name.lower()
+    known = {ext for spec in formats().values() for ext in spec.extensions}
+    if not any(name.endswith(ext) for ext in known):
+        return True
+    return is_companion_file(path)
+
+
 def default_output_format(input_format: str | None) -> str:
     """``ntu`` inputs stay NTU (every extra field kept); everything else becomes CSV."""
     return "ntu" if input_format == "ntu" else "csv"
