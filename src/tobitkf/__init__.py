@@ -38,6 +38,13 @@ _EXPORTS: dict[str, str] = {
     "smooth": "tobitkf.skeleton.smooth",
     "fit_limits": "tobitkf.skeleton.limits",
     "LimitsFit": "tobitkf.skeleton.limits",
+    # evaluation against ground truth, synthetic benchmark
+    "prepare_truth": "tobitkf.evaluation.evaluate",
+    "evaluate_methods": "tobitkf.evaluation.evaluate",
+    "evaluate_without_truth": "tobitkf.evaluation.evaluate",
+    "run_benchmark": "tobitkf.evaluation.benchmark",
+    "generate_motion": "tobitkf.evaluation.synthetic",
+    "corrupt": "tobitkf.evaluation.corruption",
     "load": "tobitkf.io",
     "save": "tobitkf.io",
     "detect_format": "tobitkf.io",
