@@ -204,6 +204,19 @@ def _table_from_rows(title: str, rows: Sequence[Mapping[str, Any]], note: str = 
     return TableSpec(title, columns, [[r.get(c) for c in columns] for r in rows], note)
 
 
+def _display_row(row: Mapping[str, Any]) -> dict[str, Any]:
+    """An accuracy row for display: angles dropped (own table), M in 1e-3 m²."""
+    out: dict[str, Any] = {}
+    for k, v in row.items():
+        if k.endswith(("_deg", "_delay")):
+            continue
+        if k == "M":
+            out["M (1e-3 m²)"] = None if v is None else 1e3 * v
+        else:
+            out[k] = v
+    return out
+
+
 def track_report(
     track: Any,
     path: str | Path,
@@ -250,10 +263,7 @@ def track_report(
         tables = [
             _table_from_rows(
                 "Accuracy against ground truth (cm, lag in frames)",
-                [
-                    {k: v for k, v in r.items() if not k.endswith(("_deg", "_delay"))}
-                    for r in table.rows()
-                ],
+                [_display_row(r) for r in table.rows()],
                 note="fine / short_glitch / sustained: samples where the RAW track is within "
                 "10 cm of the truth, off for at most 4 frames, or off for longer.",
             )
