@@ -57,6 +57,9 @@ _GL10_X, _GL10_W = np.polynomial.legendre.leggauss(10)
 _FAR = 3.0
 _CF_TERMS = 60
 _RHO_MAX = 1.0 - 2.0**-49
+# |ρ| at or above this: J from K - ρQQ unless every corner term is below _TINY_J
+_THETA_RHO_MAX = 0.99
+_TINY_J = 1e-10
 
 
 def _log_phi(z: NDArray) -> NDArray:
@@ -141,25 +144,29 @@ def _mills_tail(x: NDArray) -> tuple[NDArray, NDArray]:
     return r, s
 
 
-def _truncated_core(alpha: NDArray, beta: NDArray) -> dict[str, NDArray]:
+def _truncated_core(alpha: NDArray, beta: NDArray, logs: bool = True) -> dict[str, NDArray]:
     """All univariate quantities, including the accurate gaps ``μ_T - α``, ``β - μ_T``.
 
-    ``alpha``, ``beta`` are float arrays of one shape with ``alpha <= beta`` (NaN allowed:
-    it propagates).
+    ``alpha``, ``beta`` are 1-D float arrays of one length with ``alpha <= beta`` (NaN
+    allowed: it propagates). ``logs=False`` skips ``log P_a`` and ``log P_b`` (returned as
+    NaN), which the moment computations do not need.
     """
     with np.errstate(invalid="ignore", over="ignore", under="ignore", divide="ignore"):
         # ndtr keeps full relative precision in the lower tail down to underflow; log_ndtr
         # is only needed (and twice as slow) where the probability underflows.
         p_lower = ndtr(alpha)
         p_upper = ndtr(-beta)
-        lp_lower = np.log(p_lower)
-        lp_upper = np.log(p_upper)
-        tiny = (p_lower < 1e-300) & (alpha > -np.inf)
-        if np.any(tiny):
-            lp_lower[tiny] = log_ndtr(alpha[tiny])
-        tiny = (p_upper < 1e-300) & (beta < np.inf)
-        if np.any(tiny):
-            lp_upper[tiny] = log_ndtr(-beta[tiny])
+        if logs:
+            lp_lower = np.log(p_lower)
+            lp_upper = np.log(p_upper)
+            tiny = (p_lower < 1e-300) & (alpha > -np.inf)
+            if np.any(tiny):
+                lp_lower[tiny] = log_ndtr(alpha[tiny])
+            tiny = (p_upper < 1e-300) & (beta < np.inf)
+            if np.any(tiny):
+                lp_upper[tiny] = log_ndtr(-beta[tiny])
+        else:
+            lp_lower = lp_upper = np.full(alpha.shape, np.nan)
 
         # Reflect so that the interval's midpoint is <= 0: (a, b) = (-β, -α) if α + β > 0.
         flip = (alpha + beta) > 0  # NaN (−inf + inf) -> False
@@ -346,7 +353,7 @@ def _diag_parts(m: NDArray, v: NDArray, lo: NDArray, up: NDArray) -> dict[str, N
         beta = np.where(deg, np.inf, beta)
         core = {
             k: val.reshape(alpha.shape)
-            for k, val in _truncated_core(alpha.ravel(), beta.ravel()).items()
+            for k, val in _truncated_core(alpha.ravel(), beta.ravel(), logs=False).items()
         }
         p_lo = core["p_lower"]
         p_un = core["p_un"]
@@ -470,14 +477,49 @@ def _j_large(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
     return m12 - mh * mk - rho * qh * qk
 
 
+def _theta_corner_sum(
+    H: NDArray, K: NDArray, fin: NDArray, r: NDArray, M: int
+) -> tuple[NDArray, NDArray]:
+    """``Σ ± J`` by an M-panel, 20-point-per-panel Gauss–Legendre rule in ``θ = asin r``.
+
+    ``H``, ``K``, ``fin`` are (4, n) corner arrays, ``r`` (n,). Returns the sum, per
+    element the spread (in e-folds) of the integrand's exponent over the nodes (limited to
+    the part within 80 e-folds of its maximum), and the largest ``|J|`` of the corners.
+    """
+    fr = ((np.arange(M)[:, None] + 0.5 * (_GL20_X + 1.0)) / M).ravel()
+    wt = np.tile(_GL20_W, M) / M
+    t = np.arcsin(r)
+    sn = np.sin(t[:, None] * fr)
+    inv = 0.5 / (1.0 - sn * sn)
+    wr = (r[:, None] - sn) * wt * (0.5 * t / _TWOPI)[:, None]
+    acc = np.zeros(r.shape)
+    spread = np.zeros(r.shape)
+    jmax = np.zeros(r.shape)
+    signs = (1.0, -1.0, -1.0, 1.0)
+    for c in range(4):
+        f = fin[c]
+        if not np.any(f):
+            continue
+        h = np.where(f, H[c], 0.0)
+        k = np.where(f, K[c], 0.0)
+        ex = (2.0 * sn * (h * k)[:, None] - (h * h + k * k)[:, None]) * inv
+        emax = ex.max(axis=1)
+        emin = np.maximum(ex.min(axis=1), emax - 80.0)
+        spread = np.maximum(spread, np.where(f, emax - emin, 0.0))
+        jc = np.where(f, np.einsum("ij,ij->i", np.exp(ex), wr), 0.0)
+        jmax = np.maximum(jmax, np.abs(jc))
+        acc += signs[c] * jc
+    return acc, spread, jmax
+
+
 def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray) -> NDArray:
     """``Σ ± J(t_i, t_j; ρ)`` over the four corners, ``J(h, k; ρ) = ∫_0^ρ (ρ-r) φ₂(h, k; r) dr``.
 
     1-D inputs of one length. Corners at an infinite limit contribute exactly 0.
-    For ``|ρ| < 0.925``, with ``r = sin θ``:
-    ``φ₂ dr = exp(-(h² + k² - 2 hk sin θ)/(2 cos² θ)) dθ / (2π)``, integrated with a
-    20-point Gauss–Legendre rule in θ whose nodes and weights are shared by the four
-    corners. For ``|ρ| >= 0.925``: :func:`_j_large`.
+    With ``r = sin θ``: ``φ₂ dr = exp(-(h² + k² - 2 hk sin θ)/(2 cos² θ)) dθ / (2π)``,
+    integrated with a 20-point Gauss–Legendre rule in θ whose nodes are shared by the four
+    corners, composite (up to 64 panels) where the integrand spans many e-folds (far
+    tails). For ``|ρ| >= 0.99`` with a corner term above 1e-10: :func:`_j_large`.
     """
     out = np.zeros(rho.shape)
     H = np.stack([ai, ai, bi, bi])
@@ -485,29 +527,27 @@ def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray
     signs = (1.0, -1.0, -1.0, 1.0)
     fin = np.isfinite(H) & np.isfinite(K) & (rho != 0)
     any_fin = fin.any(axis=0)
-    small = np.abs(rho) < 0.925
+    use_k = np.zeros(rho.shape, dtype=bool)
     with np.errstate(under="ignore", over="ignore", invalid="ignore", divide="ignore"):
-        sel = small & any_fin
+        sel = any_fin
         if np.any(sel):
-            r = rho[sel]
-            t = np.arcsin(r)
-            sn = np.sin(0.5 * t[:, None] * (_GL20_X + 1.0))
-            inv = 0.5 / (1.0 - sn * sn)
-            wr = (r[:, None] - sn) * _GL20_W * (0.5 * t / _TWOPI)[:, None]
-            acc = np.zeros(r.shape)
-            for c in range(4):
-                f = fin[c, sel]
-                if not np.any(f):
-                    continue
-                h = np.where(f, H[c, sel], 0.0)
-                k = np.where(f, K[c, sel], 0.0)
-                e = np.exp((2.0 * sn * (h * k)[:, None] - (h * h + k * k)[:, None]) * inv)
-                acc += signs[c] * np.where(f, np.einsum("ij,ij->i", e, wr), 0.0)
+            Hs, Ks, fs, r = H[:, sel], K[:, sel], fin[:, sel], rho[sel]
+            acc, spread, jmax = _theta_corner_sum(Hs, Ks, fs, r, 1)
+            # Far tails make the integrand vary by many e-folds along θ; refine those
+            # elements with M panels so that each panel spans at most ~10 e-folds.
+            panels = np.clip(np.ceil(spread / 10.0), 1, 64).astype(int)
+            for M in np.unique(panels[panels > 1]):
+                g = panels == M
+                acc[g], _, jmax[g] = _theta_corner_sum(Hs[:, g], Ks[:, g], fs[:, g], r[g], int(M))
             out[sel] = acc
-        sel = ~small & any_fin
-        if np.any(sel):
+            # For |ρ| >= 0.99 the integrand drops sharply at the end of the θ range, which
+            # the rule resolves only to ~1e-8 relative; the closed form K - ρQQ is accurate
+            # to ~1e-16 absolute, so it is used unless all corner terms are tiny (tails).
+            use_k[sel] = (np.abs(r) >= _THETA_RHO_MAX) & (jmax > _TINY_J)
+        if np.any(use_k):
+            out[use_k] = 0.0
             for c in range(4):
-                m = sel & fin[c]
+                m = use_k & fin[c]
                 if np.any(m):
                     out[m] += signs[c] * _j_large(H[c, m], K[c, m], rho[m])
     return out
