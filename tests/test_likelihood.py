@@ -362,3 +362,27 @@ def test_skeleton_fit_on_kinect_recording():
     assert 1e-5 < fit.Q[0, 0] < 1e-2
     # Kinect jumps (up to ~1 m) inflate the Gaussian estimate; the adaptive limits clip them
     assert gauss.Q[0, 0] > fit.Q[0, 0]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"c": (0.1, 0.1, 0.1), "lower": [-1, -1, -1]}, "either c"),
+        ({"form": "standard", "c": (0.1, 0.1, 0.1)}, "fixed limits"),
+    ],
+)
+def test_skeleton_fit_validation(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        fit_skeleton_noise(np.zeros((5, 2, 3)), **kwargs)
+    with pytest.raises(ValueError, match=r"\(T, J, 3\)"):
+        fit_skeleton_noise(np.zeros((5, 3)))
+
+
+def test_skeleton_fixed_limits_without_censoring_match_gaussian():
+    """Identity: TKF^c with limits never reached is the KF, so the fits agree."""
+    rng = np.random.default_rng(8)
+    obs = np.cumsum(0.01 * rng.standard_normal((80, 3, 3)), axis=0)
+    kw = dict(r=1e-4, compute_stderr=False)
+    a = fit_skeleton_noise(obs, lower=[-50] * 3, upper=[50] * 3, **kw)
+    b = fit_skeleton_noise(obs, form="gaussian", **kw)
+    assert a.Q[0, 0] == pytest.approx(b.Q[0, 0], rel=1e-4)

@@ -31,7 +31,9 @@ from typing import Any, Literal
 import numpy as np
 
 __all__ = [
+    "DEFAULT_SKELETON_C",
     "FORMS",
+    "KINECT_DEVICE_LIMITS",
     "NoiseFit",
     "censored_loglik",
     "fit_noise",
@@ -543,13 +545,15 @@ def fit_noise(
 
 #: 2020 paper eq. 30–35: ATKF half-widths (x, y = up, z) in metres per frame at 30 fps.
 DEFAULT_SKELETON_C = (0.34, 0.18, 0.34)
+#: 2020 paper §4.2: Kinect v2 device limits (x, y = up, z) in metres, for TKF / TKF^c.
+KINECT_DEVICE_LIMITS = ((-3.0, -1.5, 0.5), (3.0, 3.0, 5.0))
 
 
 def fit_skeleton_noise(
     sequence: Any,
     *,
     per_joint: bool = False,
-    c: Sequence[float] | np.ndarray | None = DEFAULT_SKELETON_C,
+    c: Sequence[float] | np.ndarray | None = None,
     lower: Any = None,
     upper: Any = None,
     r: float = 0.01,
@@ -563,8 +567,17 @@ def fit_skeleton_noise(
     """Fit the skeleton filter's Q (A = H = I per joint, 3-D) to one recording.
 
     Each joint is one sequence of the batch; by default all joints share one Q
-    (2020 paper §3.5: Q "can be estimated using the likelihood functions"); with
+    (2020 paper §4.2: Q "can be estimated using the likelihood functions"); with
     ``per_joint=True`` every joint gets its own fit.
+
+    Which limits are used:
+
+    - ``form="corrected"`` (default): the adaptive ATKF limits ``x̂_{k-1} ± c`` with
+      ``c`` defaulting to :data:`DEFAULT_SKELETON_C`; or, when ``lower``/``upper`` are
+      given, TKF^c with those fixed limits.
+    - ``form="standard"`` (eq. 29): fixed limits, ``lower``/``upper`` or by default the
+      Kinect v2 device limits :data:`KINECT_DEVICE_LIMITS`.
+    - ``form="gaussian"``: a plain KF, no limits (``c``, ``lower``, ``upper`` ignored).
 
     Parameters
     ----------
@@ -572,9 +585,9 @@ def fit_skeleton_noise(
         ``positions`` attribute of that shape (e.g. ``tobitkf.SkeletonSequence``);
         ``joint_names`` is used for the keys of the per-joint result when present.
     per_joint : one fit per joint instead of one shared Q.
-    c : (3,) adaptive half-widths (ATKF, default 2020 values); set ``c=None`` and give
-        ``lower``/``upper`` for fixed (device) limits, or ``form="gaussian"`` for a KF.
-    lower, upper : fixed limits (only with ``c=None``).
+    c : (3,) adaptive half-widths in metres per frame (the defaults are for 30 fps: scale
+        them for other frame rates).
+    lower, upper : (3,) fixed limits.
     r : measurement-noise variance (R = r I), the start value when ``fit_r``.
     fit_r, q_structure, form : as in :func:`fit_noise`.
     p0 : initial covariance scale (default ``r``).
@@ -598,12 +611,18 @@ def fit_skeleton_noise(
     idx = [j for j in idx if observed[:, j].sum() >= 2]
     if not idx:
         raise ValueError("no joint has at least two observed frames")
-    if form == "gaussian":
-        c = None
-    if c is not None and (lower is not None or upper is not None):
+    fixed = lower is not None or upper is not None
+    if c is not None and fixed:
         raise ValueError("give either c (adaptive limits) or lower/upper (fixed), not both")
-    if c is not None:
-        c = np.asarray(c, dtype=float)
+    if form == "gaussian":
+        c, lower, upper = None, None, None
+    elif form == "standard":
+        if c is not None:
+            raise ValueError("form='standard' uses fixed limits (lower/upper), not c")
+        if not fixed:
+            lower, upper = (np.asarray(v) for v in KINECT_DEVICE_LIMITS)
+    elif not fixed:
+        c = np.asarray(DEFAULT_SKELETON_C if c is None else c, dtype=float)
     first = np.array([pos[np.argmax(observed[:, j]), j] for j in idx])  # (J', 3)
     eye = np.eye(3)
     P0 = (r if p0 is None else p0) * eye
