@@ -478,11 +478,13 @@ def _j_large(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
 
 
 def _theta_corner_sum(
-    H: NDArray, K: NDArray, fin: NDArray, r: NDArray, M: int
-) -> tuple[NDArray, NDArray]:
+    H: NDArray, K: NDArray, fin: NDArray, r: NDArray, M: int, weighted: bool = True
+) -> tuple[NDArray, NDArray, NDArray]:
     """``Σ ± J`` by an M-panel, 20-point-per-panel Gauss–Legendre rule in ``θ = asin r``.
 
-    ``H``, ``K``, ``fin`` are (4, n) corner arrays, ``r`` (n,). Returns the sum, per
+    ``H``, ``K``, ``fin`` are (c, n) corner arrays (c = 4 with signs +, -, -, +, or c = 1),
+    ``r`` (n,). ``weighted=False`` integrates ``φ₂`` itself (Plackett's
+    ``D = ∫_0^ρ φ₂ dr``) instead of ``(ρ - r) φ₂``. Returns the sum, per
     element the spread (in e-folds) of the integrand's exponent over the nodes (limited to
     the part within 80 e-folds of its maximum), and the largest ``|J|`` of the corners.
     """
@@ -491,12 +493,14 @@ def _theta_corner_sum(
     t = np.arcsin(r)
     sn = np.sin(t[:, None] * fr)
     inv = 0.5 / (1.0 - sn * sn)
-    wr = (r[:, None] - sn) * wt * (0.5 * t / _TWOPI)[:, None]
+    wr = wt * (0.5 * t / _TWOPI)[:, None]
+    if weighted:
+        wr = (r[:, None] - sn) * wr
     acc = np.zeros(r.shape)
     spread = np.zeros(r.shape)
     jmax = np.zeros(r.shape)
     signs = (1.0, -1.0, -1.0, 1.0)
-    for c in range(4):
+    for c in range(H.shape[0]):
         f = fin[c]
         if not np.any(f):
             continue
@@ -510,6 +514,20 @@ def _theta_corner_sum(
         jmax = np.maximum(jmax, np.abs(jc))
         acc += signs[c] * jc
     return acc, spread, jmax
+
+
+def _theta_adaptive(
+    H: NDArray, K: NDArray, fin: NDArray, r: NDArray, weighted: bool = True
+) -> tuple[NDArray, NDArray]:
+    """:func:`_theta_corner_sum` with panels refined where the integrand spans many
+    e-folds (far tails): each panel then spans at most ~10 e-folds. Returns (sum, max|J|).
+    """
+    acc, spread, jmax = _theta_corner_sum(H, K, fin, r, 1, weighted)
+    panels = np.clip(np.ceil(spread / 10.0), 1, 64).astype(int)
+    for M in np.unique(panels[panels > 1]):
+        g = panels == M
+        acc[g], _, jmax[g] = _theta_corner_sum(H[:, g], K[:, g], fin[:, g], r[g], int(M), weighted)
+    return acc, jmax
 
 
 def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray) -> NDArray:
@@ -531,14 +549,8 @@ def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray
     with np.errstate(under="ignore", over="ignore", invalid="ignore", divide="ignore"):
         sel = any_fin
         if np.any(sel):
-            Hs, Ks, fs, r = H[:, sel], K[:, sel], fin[:, sel], rho[sel]
-            acc, spread, jmax = _theta_corner_sum(Hs, Ks, fs, r, 1)
-            # Far tails make the integrand vary by many e-folds along θ; refine those
-            # elements with M panels so that each panel spans at most ~10 e-folds.
-            panels = np.clip(np.ceil(spread / 10.0), 1, 64).astype(int)
-            for M in np.unique(panels[panels > 1]):
-                g = panels == M
-                acc[g], _, jmax[g] = _theta_corner_sum(Hs[:, g], Ks[:, g], fs[:, g], r[g], int(M))
+            r = rho[sel]
+            acc, jmax = _theta_adaptive(H[:, sel], K[:, sel], fin[:, sel], r)
             out[sel] = acc
             # For |ρ| >= 0.99 the integrand drops sharply at the end of the θ range, which
             # the rule resolves only to ~1e-8 relative; the closed form K - ρQQ is accurate
@@ -556,25 +568,19 @@ def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray
 def _orthant_excess(s: NDArray, t: NDArray, rho: NDArray) -> NDArray:
     """``D(s, t; ρ) = P(Z1>s, Z2>t) - Q(s) Q(t) = ∫_0^ρ φ₂(s, t; r) dr`` (Plackett).
 
-    Finite ``s``, ``t``; for ``|ρ| < 0.925`` the integral is evaluated directly (20-point
-    Gauss–Legendre in ``θ = asin r``, relative accuracy), otherwise from Genz's bivariate
-    normal minus the product (absolute accuracy ~1e-16).
+    Finite ``s``, ``t`` of any (common) shape. Gauss–Legendre in ``θ = asin r``, composite
+    in far tails (relative accuracy); for ``|ρ| >= 0.99`` and ``|D| > 1e-10`` Genz's
+    bivariate normal minus the product (absolute accuracy ~1e-16) instead.
     """
-    out = np.zeros(np.broadcast_shapes(s.shape, t.shape, rho.shape))
-    s, t, rho = np.broadcast_arrays(s, t, rho)
-    small = np.abs(rho) < 0.925
-    if np.any(small):
-        ss, ts, rs = s[small], t[small], rho[small]
-        th = np.arcsin(rs)
-        sn = np.sin(0.5 * th[..., None] * (_GL20_X + 1.0))
-        ex = np.exp(
-            (sn * (ss * ts)[..., None] - ((ss * ss + ts * ts) / 2.0)[..., None]) / (1.0 - sn * sn)
-        )
-        out[small] = 0.5 * th * (ex @ _GL20_W) / _TWOPI
-    if np.any(~small):
-        sl, tl, rl = s[~small], t[~small], rho[~small]
-        out[~small] = bivariate_normal_upper(sl, tl, rl) - ndtr(-sl) * ndtr(-tl)
-    return out
+    shape = np.broadcast_shapes(s.shape, t.shape, rho.shape)
+    s, t, rho = (np.broadcast_to(x, shape).ravel() for x in (s, t, rho))
+    with np.errstate(under="ignore", over="ignore", invalid="ignore", divide="ignore"):
+        out, dmax = _theta_adaptive(s[None], t[None], np.ones((1, s.size), bool), rho, False)
+        closed = (np.abs(rho) >= _THETA_RHO_MAX) & (dmax > _TINY_J)
+        if np.any(closed):
+            sc, tc = s[closed], t[closed]
+            out[closed] = bivariate_normal_upper(sc, tc, rho[closed]) - ndtr(-sc) * ndtr(-tc)
+    return out.reshape(shape)
 
 
 def _pair_covariance(
@@ -748,6 +754,10 @@ def _repair_psd(C: NDArray, skip: NDArray) -> NDArray:
     if p < 3:
         return out
     R = np.where(fix, Rc, R)
+    # A zero-variance component (point mass, or P_un underflowed with the mean beyond a
+    # limit) is decoupled with a unit diagonal so the eigen-repair cannot touch it.
+    idx = np.arange(p)
+    R[..., idx, idx] = np.where(pos, R[..., idx, idx], 1.0)
     ok = np.all(np.isfinite(R), axis=(-2, -1)) & ~skip  # NaN inputs propagate untouched
     lam = np.linalg.eigvalsh(np.where(ok[..., None, None], R, 0.0))
     bad = (lam[..., 0] < 0) & ok
@@ -757,6 +767,8 @@ def _repair_psd(C: NDArray, skip: NDArray) -> NDArray:
     lam_b = np.maximum(lam_b, 0.0)
     Rb = (vec_b * lam_b[..., None, :]) @ np.swapaxes(vec_b, -1, -2)
     Rb = 0.5 * (Rb + np.swapaxes(Rb, -1, -2))
+    keep = pos[bad]
+    Rb = np.where(keep[..., :, None] & keep[..., None, :], Rb, 0.0)
     out[bad] = Rb * outer[bad]
     return out
 
