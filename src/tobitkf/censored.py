@@ -9,22 +9,34 @@ moments used by the standard Tobit filter, and the censored log-likelihood (MATH
 Numerical design (every branch is vectorised; Python loops run only over the ``p²``
 component pairs):
 
-* Probabilities are formed in log space with :func:`scipy.special.log_ndtr` after reflecting
-  each interval to the negative half-line, so an uncensored probability of ``1e-300`` keeps
-  full relative precision; ratios such as ``φ(α)/P`` are ``exp(log φ(α) - log P)``.
+* Intervals are reflected to the negative side (midpoint <= 0). Probabilities come from
+  :func:`scipy.special.ndtr` (relatively accurate down to underflow) and
+  :func:`scipy.special.log_ndtr` where they underflow, so ``log P`` stays exact even at
+  ``P ~ 1e-350``; ratios such as ``φ(α)/P`` are ``exp(log φ(α) - log P)``.
 * Narrow intervals (half-width ``h`` with ``h (1 + |centre|) <= 1``) use a 12-point
   Gauss–Legendre rule on the exponentially tilted density, which gives ``P``, the mean and
   the (centred, hence non-negative) variance without cancellation.
-* Far tails (whole interval beyond 3 standard deviations) use the continued fraction of the
-  Mills ratio for the distance of the truncated mean from the near limit, so the
+* Far tails (whole interval beyond 3 standard deviations) use Laplace's continued fraction
+  of the Mills ratio for the distance of the truncated mean from the near limit, so the
   truncated variance ``≈ 1/α²`` keeps relative precision where ``1 + αλ - λ²`` would not.
 * The clipped variance is the non-negative mixture form of MATH.md §2.
 * Cross-covariances use Hoeffding's formula with Plackett's identity (see
-  :func:`_pair_covariance`): ``Cov = ρ P_un,i P_un,j + Σ_corners ± J(t_i, t_j; ρ)`` with
-  ``J(h, k; ρ) = ∫_0^ρ (ρ - r) φ₂(h, k; r) dr``. Every term is computed with relative
-  accuracy in the tails (no subtraction of two O(1) numbers), and a corner at an infinite
-  limit contributes exactly 0, so components with both limits infinite keep their input
-  covariances bit for bit.
+  :func:`_pair_covariance`): ``Cov = S_ij P_un,i P_un,j + s_i s_j Σ_corners ± J`` with
+  ``J(h, k; ρ) = ∫_0^ρ (ρ - r) φ₂(h, k; r) dr >= 0``, integrated by Gauss–Legendre in
+  ``θ = asin r`` (composite where the integrand spans many e-folds), so tail terms keep
+  relative accuracy; for ``|ρ| >= 0.99`` the closed form ``K - ρQQ`` of MATH.md §2 (Genz's
+  bivariate normal, absolute accuracy ~1e-16) is used unless every term is below 1e-10.
+  Two narrow intervals: the Hoeffding double integral by a 10×10 rule instead (the corner
+  sum would cancel). A corner at an infinite limit contributes exactly 0, so components
+  with both limits infinite keep their input mean and covariances bit for bit.
+* Finally Cauchy–Schwarz is enforced on the correlation-scaled matrix and, for ``p >= 3``,
+  negative eigenvalues left by rounding are clipped (see :func:`_repair_psd`).
+
+Accuracy measured against 40–80 digit mpmath (tests/test_censored.py): univariate
+moments and probabilities ~1e-13 relative or better everywhere tested (P_un to 1e-350,
+means 1000 sd out, widths 1e-6 sd); cross-covariances ≤ 4e-11 relative in far tails and up
+to ``|ρ| = 1 - 1e-9``. Known limit: when only one of the two intervals is narrow (width
+``w`` sd), the corner sum loses about ``1e-16 / w`` relative (1e-10 at ``w = 1e-6``).
 """
 
 from __future__ import annotations
