@@ -36,6 +36,7 @@ _EXPORTS: dict[str, str] = {
     "SkeletonSequence": "tobitkf.skeleton.sequence",
     "TrackingState": "tobitkf.skeleton.sequence",
     "smooth": "tobitkf.skeleton.smooth",
+    "LiveSmoother": "tobitkf.skeleton.live",
     "fit_limits": "tobitkf.skeleton.limits",
     "LimitsFit": "tobitkf.skeleton.limits",
     # evaluation against ground truth, synthetic benchmark

@@ -114,6 +114,30 @@ class StreamingFilter:
         """Log-likelihood of the last step (*batch) (see the batch functions)."""
         return None if self.last is None else self.last.update.loglik
 
+    def seed(self, mask: ArrayLike, mean: ArrayLike) -> None:
+        """Overwrite the current mean of some batch elements before the next step.
+
+        Used to start a track when it is first observed (e.g. a joint that was missing
+        in the first frames): with A = I this is exactly what the batch functions do with
+        ``x0`` set to each element's first measurement. Covariances are left as they are.
+
+        Parameters
+        ----------
+        mask : array_like of bool, shape (*batch,)
+            Elements to overwrite.
+        mean : array_like, broadcastable to (*batch, n)
+            New means (only the masked elements are used).
+        """
+        if self._x is None:
+            raise RuntimeError("seed() needs a state: call it after the first step")
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != self._x.shape[:-1]:
+            raise ValueError(f"mask: expected shape {self._x.shape[:-1]}, found {m.shape}")
+        values = np.broadcast_to(np.asarray(mean, dtype=float), self._x.shape)
+        x = np.array(self._x, dtype=float)  # the state may be a read-only view
+        x[m] = values[m]
+        self._x = x
+
     # ------------------------------------------------------------------ stepping
     def step(
         self,
