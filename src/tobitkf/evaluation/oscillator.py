@@ -387,17 +387,21 @@ class OscillatorResult:
         spread = self.spread() if len(self.seeds) > 1 else None
         for name in self.metrics:
             m = self.metrics[name]
-            p1, p2 = PAPER_TABLE1_RMSE.get(name, (float("nan"), float("nan")))
+            p1, p2 = (
+                (f"{v:10.4f}" for v in PAPER_TABLE1_RMSE[name])
+                if name in (PAPER_TABLE1_RMSE)
+                else (f"{'-':>10}", f"{'-':>10}")
+            )
             lines.append(
-                f"  {labels[name]:<24} {m['rmse_x1']:11.4f} {p1:10.4f} {m['rmse_x2']:13.4f} "
-                f"{p2:10.4f}"
+                f"  {labels[name]:<24} {m['rmse_x1']:11.4f} {p1} {m['rmse_x2']:13.4f} {p2}"
             )
         lines += ["", "Table 2: mean NCI            |.| (eq. 39)   paper   signed (textbook)"]
         for name in self.metrics:
             m = self.metrics[name]
             lines.append(
                 f"  {labels[name]:<24} {m['nci_abs']:13.4f} "
-                f"{PAPER_TABLE2_NCI.get(name, np.nan):8.4f} {m['nci_signed']:12.4f}"
+                + (f"{PAPER_TABLE2_NCI[name]:8.4f}" if name in PAPER_TABLE2_NCI else f"{'-':>8}")
+                + f" {m['nci_signed']:12.4f}"
             )
         if spread is not None:
             lines += ["", f"Spread over {len(self.seeds)} seeds (mean ± sd [min, max]):"]
