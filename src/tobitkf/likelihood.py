@@ -486,6 +486,16 @@ def fit_noise(
     Q_hat, R_hat = unpack(theta)
     ll = total_loglik(theta)
     message = str(res.message)
+    at_bound = [
+        name
+        for name, t in zip(names, theta)
+        if name.startswith("log") and (t <= lo_b + 1e-6 or t >= hi_b - 1e-6)
+    ]
+    if at_bound:
+        message += (
+            f"; {', '.join(at_bound)} at the search bound {bounds_log}: the variance is not "
+            "identified by these data (standard errors are not meaningful)"
+        )
 
     se_q = np.full((n, n), np.nan)
     se_r = np.full((p, p), np.nan) if fit_r else None
