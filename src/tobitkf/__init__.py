@@ -30,6 +30,7 @@ _EXPORTS: dict[str, str] = {
     "censored_loglik": "tobitkf.likelihood",
     "fit_noise": "tobitkf.likelihood",
     "NoiseFit": "tobitkf.likelihood",
+    "fit_skeleton_noise": "tobitkf.likelihood",
     # skeletons
     "Topology": "tobitkf.skeleton.topology",
     "get_topology": "tobitkf.skeleton.topology",

@@ -548,7 +548,12 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
     default=None,
     help="Write Fig. 2 and Fig. 3 (PNG) here.",
 )
-def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir):
+@click.option(
+    "--random-x0",
+    is_flag=True,
+    help="Draw each run's true start from N(x0, P0) instead of x0 (the paper is ambiguous).",
+)
+def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
     """Section 4.1: Tables 1 and 2 (RMSE and NCI) for TKF, TKF^c and the KF."""
     from tobitkf.evaluation.oscillator import oscillator_experiment
 
@@ -557,7 +562,9 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir):
         if not as_json
         else nullcontext()
     ):
-        result = oscillator_experiment(runs=runs, steps=steps, seed=seed, seeds=seeds)
+        result = oscillator_experiment(
+            runs=runs, steps=steps, seed=seed, seeds=seeds, random_x0=random_x0
+        )
     if as_json:
         click.echo(dumps(result.to_dict()))
     else:
