@@ -157,6 +157,10 @@ BIVARIATE_MP = [
     (-0.7, -2.0, -1.999999, 1.0, 1.000001, -1.4825985316002892e-14),  # (*)
     (-0.98, 2.0, 2.000001, -1.0, 3.0, -2.4636846554237819e-8),  # (*)
     (0.95, 5.0, 5.000005, 3.0, INF, 2.7615638765452821e-12),  # (*)
+    (0.995, 0.1, 0.100001, -0.3, 0.5, 1.6543560517388131e-7),  # (*)
+    (0.9999, 0.1, 0.100001, -0.3, 0.5, 1.6738066054604522e-7),  # (*)
+    (0.994, -0.644, -0.643999999, 5.19, 5.69, 4.6556440626813798e-18),  # (*)
+    (0.999999, 0.1, 0.100000001, -0.3, 0.5, 1.6741996491165072e-10),  # (*)
     (-0.999999999, -0.5, 0.3, -1.0, 0.2, -0.14803624541659347),
     (0.9, 8.0, INF, 8.0, INF, 1.7531562714407615e-18),
     (0.8, 6.0, INF, 7.0, INF, 2.9172316643205014e-14),
@@ -171,17 +175,23 @@ BIVARIATE_MP = [
 
 @pytest.mark.parametrize(("rho", "a1", "b1", "a2", "b2", "cov"), BIVARIATE_MP)
 def test_bivariate_covariance_high_precision(rho, a1, b1, a2, b2, cov):
-    # scale the problem (s1 = 2, s2 = 0.5, shifted means) so standardisation is exercised
-    m = np.array([1.0, -3.0])
-    s = np.array([2.0, 0.5])
-    S = np.array([[4.0, rho * 1.0], [rho * 1.0, 0.25]])
-    lo = m + s * np.array([a1, a2])
-    up = m + s * np.array([b1, b2])
-    res = clipped_normal_moments(m, S, lo, up)
     # measured worst relative error 1.9e-11 (rho = 0.99, far tail, closed-form K route);
     # narrow-interval cases (*) agree to 1e-13 or better
-    assert abs(res.cov[0, 1] - cov * s[0] * s[1]) <= 1e-9 * abs(cov * s[0] * s[1])
+    S = np.array([[1.0, rho], [rho, 1.0]])
+    res = clipped_normal_moments([0.0, 0.0], S, [a1, a2], [b1, b2])
+    assert abs(res.cov[0, 1] - cov) <= 1e-9 * abs(cov)
     assert res.cov[0, 1] == res.cov[1, 0]
+    width = min(b1 - a1, b2 - a2)
+    if width > 1e-7:
+        # the same problem scaled and shifted (s1 = 2, s2 = 0.5): rounding the limits
+        # perturbs a width w by ~1e-16/w relative, harmless above 1e-7
+        m = np.array([1.0, -3.0])
+        s = np.array([2.0, 0.5])
+        S = np.array([[4.0, rho * 1.0], [rho * 1.0, 0.25]])
+        lo = m + s * np.array([a1, a2])
+        up = m + s * np.array([b1, b2])
+        res = clipped_normal_moments(m, S, lo, up)
+        assert abs(res.cov[0, 1] - cov * s[0] * s[1]) <= 1e-9 * abs(cov * s[0] * s[1])
 
 
 def test_stein_identity_for_unbounded_partner():
