@@ -17,6 +17,10 @@ _EXPORTS: dict[str, str] = {
     "ClippedMoments": "tobitkf.censored",
     "clipped_normal_moments": "tobitkf.censored",
     "bivariate_normal_cdf": "tobitkf.censored",
+    "clipped_normal_moments_diag": "tobitkf.censored",
+    "truncated_standard_normal": "tobitkf.censored",
+    "TruncatedStats": "tobitkf.censored",
+    "censored_logpdf": "tobitkf.censored",
     # models and filters (math core)
     "LinearGaussian": "tobitkf.model",
     "FilterResult": "tobitkf.model",
