@@ -16,7 +16,8 @@ from tobitkf.evaluation.corruption import (
     corrupt,
     jump_statistics,
 )
-from tobitkf.evaluation.synthetic import MOTIONS, bvh_to_kinect, generate_motion, read_bvh
+from tobitkf.evaluation.synthetic import MOTIONS, bvh_to_kinect, generate_motion
+from tobitkf.io.bvh import read_bvh
 from tobitkf.skeleton.sequence import TrackingState
 from tobitkf.skeleton.topology import get_topology
 
@@ -72,8 +73,9 @@ def test_read_bvh_chains_offsets(tmp_path) -> None:
         "1 2 3 0 0 0 0 0 0\n"
         "0 0 0 90 0 0 0 0 90\n"
     )
-    names, pos, ft = read_bvh(f)
-    assert names == ("Hips", "Knee", "Knee_End") and ft == 0.5
+    (seq,) = read_bvh(f, end_sites=True)
+    names, pos = tuple(seq.joint_names), seq.positions
+    assert names == ("Hips", "Knee", "Knee_End") and seq.fps == 2.0
     np.testing.assert_allclose(pos[0], [[1, 2, 3], [1, 1, 3], [1, 0, 3]], atol=1e-12)
     # frame 2: root turned 90 deg about z: (0,-1,0) -> (1,0,0); the knee's own 90 deg
     # about x then turns its child offset (0,-1,0) -> (0,0,-1) -> root z-rot -> (0,0,-1)

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.skeleton.topology import get_topology
+
 __all__ = [
     "BVH_TO_KINECT",
     "KINECT_V2_JOINTS",
@@ -31,15 +33,9 @@ __all__ = [
     "bvh_to_kinect",
     "generate_motion",
     "generate_positions",
-    "read_bvh",
 ]
 
-KINECT_V2_JOINTS = (
-    "SpineBase", "SpineMid", "Neck", "Head", "ShoulderLeft", "ElbowLeft", "WristLeft",
-    "HandLeft", "ShoulderRight", "ElbowRight", "WristRight", "HandRight", "HipLeft",
-    "KneeLeft", "AnkleLeft", "FootLeft", "HipRight", "KneeRight", "AnkleRight", "FootRight",
-    "SpineShoulder", "HandTipLeft", "ThumbLeft", "HandTipRight", "ThumbRight",
-)  # fmt: skip
+KINECT_V2_JOINTS = get_topology("kinect_v2").joints
 _J = {n: i for i, n in enumerate(KINECT_V2_JOINTS)}
 MOTIONS = ("walk", "arms", "squat", "mixed")
 
@@ -263,97 +259,6 @@ def generate_motion(
 
 
 # ------------------------------------------------------------------------------- BVH
-def read_bvh(path: str | Path) -> tuple[tuple[str, ...], NDArray[np.float64], float]:
-    """Global joint positions from a BVH file (End Sites included as ``<parent>_End``).
-
-    Rotations are composed in the order the channels are listed (``Zrotation Yrotation
-    Xrotation`` → Rz·Ry·Rx, degrees); a joint's global position is its parent's plus the
-    parent's global rotation applied to its OFFSET.
-
-    Returns
-    -------
-    names : joint names (J,).
-    positions : (T, J, 3) in the file's units.
-    frame_time : seconds per frame.
-    """
-    p = Path(path)
-    tokens = p.read_text().split()
-    i = 0
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[list[float]] = []
-    channels: list[list[str]] = []
-    stack: list[int] = []
-    while tokens[i] != "MOTION":
-        tok = tokens[i]
-        if tok in ("ROOT", "JOINT"):
-            names.append(tokens[i + 1])
-            parents.append(stack[-1] if stack else -1)
-            offsets.append([0.0, 0.0, 0.0])
-            channels.append([])
-            i += 2
-        elif tok == "End":
-            names.append(f"{names[stack[-1]]}_End")
-            parents.append(stack[-1])
-            offsets.append([0.0, 0.0, 0.0])
-            channels.append([])
-            i += 2
-        elif tok == "{":
-            stack.append(len(names) - 1)
-            i += 1
-        elif tok == "}":
-            stack.pop()
-            i += 1
-        elif tok == "OFFSET":
-            offsets[-1] = [float(x) for x in tokens[i + 1 : i + 4]]
-            i += 4
-        elif tok == "CHANNELS":
-            k = int(tokens[i + 1])
-            channels[-1] = tokens[i + 2 : i + 2 + k]
-            i += 2 + k
-        else:
-            i += 1
-    n_frames = int(tokens[i + 2])
-    frame_time = float(tokens[i + 5])
-    data = np.array(tokens[i + 6 :], dtype=float)
-    n_ch = sum(len(c) for c in channels)
-    if data.size != n_frames * n_ch:
-        raise ValueError(f"{p}: expected {n_frames}x{n_ch} motion values, found {data.size}")
-    data = data.reshape(n_frames, n_ch)
-    J = len(names)
-    pos = np.zeros((n_frames, J, 3))
-    rot = np.zeros((n_frames, J, 3, 3))
-    col = 0
-    axes = {"X": np.array([1.0, 0, 0]), "Y": np.array([0, 1.0, 0]), "Z": np.array([0, 0, 1.0])}
-    for j in range(J):
-        local = np.repeat(np.eye(3)[None], n_frames, 0)
-        trans = np.array(offsets[j]) + np.zeros((n_frames, 3))
-        for ch in channels[j]:
-            v = data[:, col]
-            col += 1
-            if ch.endswith("position"):
-                k = "XYZ".index(ch[0])
-                trans[:, k] = offsets[j][k] + v
-            else:
-                a = np.radians(v)
-                u = axes[ch[0]]
-                K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
-                r = (
-                    np.eye(3)
-                    + np.sin(a)[:, None, None] * K
-                    + (1 - np.cos(a))[:, None, None] * (K @ K)
-                )
-                local = local @ r
-        pj = parents[j]
-        if pj < 0:
-            pos[:, j] = trans
-            rot[:, j] = local
-        else:
-            pos[:, j] = pos[:, pj] + np.einsum("tab,b->ta", rot[:, pj], np.array(offsets[j]))
-            rot[:, j] = rot[:, pj] @ local
-    return tuple(names), pos, frame_time
-
-
 # Kinect V2 joint <- CMU BVH joint(s) (mean of several)
 BVH_TO_KINECT: dict[str, tuple[str, ...]] = {
     "SpineBase": ("Hips",), "SpineMid": ("Chest",), "Neck": ("lowerneck", "Neck"),
@@ -385,10 +290,12 @@ def bvh_to_kinect(
     SkeletonSequence (topology ``kinect_v2``, all TRACKED, timestamps ``k / fps``).
     """
     from tobitkf.evaluation.alignment import resample
+    from tobitkf.io.bvh import read_bvh
     from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
     from tobitkf.skeleton.topology import get_topology
 
-    names, pos, ft = read_bvh(path)
+    (bvh,) = read_bvh(path, end_sites=True)
+    names, pos, ft = bvh.joint_names, bvh.positions, 1.0 / float(bvh.fps)
     idx = {n: i for i, n in enumerate(names)}
     missing = [m for ms in BVH_TO_KINECT.values() for m in ms if m not in idx]
     if missing:
