@@ -344,6 +344,8 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
             if truths:
                 mocap = _load_one(truths[i], "truth")
                 gt = prepare_truth(track, mocap, pairs=pairs)
+                for warning in gt.notes.get("warnings", []):
+                    err_console.print(f"[yellow]warning[/yellow] {path}: {warning}")
                 table = evaluate_methods(track, gt, method_specs, fixed_delay=fixed_delay)
                 tables.append(table)
             else:
@@ -359,10 +361,12 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
         results["pooled"] = pooled
         if not as_json:
             cols = [c for c in pooled[0] if c != "method"]
+            scale = {"M": 1e3}  # M is in m²; shown in 1e-3 m²
+            names = {"M": "M e-3"}
             _print_table(
                 f"pooled over {len(tables)} recordings (cm)",
-                ["method", *[c.removesuffix("_cm") for c in cols]],
-                [[r["method"], *[r[c] for c in cols]] for r in pooled],
+                ["method", *[names.get(c, c.removesuffix("_cm")) for c in cols]],
+                [[r["method"], *[_scaled(r[c], scale.get(c, 1.0)) for c in cols]] for r in pooled],
             )
     if outdir:
         out = Path(outdir)
@@ -372,6 +376,10 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
             console.print(f"wrote {out / 'results.json'}")
     if as_json:
         click.echo(dumps(results))
+
+
+def _scaled(value: Any, factor: float) -> Any:
+    return value * factor if isinstance(value, float) and factor != 1.0 else value
 
 
 def _default_eval_methods(defaults, registry) -> list[str]:
