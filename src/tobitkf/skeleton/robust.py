@@ -1,0 +1,578 @@
+"""Robust skeleton smoothing: reject physically impossible measurements, then smooth.
+
+Kinect-type trackers fail in two ways that a Kalman filter cannot undo by itself:
+one-frame spikes, and *sustained* failures in which a limb is reported in a wrong but
+stable place for 10–50 frames (KERAAL ELK: the whole right arm off by up to 1 m for 42
+frames).  A filter that trusts every measurement follows the failure after a few frames;
+the adaptive Tobit limits of the 2020 paper only slow it down, and they also clip
+legitimate fast hand motion.  :func:`robust_smooth` instead decides, joint by joint and
+frame by frame, whether a measurement is physically possible, treats the impossible
+ones as missing, and smooths what is left with a constant-velocity Kalman filter (and,
+offline, the RTS smoother, which interpolates across rejected stretches).
+
+Gating (per frame, joints from the root outwards, vectorised over joints)
+--------------------------------------------------------------------------
+A valid measurement ``y_j(t)`` is *accepted* when
+
+1. **speed gate** — it is reachable from the joint's last accepted measurement
+   ``y_j(s)``: ``|y_j(t) - y_j(s)| <= v_max_j (t - s) + margin``.  ``v_max`` is a
+   physical bound by body region (hands 8, arms 5, torso 3, legs 6 m/s); the gate grows
+   with the time since the last accepted sample, so a joint that really moved faster
+   than ``v_max`` is re-acquired a frame or two later instead of being lost;
+2. **bone gate** — if its parent was accepted in this frame, the bone to the parent has
+   its normal length: ``| |y_j - y_parent| - L_j | <= bone_tol_abs + bone_tol_rel L_j``
+   with ``L_j`` the recording's median bone length (offline) or the median of the
+   lengths seen so far (online).  A wrong bone is blamed on the distal joint;
+3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
+   joint is accepted only if it was accepted in the previous frame and did not jump
+   (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
+   wrist stays rejected until the wrist comes back).
+
+Offline, the gate runs forwards and backwards in time and a measurement is rejected
+when either pass rejects it (the backward pass catches a failure at the start of a
+recording, the forward pass one at the end).  ``NOT_TRACKED`` joints and NaN are
+missing; ``INFERRED`` joints get ``inferred_noise_factor`` times the measurement
+variance.
+
+Smoothing
+---------
+Each axis of each joint is a constant-velocity model (position, velocity) driven by
+white acceleration noise of spectral density ``q_accel`` (m²/s³, per region) with
+measurement noise ``r`` (m², per region): ``A = [[1, dt], [0, 1]]``,
+``Q = q [[dt³/3, dt²/2], [dt²/2, dt]]``, ``H = [1, 0]``, so irregular time steps are
+exact.  Offline the RTS smoother runs after the filter; online the filter output is
+returned (rejected frames are then extrapolated with the velocity, which is damped by
+holding: ``hold_after`` seconds after the last accepted sample the velocity is no longer
+trusted, see :func:`robust_smooth`).
+
+The physical reasoning for every default is in ``docs/robust.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+
+__all__ = [
+    "ROBUST_DEFAULTS",
+    "bone_lengths",
+    "gate_measurements",
+    "joint_levels",
+    "region_values",
+    "robust_smooth",
+]
+
+Array = NDArray[np.float64]
+
+#: default parameters of :func:`robust_smooth` (see docs/robust.md for the reasoning)
+ROBUST_DEFAULTS: dict[str, Any] = {
+    # largest plausible joint speed per body region, m/s
+    "v_max": {"hands": 8.0, "arms": 5.0, "torso": 3.0, "legs": 6.0},
+    # noise allowance of the speed gate, m (a few standard deviations of hand jitter)
+    "margin": 0.05,
+    # bone-length tolerance: abs + rel * median length
+    "bone_tol_abs": 0.03,
+    "bone_tol_rel": 0.15,
+    # typical (rms) joint speed per region, m/s, and velocity correlation time, s
+    "speed_sd": {"hands": 1.0, "arms": 0.6, "torso": 0.3, "legs": 0.6},
+    "tau": 0.15,
+    # measurement noise standard deviation per region, m
+    "noise_sd": {"hands": 0.015, "arms": 0.01, "torso": 0.007, "legs": 0.01},
+    "inferred_noise_factor": 4.0,
+    "bones": True,
+    "two_pass": True,
+    # longest believable tracking failure, s (KERAAL's longest: 48 frames = 1.6 s)
+    "max_reject": 2.0,
+    # online: frames dropped from the state when a rejection starts (~67 ms at 30 fps)
+    "lookback": 2,
+}
+
+
+# ----------------------------------------------------------------------------- helpers
+def joint_levels(parents: tuple[int, ...] | list[int]) -> list[NDArray[np.intp]]:
+    """Joint indices grouped by depth in the tree (roots first)."""
+    J = len(parents)
+    depth = np.full(J, -1)
+    for _ in range(J + 1):
+        changed = False
+        for j, p in enumerate(parents):
+            if depth[j] >= 0:
+                continue
+            if p < 0:
+                depth[j] = 0
+                changed = True
+            elif depth[p] >= 0:
+                depth[j] = depth[p] + 1
+                changed = True
+        if not changed:
+            break
+    if np.any(depth < 0):
+        raise ValueError(f"parents {list(parents)} contain a cycle")
+    return [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)]
+
+
+def region_values(topology: Any, values: Any, name: str) -> Array:
+    """Per-joint values ``(J,)`` from a number, a ``(J,)`` array or a region mapping."""
+    J = topology.n_joints
+    if isinstance(values, Mapping):
+        groups = topology.joint_groups()
+        out = np.full(J, np.nan)
+        for g, idx in groups.items():
+            if idx:
+                if g not in values:
+                    raise ValueError(f"{name}: no value for body region {g!r}")
+                out[idx] = float(values[g])
+        return out
+    arr = np.broadcast_to(np.asarray(values, dtype=float), (J,)).copy()
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{name} must be positive, got {values!r}")
+    return arr
+
+
+def bone_lengths(positions: Array, parents: Any) -> Array:
+    """Median length of each joint's bone to its parent over frames, ``(J,)`` (NaN for roots)."""
+    pos = np.asarray(positions, dtype=float)
+    J = pos.shape[1]
+    out = np.full(J, np.nan)
+    for j, p in enumerate(parents):
+        if p < 0:
+            continue
+        d = np.linalg.norm(pos[:, j] - pos[:, p], axis=-1)
+        d = d[np.isfinite(d)]
+        if d.size:
+            out[j] = float(np.median(d))
+    return out
+
+
+def gate_measurements(
+    ys: Array,
+    times: Array,
+    parents: Any,
+    v_max: Array,
+    *,
+    margin: float,
+    bone_len: Array | None,
+    bone_tol_abs: float,
+    bone_tol_rel: float,
+    online_bones: bool = False,
+    max_reject: float = np.inf,
+) -> NDArray[np.bool_]:
+    """Causal accept / reject decision for every measurement (module docstring).
+
+    Parameters
+    ----------
+    ys : (T, J, 3) measurements, NaN = missing.
+    times : (T,) seconds, non-decreasing.
+    parents : (J,) parent index per joint, -1 for roots.
+    v_max : (J,) speed bound, m/s.
+    margin : noise allowance of the speed gate, m.
+    bone_len : (J,) reference bone lengths (NaN: no bone check), or None for no bone gate.
+    bone_tol_abs, bone_tol_rel : bone tolerance ``abs + rel * L``.
+    online_bones : use, at frame t, the median of the bone lengths measured before t
+        instead of ``bone_len`` (causal; the bone gate starts after 15 frames).
+    max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
+        its measurement moves plausibly from the previous frame's (no lock-out when the
+        reference itself was wrong).
+
+    Returns
+    -------
+    (T, J) bool, True = accepted.
+    """
+    ys = np.asarray(ys, dtype=float)
+    T, J, _ = ys.shape
+    par = np.asarray(parents, dtype=int)
+    levels = joint_levels(tuple(int(p) for p in par))
+    acc = np.zeros((T, J), dtype=bool)
+    last = np.full((J, 3), np.nan)
+    last_t = np.full(J, np.nan)
+    prev_acc = np.zeros(J, dtype=bool)
+    rej_since = np.full(J, np.nan)
+    valid_all = np.isfinite(ys).all(axis=-1)
+    use_bones = bone_len is not None
+    hist: list[list[float]] = [[] for _ in range(J)]
+    L_cur = np.full(J, np.nan)
+    for t in range(T):
+        if online_bones and use_bones and t % 5 == 0:
+            for j in range(J):
+                if len(hist[j]) >= 15:
+                    L_cur[j] = float(np.median(hist[j][-600:]))
+        L = L_cur if online_bones else bone_len
+        tt = times[t]
+        dt_prev = times[t] - times[t - 1] if t > 0 else np.inf
+        acc_t = np.zeros(J, dtype=bool)
+        for idx in levels:
+            y = ys[t, idx]
+            valid = valid_all[t, idx]
+            d = np.linalg.norm(y - last[idx], axis=-1)
+            elapsed = tt - last_t[idx]
+            gate = v_max[idx] * elapsed + margin
+            has_last = np.isfinite(last_t[idx])
+            gate_ok = ~has_last | (d <= gate)
+            step_ok = prev_acc[idx] & (d <= v_max[idx] * dt_prev + margin)
+            if t > 0:
+                raw_step = np.linalg.norm(y - ys[t - 1, idx], axis=-1)
+                relock = (tt - rej_since[idx] > max_reject) & (
+                    raw_step <= v_max[idx] * dt_prev + margin
+                )
+            else:
+                relock = np.zeros(len(idx), dtype=bool)
+            p = par[idx]
+            is_root = p < 0
+            pp = np.where(is_root, 0, p)
+            parent_acc = np.where(is_root, True, acc_t[pp])
+            if use_bones:
+                blen = np.linalg.norm(y - ys[t, pp], axis=-1)
+                Lj = L[idx]
+                tol = bone_tol_abs + bone_tol_rel * Lj
+                bone_ok = ~np.isfinite(Lj) | ~(np.abs(blen - Lj) > tol)
+                bone_ok |= is_root
+            else:
+                bone_ok = np.ones(len(idx), dtype=bool)
+            ok = valid & ((gate_ok & np.where(parent_acc, bone_ok, step_ok)) | relock)
+            acc_t[idx] = ok
+            if online_bones and use_bones:
+                for k in np.flatnonzero(np.isfinite(blen) & ~is_root):
+                    hist[idx[k]].append(float(blen[k]))
+        upd = acc_t
+        last[upd] = ys[t, upd]
+        last_t[upd] = tt
+        prev_acc = acc_t
+        valid_t = valid_all[t]
+        start = valid_t & ~acc_t & ~np.isfinite(rej_since)
+        rej_since[start] = tt
+        rej_since[acc_t] = np.nan
+        acc[t] = acc_t
+    return acc
+
+
+def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
+    """Transition and unit-q process noise ``(T, 2, 2)`` of the integrated OU velocity model.
+
+    ``dv = -v/tau dt + sqrt(q) dW``, ``dx = v dt``, discretised exactly over each step;
+    ``tau = inf`` is the constant-velocity (white-acceleration) model.
+    """
+    dt = np.asarray(steps, dtype=float)
+    T = dt.shape[0]
+    A = np.zeros((T, 2, 2))
+    Q = np.empty((T, 2, 2))
+    if not np.isfinite(tau):
+        A[:, 0, 0] = A[:, 1, 1] = 1.0
+        A[:, 0, 1] = dt
+        Q[:, 0, 0] = dt**3 / 3
+        Q[:, 0, 1] = Q[:, 1, 0] = dt**2 / 2
+        Q[:, 1, 1] = dt
+        return A, Q
+    rho = np.exp(-dt / tau)
+    om = -np.expm1(-dt / tau)  # 1 - rho, accurate for small steps
+    om2 = -np.expm1(-2 * dt / tau)  # 1 - rho^2
+    A[:, 0, 0] = 1.0
+    A[:, 0, 1] = tau * om
+    A[:, 1, 1] = rho
+    Q[:, 0, 0] = tau**2 * (dt - 2 * tau * om + 0.5 * tau * om2)
+    Q[:, 0, 1] = Q[:, 1, 0] = 0.5 * tau**2 * om**2
+    Q[:, 1, 1] = 0.5 * tau * om2
+    # Q_xx suffers cancellation for dt << tau: use the series dt^3/3 - dt^4/(4 tau) there
+    small = dt < 1e-3 * tau
+    Q[small, 0, 0] = dt[small] ** 3 / 3 - dt[small] ** 4 / (4 * tau)
+    return A, Q
+
+
+def _cv_smooth(
+    ys: Array,
+    steps: Array,
+    tau: float,
+    q: Array,
+    r: Array,
+    r_scale: Array | None,
+    offline: bool,
+) -> Array:
+    """OU-velocity KF (+ RTS) per axis; ys (T, J, 3) with NaN missing; q, r (J,)."""
+    from tobitkf.kalman import kalman_filter, rts_smooth
+    from tobitkf.model import LinearGaussian
+
+    out = np.full_like(ys, np.nan)
+    A_seq, base_Q = _ou_matrices(steps, tau)
+    # joints sharing (q, r) run in one vectorised pass
+    keys = np.stack([q, r], axis=1)
+    for key in np.unique(keys, axis=0):
+        idx = np.flatnonzero(np.all(keys == key, axis=1))
+        qa, rr = float(key[0]), float(key[1])
+        y = ys[:, idx, :, None]  # (T, j, 3, 1)
+        valid = np.isfinite(y[..., 0])
+        first = np.argmax(valid, axis=0)  # (j, 3)
+        has = valid.any(axis=0)
+        x0p = np.take_along_axis(y[..., 0], first[None], axis=0)[0]
+        x0 = np.stack([np.where(has, x0p, 0.0), np.zeros_like(x0p)], axis=-1)  # (j, 3, 2)
+        # P0: position known to the noise, velocity from its stationary distribution
+        P0 = np.diag([rr, qa * tau / 2 if np.isfinite(tau) else 1.0])
+        model = LinearGaussian(
+            A=A_seq[0],
+            H=np.array([[1.0, 0.0]]),
+            Q=qa * base_Q[0],
+            R=np.array([[rr]]),
+            x0=x0,
+            P0=P0,
+        )
+        kwargs: dict[str, Any] = {"A_seq": A_seq, "Q_seq": qa * base_Q}
+        if r_scale is not None:
+            kwargs["R_scale"] = r_scale[:, idx, :, None]
+        # the first step predicts from x0 with A_seq[0]; start at the first sample itself
+        A_seq0 = A_seq.copy()
+        A_seq0[0] = np.eye(2)
+        Q0 = kwargs["Q_seq"].copy()
+        Q0[0] = 0.0
+        kwargs["A_seq"], kwargs["Q_seq"] = A_seq0, Q0
+        res = kalman_filter(model, y, **kwargs)
+        means = rts_smooth(model, res).means if offline else res.means
+        out[:, idx, :] = means[..., 0]
+    return out
+
+
+def _causal_filter(
+    ys: Array,
+    acc: NDArray[np.bool_],
+    steps: Array,
+    tau: float,
+    q: Array,
+    r: Array,
+    r_scale: Array | None,
+    lookback: int,
+) -> Array:
+    """Causal OU-velocity Kalman filter per axis with roll-back at rejection onsets.
+
+    Same model as :func:`_cv_smooth` (started at a joint's first accepted sample with
+    P = diag(r, stationary velocity variance)).  When a joint's measurement is
+    rejected right after an accepted one, the last ``lookback`` accepted frames are
+    dropped from its *state* (re-predicted from the state before them): the entry of a
+    tracking failure is often gradual, and its first frames pass the gates.  Outputs
+    already emitted for those frames are not changed (the filter stays causal).
+    """
+    T, J, _ = ys.shape
+    N = J * 3
+    y = ys.reshape(T, N)
+    ok = np.repeat(acc, 3, axis=1) & np.isfinite(y)
+    qn = np.repeat(q, 3)
+    rn = np.repeat(r, 3)[None, :] * (1.0 if r_scale is None else r_scale.reshape(T, N))
+    rn = np.broadcast_to(rn, (T, N))
+    A_seq, base_Q = _ou_matrices(steps, tau)
+    v0 = qn * tau / 2 if np.isfinite(tau) else np.ones(N)
+    xs = np.zeros((T, N, 2))
+    Ps = np.zeros((T, N, 2, 2))
+    x = np.zeros((N, 2))
+    P = np.zeros((N, 2, 2))
+    started = np.zeros(N, dtype=bool)
+    out = np.full((T, N), np.nan)
+    prev_ok = np.zeros(N, dtype=bool)
+
+    def predict(x: Array, P: Array, t: int, sel: Any) -> tuple[Array, Array]:
+        A = A_seq[t]
+        Q = qn[sel, None, None] * base_Q[t]
+        return x @ A.T, A @ P @ A.T + Q
+
+    for t in range(T):
+        if lookback > 0 and t > lookback:
+            onset = started & prev_ok & ~ok[t]
+            if onset.any():
+                s0 = t - lookback - 1
+                sel = onset & ok[s0]  # keep it simple: only when the base frame was good
+                if sel.any():
+                    xb, Pb = xs[s0, sel], Ps[s0, sel]
+                    for k in range(s0 + 1, t):
+                        xb, Pb = predict(xb, Pb, k, sel)
+                    x[sel], P[sel] = xb, Pb
+        # predict (frame 0 and fresh starts: nothing to predict from)
+        if t > 0:
+            xp, Pp = predict(x, P, t, slice(None))
+            x = np.where(started[:, None], xp, x)
+            P = np.where(started[:, None, None], Pp, P)
+        new = ok[t] & ~started
+        if new.any():
+            x[new, 0] = y[t, new]
+            x[new, 1] = 0.0
+            P[new] = 0.0
+            P[new, 0, 0] = rn[t, new]
+            P[new, 1, 1] = v0[new]
+            started |= new
+        upd = ok[t] & ~new
+        if upd.any():
+            S = P[upd, 0, 0] + rn[t, upd]
+            K = P[upd, :, 0] / S[:, None]
+            innov = y[t, upd] - x[upd, 0]
+            x[upd] = x[upd] + K * innov[:, None]
+            P[upd] = P[upd] - K[:, :, None] * P[upd, 0, :][:, None, :]
+            P[upd] = 0.5 * (P[upd] + np.swapaxes(P[upd], -1, -2))
+        xs[t], Ps[t] = x, P
+        out[t] = np.where(started, x[:, 0], np.nan)
+        prev_ok = ok[t]
+    return out.reshape(T, J, 3)
+
+
+def _times(sequence: SkeletonSequence) -> tuple[Array, Array]:
+    from tobitkf.skeleton.smooth import frame_steps
+
+    steps, _, _ = frame_steps(sequence)
+    if sequence.timestamps is not None:
+        times = np.asarray(sequence.timestamps, dtype=float)
+    else:
+        times = np.concatenate([[0.0], np.cumsum(steps[1:])])
+    return times, steps
+
+
+# ----------------------------------------------------------------------------- public
+def robust_smooth(
+    sequence: SkeletonSequence,
+    *,
+    offline: bool = True,
+    v_max: Any = None,
+    margin: float | None = None,
+    bone_tol_abs: float | None = None,
+    bone_tol_rel: float | None = None,
+    speed_sd: Any = None,
+    tau: float | None = None,
+    noise_sd: Any = None,
+    inferred_noise_factor: float | None = None,
+    bones: bool | None = None,
+    two_pass: bool | None = None,
+    max_reject: float | None = None,
+    lookback: int | None = None,
+) -> SkeletonSequence:
+    """Reject physically impossible measurements, then smooth (module docstring).
+
+    Parameters
+    ----------
+    sequence : SkeletonSequence, positions (T, J, 3) in metres.
+    offline : True (default): bone lengths from the whole recording, forward + backward
+        gating, RTS smoother (interpolates across rejected stretches).  False: causal
+        (online) — running bone lengths, forward gating, Kalman filter output only.
+    v_max : speed bound, m/s: a number, (J,) values or a mapping per body region
+        (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 6.
+    margin : speed-gate noise allowance, m (default 0.05).
+    bone_tol_abs, bone_tol_rel : bone gate ``|length - L| <= abs + rel * L`` (default
+        0.03 m + 15 %).
+    q_accel : white-acceleration spectral density, m²/s³ (number, (J,) or per region;
+        default hands 10, arms 4, torso 1, legs 4).
+    noise_sd : measurement noise standard deviation, m (default hands 15 mm, arms 10,
+        torso 7, legs 10).
+    inferred_noise_factor : variance multiplier for INFERRED joints (default 4).
+    bones : use the bone gate (default True).
+    two_pass : offline only: also gate backwards in time (default True).
+
+    Returns
+    -------
+    SkeletonSequence
+        Positions replaced; ``metadata["diagnostics"]`` = ``rejected_fraction`` (J,),
+        ``filled_fraction`` (J,) (missing or rejected samples that got an estimate),
+        ``clipped_fraction`` (J,) zeros (no censoring here; kept for the smooth()
+        diagnostics layout), ``rejected`` (T, J) bool mask, ``bone_lengths`` (J,),
+        ``method`` (``"robust"`` / ``"robust_online"``) and ``params``.
+    """
+    if not isinstance(sequence, SkeletonSequence):
+        raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
+    d = ROBUST_DEFAULTS
+    topo = sequence.topology
+    params = {
+        "v_max": d["v_max"] if v_max is None else v_max,
+        "margin": d["margin"] if margin is None else float(margin),
+        "bone_tol_abs": d["bone_tol_abs"] if bone_tol_abs is None else float(bone_tol_abs),
+        "bone_tol_rel": d["bone_tol_rel"] if bone_tol_rel is None else float(bone_tol_rel),
+        "speed_sd": d["speed_sd"] if speed_sd is None else speed_sd,
+        "tau": d["tau"] if tau is None else float(tau),
+        "noise_sd": d["noise_sd"] if noise_sd is None else noise_sd,
+        "inferred_noise_factor": d["inferred_noise_factor"]
+        if inferred_noise_factor is None
+        else float(inferred_noise_factor),
+        "bones": d["bones"] if bones is None else bool(bones),
+        "two_pass": d["two_pass"] if two_pass is None else bool(two_pass),
+        "max_reject": d["max_reject"] if max_reject is None else float(max_reject),
+        "lookback": d["lookback"] if lookback is None else int(lookback),
+        "offline": bool(offline),
+    }
+    for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
+        v = params[name]
+        if not np.isfinite(v) or v < 0:
+            raise ValueError(f"{name} must be >= 0, got {v!r}")
+    if params["inferred_noise_factor"] < 1:
+        raise ValueError(
+            f"inferred_noise_factor must be >= 1, got {params['inferred_noise_factor']!r}"
+        )
+    vmax = region_values(topo, params["v_max"], "v_max")
+    if not (params["tau"] > 0):
+        raise ValueError(
+            f"tau must be > 0 (seconds; inf = constant velocity), got {params['tau']!r}"
+        )
+    spd = region_values(topo, params["speed_sd"], "speed_sd")
+    # stationary velocity variance of the OU model is q tau / 2
+    qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
+    sd = region_values(topo, params["noise_sd"], "noise_sd")
+
+    T, J = sequence.n_frames, sequence.n_joints
+    ys = np.array(sequence.positions, dtype=float)
+    missing = ~np.isfinite(ys).all(axis=-1)
+    states = sequence.tracking_state
+    if states is not None:
+        missing |= states == TrackingState.NOT_TRACKED
+    ys[missing] = np.nan
+    parents = topo.parents
+    if T == 0:
+        return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
+    times, steps = _times(sequence)
+    L = bone_lengths(ys, parents) if params["bones"] else None
+    gate_kw = dict(
+        margin=params["margin"],
+        bone_len=L,
+        bone_tol_abs=params["bone_tol_abs"],
+        bone_tol_rel=params["bone_tol_rel"],
+        max_reject=params["max_reject"],
+    )
+    if offline:
+        acc = gate_measurements(ys, times, parents, vmax, **gate_kw)
+        if params["two_pass"]:
+            acc_b = gate_measurements(ys[::-1], -times[::-1], parents, vmax, **gate_kw)[::-1]
+            acc &= acc_b
+    else:
+        acc = gate_measurements(ys, times, parents, vmax, online_bones=True, **gate_kw)
+    rejected = ~missing & ~acc
+    yk = ys.copy()
+    yk[~acc] = np.nan
+    r_scale = None
+    if states is not None and params["inferred_noise_factor"] != 1.0:
+        inf = states == TrackingState.INFERRED
+        if inf.any():
+            r_scale = np.broadcast_to(
+                np.where(inf, params["inferred_noise_factor"], 1.0)[..., None], ys.shape
+            ).copy()
+    if offline:
+        est = _cv_smooth(yk, steps, params["tau"], qa, sd**2, r_scale, True)
+    else:
+        est = _causal_filter(
+            yk, acc, steps, params["tau"], qa, sd**2, r_scale, int(params["lookback"])
+        )
+    # no estimate before a joint's first valid measurement, none for joints never accepted
+    valid = ~missing
+    first = np.where(valid.any(axis=0), np.argmax(valid, axis=0), T)
+    before = np.arange(T)[:, None] < first[None, :]
+    est[before] = np.nan
+    never = ~acc.any(axis=0)
+    est[:, never] = ys[:, never]
+    filled = (missing | rejected) & np.isfinite(est).all(axis=-1)
+    used = dict(params)
+    used["v_max"] = vmax.tolist()
+    used["speed_sd"] = spd.tolist()
+    used["noise_sd"] = sd.tolist()
+    diagnostics = {
+        "rejected_fraction": rejected.sum(axis=0) / T,
+        "filled_fraction": filled.sum(axis=0) / T,
+        "clipped_fraction": np.zeros(J),
+        "rejected": rejected,
+        "bone_lengths": L if L is not None else np.full(J, np.nan),
+        "method": "robust" if offline else "robust_online",
+        "params": used,
+    }
+    meta = dict(sequence.metadata)
+    meta["diagnostics"] = diagnostics
+    return sequence.replace(positions=est, metadata=meta)
