@@ -268,3 +268,20 @@ def test_keraal_pooled_rmse_below_raw():
     assert rmse["raw"] > 0.10
     assert rmse["robust"] < rmse["raw"] - 0.015
     assert rmse["robust_online"] < rmse["raw"] - 0.01
+
+
+def test_validators_for_the_registry():
+    from tobitkf.skeleton.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
+
+    assert set(ROBUST_VALIDATORS) == set(ROBUST_DEFAULTS) - {"inferred_noise_factor"}
+    for name, check in ROBUST_VALIDATORS.items():
+        check(name, ROBUST_DEFAULTS[name])  # defaults are valid
+    assert ROBUST_VALIDATORS["v_max"]("v_max", 4) == 4.0
+    with pytest.raises(ValueError, match="torso"):
+        ROBUST_VALIDATORS["v_max"]("v_max", {"hands": 8, "arms": 5, "legs": 6})
+    with pytest.raises(ValueError):
+        ROBUST_VALIDATORS["tau"]("tau", 0)
+    with pytest.raises(ValueError):
+        ROBUST_VALIDATORS["lookback"]("lookback", 1.5)
+    with pytest.raises(ValueError):
+        ROBUST_VALIDATORS["bones"]("bones", "yes")

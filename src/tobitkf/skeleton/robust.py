@@ -60,6 +60,7 @@ from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 
 __all__ = [
     "ROBUST_DEFAULTS",
+    "ROBUST_VALIDATORS",
     "bone_lengths",
     "gate_measurements",
     "joint_levels",
@@ -90,6 +91,75 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "max_reject": 2.0,
     # online: frames dropped from the state when a rejection starts (~67 ms at 30 fps)
     "lookback": 2,
+    # offline: an accepted run between two rejections must last this long, s
+    "min_run": 0.1,
+}
+
+
+# ----------------------------------------------------------------------------- validators
+_REGIONS = ("hands", "arms", "torso", "legs")
+
+
+def _v_region(name: str, value: Any) -> Any:
+    """A positive number, or a mapping with a positive number for every body region."""
+    if isinstance(value, Mapping):
+        missing = [g for g in _REGIONS if g not in value]
+        extra = sorted(set(value) - set(_REGIONS))
+        if missing or extra:
+            raise ValueError(
+                f"{name} needs one value per body region {_REGIONS}; "
+                f"missing {missing}, unknown {extra}"
+            )
+        return {g: _v_pos(f"{name}[{g}]", value[g]) for g in _REGIONS}
+    return _v_pos(name, value)
+
+
+def _v_pos(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not (v > 0):
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+    return v
+
+
+def _v_nonneg(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not (v >= 0):
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return v
+
+
+def _v_bool(name: str, value: Any) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+    return bool(value)
+
+
+def _v_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or int(value) != value or int(value) < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    return int(value)
+
+
+#: parameter validators (name -> check(name, value) -> value), for the smooth() registry
+ROBUST_VALIDATORS: dict[str, Any] = {
+    "v_max": _v_region,
+    "margin": _v_nonneg,
+    "bone_tol_abs": _v_nonneg,
+    "bone_tol_rel": _v_nonneg,
+    "speed_sd": _v_region,
+    "tau": _v_pos,
+    "noise_sd": _v_region,
+    "bones": _v_bool,
+    "two_pass": _v_bool,
+    "max_reject": _v_pos,
+    "lookback": _v_int,
+    "min_run": _v_nonneg,
 }
 
 
@@ -333,6 +403,37 @@ def _cv_smooth(
     return out
 
 
+def drop_short_runs(
+    acc: NDArray[np.bool_], rejected: NDArray[np.bool_], times: Array, min_run: float
+) -> NDArray[np.bool_]:
+    """Reject accepted runs shorter than ``min_run`` seconds lying between two rejections.
+
+    Offline only.  Inside a long tracking failure a wrong sample sometimes passes the
+    gates (its bone happens to have the right length); the RTS smoother would then bend
+    the whole bridge across the failure towards that one sample.  A re-acquisition is
+    believed only when it lasts ``min_run`` seconds.
+    """
+    out = acc.copy()
+    T, J = acc.shape
+    if T < 3 or min_run <= 0:
+        return out
+    for j in range(J):
+        a = acc[:, j]
+        edges = np.flatnonzero(np.diff(np.r_[0, a.astype(np.int8), 0]))
+        for s, e in zip(edges[::2], edges[1::2], strict=True):  # run [s, e)
+            if s == 0 or e >= T:
+                continue
+            # the neighbours of the run: last non-missing before, first after
+            before = np.flatnonzero(rejected[:s, j] | acc[:s, j])
+            after = np.flatnonzero(rejected[e:, j] | acc[e:, j])
+            if not (before.size and after.size):
+                continue
+            if rejected[before[-1], j] and rejected[e + after[0], j]:
+                if times[e - 1] - times[s] < min_run:
+                    out[s:e, j] = False
+    return out
+
+
 def _causal_filter(
     ys: Array,
     acc: NDArray[np.bool_],
@@ -440,6 +541,7 @@ def robust_smooth(
     two_pass: bool | None = None,
     max_reject: float | None = None,
     lookback: int | None = None,
+    min_run: float | None = None,
 ) -> SkeletonSequence:
     """Reject physically impossible measurements, then smooth (module docstring).
 
@@ -490,6 +592,7 @@ def robust_smooth(
         "two_pass": d["two_pass"] if two_pass is None else bool(two_pass),
         "max_reject": d["max_reject"] if max_reject is None else float(max_reject),
         "lookback": d["lookback"] if lookback is None else int(lookback),
+        "min_run": d["min_run"] if min_run is None else float(min_run),
         "offline": bool(offline),
     }
     for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
@@ -536,6 +639,8 @@ def robust_smooth(
             acc &= acc_b
     else:
         acc = gate_measurements(ys, times, parents, vmax, online_bones=True, **gate_kw)
+    if offline and params["min_run"] > 0:
+        acc = drop_short_runs(acc, ~missing & ~acc, times, params["min_run"])
     rejected = ~missing & ~acc
     yk = ys.copy()
     yk[~acc] = np.nan
