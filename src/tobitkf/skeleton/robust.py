@@ -16,7 +16,7 @@ A valid measurement ``y_j(t)`` is *accepted* when
 
 1. **speed gate** — it is reachable from the joint's last accepted measurement
    ``y_j(s)``: ``|y_j(t) - y_j(s)| <= v_max_j (t - s) + margin``.  ``v_max`` is a
-   physical bound by body region (hands 8, arms 5, torso 3, legs 6 m/s); the gate grows
+   physical bound by body region (hands 8, arms 5, torso 3, legs 10 m/s); the gate grows
    with the time since the last accepted sample, so a joint that really moved faster
    than ``v_max`` is re-acquired a frame or two later instead of being lost;
 2. **bone gate** — if its parent was accepted in this frame, the bone to the parent has
@@ -73,7 +73,7 @@ Array = NDArray[np.float64]
 #: default parameters of :func:`robust_smooth` (see docs/robust.md for the reasoning)
 ROBUST_DEFAULTS: dict[str, Any] = {
     # largest plausible joint speed per body region, m/s
-    "v_max": {"hands": 8.0, "arms": 5.0, "torso": 3.0, "legs": 6.0},
+    "v_max": {"hands": 8.0, "arms": 5.0, "torso": 3.0, "legs": 10.0},
     # noise allowance of the speed gate, m (a few standard deviations of hand jitter)
     "margin": 0.05,
     # bone-length tolerance: abs + rel * median length
@@ -243,8 +243,10 @@ def gate_measurements(
     margin : noise allowance of the speed gate, m.
     bone_len : (J,) reference bone lengths (NaN: no bone check), or None for no bone gate.
     bone_tol_abs, bone_tol_rel : bone tolerance ``abs + rel * L``.
-    online_bones : use, at frame t, the median of the bone lengths measured before t
-        instead of ``bone_len`` (causal; the bone gate starts after 15 frames).
+    online_bones : use, at frame t, the median of the bone lengths of the frames accepted
+        before t instead of ``bone_len`` (causal; the bone gate starts after 15 of them;
+        a joint re-locked by ``max_reject`` learns its bone length again, so wrong
+        first frames cannot lock it out).
     max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
         its measurement moves plausibly from the previous frame's (no lock-out when the
         reference itself was wrong).
@@ -306,7 +308,11 @@ def gate_measurements(
             ok = valid & ((gate_ok & np.where(parent_acc, bone_ok, step_ok)) | relock)
             acc_t[idx] = ok
             if online_bones and use_bones:
-                for k in np.flatnonzero(np.isfinite(blen) & ~is_root):
+                # a re-lock means the learnt bone length was wrong: learn it again
+                for k in np.flatnonzero(relock & ~(gate_ok & bone_ok & parent_acc)):
+                    hist[idx[k]] = []
+                    L_cur[idx[k]] = np.nan
+                for k in np.flatnonzero(ok & parent_acc & ~is_root):
                     hist[idx[k]].append(float(blen[k]))
         upd = acc_t
         last[upd] = ys[t, upd]
@@ -552,7 +558,7 @@ def robust_smooth(
         gating, RTS smoother (interpolates across rejected stretches).  False: causal
         (online) — running bone lengths, forward gating, Kalman filter output only.
     v_max : speed bound, m/s: a number, (J,) values or a mapping per body region
-        (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 6.
+        (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 10.
     margin : speed-gate noise allowance, m (default 0.05).
     bone_tol_abs, bone_tol_rel : bone gate ``|length - L| <= abs + rel * L`` (default
         0.03 m + 15 %).
