@@ -7,7 +7,7 @@ frames).  A filter that trusts every measurement follows the failure after a few
 the adaptive Tobit limits of the 2020 paper only slow it down, and they also clip
 legitimate fast hand motion.  :func:`robust_smooth` instead decides, joint by joint and
 frame by frame, whether a measurement is physically possible, treats the impossible
-ones as missing, and smooths what is left with a constant-velocity Kalman filter (and,
+ones as missing, and smooths what is left with a velocity-state Kalman filter (and,
 offline, the RTS smoother, which interpolates across rejected stretches).
 
 Gating (per frame, joints from the root outwards, vectorised over joints)
@@ -28,22 +28,26 @@ A valid measurement ``y_j(t)`` is *accepted* when
    (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
    wrist stays rejected until the wrist comes back).
 
-Offline, the gate runs forwards and backwards in time and a measurement is rejected
-when either pass rejects it (the backward pass catches a failure at the start of a
-recording, the forward pass one at the end).  ``NOT_TRACKED`` joints and NaN are
+A joint rejected for longer than ``max_reject`` (2 s) is re-acquired as soon as it moves
+plausibly from frame to frame (no lock-out behind a wrong reference).  Offline, the gate
+runs forwards and backwards in time and a measurement is rejected when either pass
+rejects it (failures often enter over 1–3 frames that only one direction flags), and an
+accepted run shorter than ``min_run`` (0.1 s) between two rejections is rejected too.
+Online, when a rejection starts the last ``lookback`` (2) accepted frames are dropped
+from the filter state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
 missing; ``INFERRED`` joints get ``inferred_noise_factor`` times the measurement
 variance.
 
 Smoothing
 ---------
-Each axis of each joint is a constant-velocity model (position, velocity) driven by
-white acceleration noise of spectral density ``q_accel`` (m²/s³, per region) with
-measurement noise ``r`` (m², per region): ``A = [[1, dt], [0, 1]]``,
-``Q = q [[dt³/3, dt²/2], [dt²/2, dt]]``, ``H = [1, 0]``, so irregular time steps are
-exact.  Offline the RTS smoother runs after the filter; online the filter output is
-returned (rejected frames are then extrapolated with the velocity, which is damped by
-holding: ``hold_after`` seconds after the last accepted sample the velocity is no longer
-trusted, see :func:`robust_smooth`).
+Each axis of each joint is an integrated Ornstein–Uhlenbeck velocity model,
+``dv = -v/tau dt + sqrt(q) dW``, ``dx = v dt``, discretised exactly per time step (so
+irregular timestamps are exact), with ``q = 2 speed_sd² / tau`` (the stationary velocity
+standard deviation is ``speed_sd``, per body region) and measurement noise ``noise_sd``
+(per region), ``H = [1, 0]``.  Offline the RTS smoother runs after the filter; online the
+filter output is
+returned: across a rejected stretch the OU velocity decays with ``tau`` (0.15 s), so a
+lost joint is extrapolated by at most about ``v * tau`` and then held.
 
 The physical reasoning for every default is in ``docs/robust.md``.
 """
