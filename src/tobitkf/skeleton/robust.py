@@ -46,8 +46,8 @@ irregular timestamps are exact), with ``q = 2 speed_sd² / tau`` (the stationary
 standard deviation is ``speed_sd``, per body region) and measurement noise ``noise_sd``
 (per region), ``H = [1, 0]``.  Offline the RTS smoother runs after the filter; online the
 filter output is returned: across a rejected stretch the OU velocity decays with
-``tau`` (0.15 s), so a
-lost joint is extrapolated by at most about ``v * tau`` and then held.
+``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
+held.
 
 The physical reasoning for every default is in ``docs/robust.md``.
 """
