@@ -65,6 +65,8 @@ def test_registry_names_and_defaults():
         "one_euro",
         "kinect",
         "moving_average",
+        "robust",
+        "robust_online",
     }
     assert set(METHODS) == expected
     d = method_defaults("atkf")

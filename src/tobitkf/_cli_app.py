@@ -78,7 +78,8 @@ def app() -> None:
     "--method",
     default="atkf",
     show_default=True,
-    help="Smoothing method (see `tobitkf methods`).",
+    help="Smoothing method (see `tobitkf methods`). atkf is the 2020 paper's filter; against "
+    "Vicon it does not beat raw Kinect (docs/evaluation.md), our `robust` does.",
 )
 @click.option(
     "-f",
@@ -187,7 +188,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         ]
         _print_table(
             f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
-            ["file", "bodies", "frames", "joints", "% clipped", "% missing", "seconds"],
+            ["file", "bodies", "frames", "joints", "% clipped/rejected", "% missing", "seconds"],
             rows,
         )
         if rows:

@@ -244,7 +244,10 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         bodies=len(sequences),
         frames=max(s.n_frames for s in sequences),
         joints=max(s.n_joints for s in sequences),
-        clipped_percent=_percent(d.get("clipped_fraction", []) for d in diags),
+        # Tobit methods clip measurements; the robust methods reject them instead
+        clipped_percent=_percent(
+            d.get("rejected_fraction", d.get("clipped_fraction", [])) for d in diags
+        ),
         missing_percent=_percent(missing),
         seconds=time.perf_counter() - start,
         input_format=in_fmt,

@@ -73,6 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tobitkf.skeleton import baselines
+from tobitkf.skeleton.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 
 __all__ = [
@@ -204,7 +205,7 @@ class MethodSpec:
     """
 
     name: str
-    kind: str  # "kalman" or "baseline"
+    kind: str  # "kalman", "baseline" or "robust"
     defaults: Mapping[str, Any]
     validators: Mapping[str, Callable[[str, Any], Any]]
     description: str
@@ -253,6 +254,9 @@ _SAVGOL_VALIDATORS = {
     "polyorder": _int_at_least(0),
     "max_gap": _opt(_int_at_least(0)),
 }
+
+_ROBUST_DEFAULTS = {k: v for k, v in ROBUST_DEFAULTS.items() if k != "inferred_noise_factor"}
+_ROBUST_VALIDATORS = {k: v for k, v in ROBUST_VALIDATORS.items() if k in _ROBUST_DEFAULTS}
 
 #: registry: method name -> :class:`MethodSpec` (callable)
 METHODS: dict[str, MethodSpec] = {
@@ -339,6 +343,23 @@ METHODS: dict[str, MethodSpec] = {
         {"window": 5, "centered": True},
         {"window": _int_at_least(1), "centered": _bool},
         "moving average (centred or trailing)",
+    ),
+    # ours: physically impossible samples (speed, bone length) are treated as missing
+    "robust": _spec(
+        "robust",
+        "robust",
+        dict(_ROBUST_DEFAULTS),
+        dict(_ROBUST_VALIDATORS),
+        "physical speed / bone-length gating, OU-velocity RTS smoother (offline)",
+        offline=True,
+    ),
+    "robust_online": _spec(
+        "robust_online",
+        "robust",
+        dict(_ROBUST_DEFAULTS),
+        dict(_ROBUST_VALIDATORS),
+        "physical speed / bone-length gating, causal OU-velocity Kalman filter",
+        offline=False,
     ),
 }
 
@@ -631,6 +652,17 @@ def smooth(
         up_axis = _check_up_axis(up_axis)
     factor = _inferred_factor(inferred_noise_factor)
     offline = _bool("offline", offline)
+    if spec.kind == "robust":  # the method name decides offline / online
+        from tobitkf.skeleton.robust import robust_smooth
+
+        def run(s: SkeletonSequence) -> SkeletonSequence:
+            return robust_smooth(
+                s, offline=spec.options["offline"], inferred_noise_factor=factor, **full
+            )
+
+        if isinstance(sequence, SkeletonSequence):
+            return run(sequence)
+        return [run(s) for s in sequence]
     if isinstance(sequence, SkeletonSequence):
         return _smooth_group([sequence], spec, full, offline, up_axis, factor)[0]
     seqs = list(sequence)
