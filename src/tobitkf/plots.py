@@ -34,7 +34,8 @@ def _pyplot():
 
 def _colours(names: Sequence[str]) -> dict[str, Any]:
     plt = _pyplot()
-    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    # grey is reserved for the raw track
+    cycle = [c for c in plt.rcParams["axes.prop_cycle"].by_key()["color"] if c != "#7f7f7f"]
     out: dict[str, Any] = {}
     i = 0
     for name in names:

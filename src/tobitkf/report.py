@@ -17,6 +17,10 @@ import numpy as np
 
 GLITCH_THRESHOLD_M = 0.10
 
+#: methods drawn in the coordinate traces by default: the paper's filter, the best
+#: published offline smoother, and ours (the tables always list every method)
+FOCUS_METHODS = ("atkf", "kf+rts", "robust", "robust_online")
+
 
 @dataclass(frozen=True)
 class TableSpec:
@@ -41,6 +45,9 @@ class ReportInput:
         has no mocap partner; None without ground truth
     tables : metric tables shown at the top
     notes : paragraphs of plain text (conclusions, caveats)
+    figures : extra figures (name -> PNG bytes) to embed
+    animate : methods drawn in the animation next to raw (default: the first method)
+    traces : methods drawn in the coordinate traces (default: all; tables always show all)
     """
 
     title: str
@@ -50,6 +57,8 @@ class ReportInput:
     tables: Sequence[TableSpec] = ()
     notes: Sequence[str] = ()
     figures: Mapping[str, bytes] = field(default_factory=dict)
+    animate: Sequence[str] = ()  # methods shown in the GIF next to raw (default: the first)
+    traces: Sequence[str] = ()  # methods drawn in the coordinate traces (default: all)
 
 
 def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITCH_THRESHOLD_M):
@@ -111,7 +120,7 @@ def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> di
     joint_names = list(inp.raw.joint_names)
     for j in pick_joints(mask, raw, n_joints):
         series: dict[str, np.ndarray] = {"raw": raw[:, j]}
-        for name in names:
+        for name in [n for n in inp.traces if n in inp.methods] or names:
             series[name] = np.asarray(inp.methods[name].positions, float)[:, j]
         if inp.truth is not None and np.isfinite(inp.truth[:, j]).any():
             series["truth"] = inp.truth[:, j]
@@ -143,7 +152,8 @@ def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> di
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
 
     if gif and names:
-        anim = {"raw": raw, names[0]: frames[names[0]]}
+        shown = [n for n in inp.animate if n in frames] or names[:1]
+        anim = {"raw": raw, **{n: frames[n] for n in shown}}
         if inp.truth is not None:
             anim["truth"] = inp.truth
         with tempfile.TemporaryDirectory() as tmp:
@@ -304,5 +314,7 @@ def track_report(
         truth=truth_positions,
         tables=tables,
         notes=list(notes),
+        animate=[m for m in ("atkf", "robust") if m in smoothed],
+        traces=[m for m in FOCUS_METHODS if m in smoothed],
     )
     return write_report(inp, path, gif=gif), table
