@@ -61,3 +61,28 @@ def test_animation_is_a_gif_with_frames(tmp_path):
     with Image.open(out) as im:
         assert im.format == "GIF"
         assert getattr(im, "n_frames", 1) == len(range(0, T, 3))
+
+
+def test_a_method_keeps_its_colour_across_figures_and_grey_is_raw_only():
+    from matplotlib.colors import to_rgb
+
+    few = plots._colours(["raw", "robust", "truth"])
+    many = plots._colours(
+        [
+            "raw",
+            "kf",
+            "atkf",
+            "sgf",
+            "kf+rts",
+            "one_euro",
+            "kinect",
+            "robust",
+            "robust_online",
+            "my_filter",
+            "truth",
+        ]
+    )
+    assert to_rgb(few["robust"]) == to_rgb(many["robust"])
+    colours = [to_rgb(c) for name, c in many.items() if name != "raw"]
+    assert all(len(set(c)) > 1 or c == (0.0, 0.0, 0.0) for c in colours)  # no grey but raw
+    assert len(set(colours)) == len(colours)  # all distinct

@@ -17,8 +17,25 @@ import numpy as np
 
 AXIS_NAMES = ("x", "y", "z")
 
-# colour for each series name; anything else cycles through the default palette
-_FIXED_COLOURS = {"raw": "0.55", "truth": "black"}
+# one colour per method in every figure of a report (grey is the raw track's alone);
+# names not listed here cycle through the rest of the palette
+_FIXED_COLOURS = {
+    "raw": "0.55",
+    "truth": "black",
+    "kf": "tab:blue",
+    "atkf": "tab:orange",
+    "atkf2016": "tab:brown",
+    "tkf": "tab:olive",
+    "tkfc": "tab:cyan",
+    "sgf": "tab:purple",
+    "savgol": "tab:purple",
+    "kf+rts": "navy",
+    "one_euro": "tab:pink",
+    "kinect": "darkkhaki",
+    "moving_average": "teal",
+    "robust": "tab:green",
+    "robust_online": "tab:red",
+}
 
 
 def _pyplot():
@@ -34,8 +51,14 @@ def _pyplot():
 
 def _colours(names: Sequence[str]) -> dict[str, Any]:
     plt = _pyplot()
-    # grey is reserved for the raw track
-    cycle = [c for c in plt.rcParams["axes.prop_cycle"].by_key()["color"] if c != "#7f7f7f"]
+    from matplotlib.colors import to_rgb
+
+    taken = {to_rgb(c) for c in _FIXED_COLOURS.values()}
+    cycle = [
+        c
+        for c in plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        if len(set(to_rgb(c))) > 1 and to_rgb(c) not in taken  # no greys, no fixed colours
+    ] + ["goldenrod", "slateblue", "sienna", "darkcyan", "indigo", "crimson", "olivedrab"]
     out: dict[str, Any] = {}
     i = 0
     for name in names:
