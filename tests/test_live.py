@@ -98,3 +98,22 @@ def test_live_handles_several_bodies_independently():
     )
     np.testing.assert_allclose(both[:, 0], _stream(a, "atkf"), atol=1e-12, equal_nan=True)
     np.testing.assert_allclose(both[:, 1], _stream(b, "atkf"), atol=1e-12, equal_nan=True)
+
+
+def test_rejected_frame_leaves_the_stream_unchanged():
+    # a frame refused for its batch shape must not advance the clock: the next good frame
+    # gives the same result as in a stream that never saw the bad one
+    seq = _synthetic(3, T=12)
+    ts = np.arange(12) / 30.0
+    clean = LiveSmoother("kinect_v2", "atkf")
+    noisy = LiveSmoother("kinect_v2", "atkf")
+    for k in range(6):
+        a = clean.update(seq.positions[k], seq.tracking_state[k], ts[k])
+        b = noisy.update(seq.positions[k], seq.tracking_state[k], ts[k])
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="batch shape"):
+        noisy.update(np.stack([seq.positions[6]] * 2), None, ts[6] + 0.5)
+    for k in range(6, 12):
+        a = clean.update(seq.positions[k], seq.tracking_state[k], ts[k])
+        b = noisy.update(seq.positions[k], seq.tracking_state[k], ts[k])
+        np.testing.assert_array_equal(a, b)

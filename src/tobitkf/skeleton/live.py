@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.skeleton.sequence import TrackingState
 from tobitkf.skeleton.topology import Topology, get_topology
 
 __all__ = ["LIVE_METHODS", "LiveSmoother"]
@@ -154,24 +153,26 @@ class LiveSmoother:
         ndarray, shape like ``positions``
             Smoothed positions; NaN for a joint not measured yet.
         """
-        ys = np.array(positions, dtype=float)
-        if ys.ndim not in (2, 3) or ys.shape[-1] != 3:
-            raise ValueError(f"positions: expected shape (J, 3) or (B, J, 3), found {ys.shape}")
-        if ys.shape[-2] != self.topology.n_joints:
+        from tobitkf.skeleton import smooth as sm
+
+        shape = np.shape(positions)
+        if len(shape) not in (2, 3) or shape[-1] != 3:
+            raise ValueError(f"positions: expected shape (J, 3) or (B, J, 3), found {shape}")
+        if shape[-2] != self.topology.n_joints:
             raise ValueError(
-                f"positions: {ys.shape[-2]} joints, but topology {self.topology.name!r} has "
+                f"positions: {shape[-2]} joints, but topology {self.topology.name!r} has "
                 f"{self.topology.n_joints}"
             )
-        missing = np.isnan(ys).any(axis=-1)
-        states = None
-        if tracking_state is not None:
-            states = np.asarray(tracking_state)
-            if states.shape != ys.shape[:-1]:
-                raise ValueError(
-                    f"tracking_state: expected shape {ys.shape[:-1]}, found {states.shape}"
-                )
-            missing |= states == TrackingState.NOT_TRACKED
-        ys[missing] = np.nan
+        if self._started is not None and shape[:-1] != self._started.shape:
+            # checked before the clock moves: a rejected frame leaves the stream unchanged
+            raise ValueError(
+                f"positions: batch shape {shape[:-1]} differs from the stream's "
+                f"{self._started.shape}"
+            )
+        states = None if tracking_state is None else np.asarray(tracking_state)
+        if states is not None and states.shape != shape[:-1]:
+            raise ValueError(f"tracking_state: expected shape {shape[:-1]}, found {states.shape}")
+        ys, missing = sm._measurements(positions, states)
         valid = ~missing
         dt = self._step_seconds(timestamp)
         self._time += dt
@@ -179,11 +180,6 @@ class LiveSmoother:
             self._filter = self._make_filter(ys, valid)
             self._started = valid.copy()
             self._last_valid_time = np.full(valid.shape, np.nan)
-        elif ys.shape[:-1] != self._started.shape:
-            raise ValueError(
-                f"positions: batch shape {ys.shape[:-1]} differs from the stream's "
-                f"{self._started.shape}"
-            )
         else:
             new = valid & ~self._started
             if new.any():
@@ -192,11 +188,9 @@ class LiveSmoother:
         kwargs: dict[str, Any] = {}
         ratio = dt / self._ref
         kwargs["Q"] = self._Q * ratio
-        if states is not None and self.inferred_noise_factor != 1.0:
-            inferred = (states == TrackingState.INFERRED) & valid
-            if inferred.any():
-                scale = np.where(inferred, self.inferred_noise_factor, 1.0)
-                kwargs["R_scale"] = np.broadcast_to(scale[..., None], ys.shape).copy()
+        r_scale = sm._inferred_r_scale(states, valid, self.inferred_noise_factor)
+        if r_scale is not None:
+            kwargs["R_scale"] = r_scale
         if self._c is not None:
             last = self._last_valid_time
             elapsed = np.where(np.isfinite(last), self._time - last, dt)

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = [
     "ROBUST_DEFAULTS",
@@ -623,13 +623,11 @@ def robust_smooth(
     qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
     sd = region_values(topo, params["noise_sd"], "noise_sd")
 
+    from tobitkf.skeleton.smooth import _inferred_r_scale, _measurements
+
     T, J = sequence.n_frames, sequence.n_joints
-    ys = np.array(sequence.positions, dtype=float)
-    missing = ~np.isfinite(ys).all(axis=-1)
     states = sequence.tracking_state
-    if states is not None:
-        missing |= states == TrackingState.NOT_TRACKED
-    ys[missing] = np.nan
+    ys, missing = _measurements(sequence.positions, states)
     parents = topo.parents
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
@@ -654,13 +652,7 @@ def robust_smooth(
     rejected = ~missing & ~acc
     yk = ys.copy()
     yk[~acc] = np.nan
-    r_scale = None
-    if states is not None and params["inferred_noise_factor"] != 1.0:
-        inf = states == TrackingState.INFERRED
-        if inf.any():
-            r_scale = np.broadcast_to(
-                np.where(inf, params["inferred_noise_factor"], 1.0)[..., None], ys.shape
-            ).copy()
+    r_scale = _inferred_r_scale(states, ~missing, params["inferred_noise_factor"])
     if offline:
         est = _cv_smooth(yk, steps, params["tau"], qa, sd**2, r_scale, True)
     else:

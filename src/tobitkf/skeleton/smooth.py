@@ -458,23 +458,45 @@ def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
 
 @dataclass
 class _Batch:
-    """Stacked inputs: positions (T, *batch, 3), states (T, *batch) or None, steps (T,)."""
+    """Stacked inputs: positions (T, *batch, 3), states (T, *batch) or None, steps (T,).
+
+    ``ys`` / ``missing`` are the measurements and missing mask of :func:`_measurements`.
+    """
 
     positions: Array
     states: NDArray[np.int8] | None
     steps: Array
     is_reference: bool
     up_axis: int
+    ys: Array
+    missing: NDArray[np.bool_]
 
 
-def _measurements(batch: _Batch) -> tuple[Array, NDArray[np.bool_]]:
-    """Measurements with NOT_TRACKED set to NaN, and the missing mask (T, *batch)."""
-    ys = batch.positions.copy()
+def _measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.bool_]]:
+    """Measurements (a float copy) with NaN and NOT_TRACKED joints set to NaN, and the
+    missing mask ``positions.shape[:-1]``. Shared by :func:`smooth`, the live smoother
+    and the robust smoother so that all three treat a sample as missing alike.
+    """
+    ys = np.array(positions, dtype=float)
     missing = np.isnan(ys).any(axis=-1)
-    if batch.states is not None:
-        missing |= batch.states == TrackingState.NOT_TRACKED
+    if states is not None:
+        missing |= np.asarray(states) == TrackingState.NOT_TRACKED
     ys[missing] = np.nan
     return ys, missing
+
+
+def _inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
+    """Measurement-variance multiplier ``(*valid.shape, 3)`` for valid INFERRED joints.
+
+    ``factor`` where a valid joint is INFERRED, 1 elsewhere; None when nothing is scaled
+    (no states, factor 1 or no valid inferred joint), so the filters skip the work.
+    """
+    if states is None or factor == 1.0:
+        return None
+    inferred = (np.asarray(states) == TrackingState.INFERRED) & valid
+    if not inferred.any():
+        return None
+    return np.repeat(np.where(inferred, factor, 1.0)[..., None], 3, axis=-1)
 
 
 def _diag3(v: Any) -> Array:
@@ -518,7 +540,7 @@ def _run_kalman(
     from tobitkf.kalman import kalman_filter, rts_smooth
     from tobitkf.model import LinearGaussian
 
-    ys, missing = _measurements(batch)
+    ys, missing = batch.ys, batch.missing
     T = ys.shape[0]
     bshape = ys.shape[1:-1]
     valid = ~missing
@@ -533,13 +555,9 @@ def _run_kalman(
     ratio = batch.steps / REFERENCE_DT  # (T,)
     if not batch.is_reference:
         kwargs["Q_seq"] = Q[None] * ratio[:, None, None]
-    scale = None
-    if batch.states is not None and inferred_noise_factor != 1.0:
-        inferred = (batch.states == TrackingState.INFERRED) & valid
-        if inferred.any():
-            scale = np.where(inferred, inferred_noise_factor, 1.0)  # (T, *batch)
-    if scale is not None:
-        kwargs["R_scale"] = np.broadcast_to(scale[..., None], ys.shape).copy()
+    r_scale = _inferred_r_scale(batch.states, valid, inferred_noise_factor)
+    if r_scale is not None:
+        kwargs["R_scale"] = r_scale
     kind = spec.options["filter"]
     if kind == "atkf":
         from tobitkf.tobit import adaptive_tobit_filter
@@ -578,7 +596,7 @@ def _run_kalman(
 def _run_baseline(
     spec: MethodSpec, params: Mapping[str, Any], batch: _Batch
 ) -> tuple[Array, NDArray[np.bool_]]:
-    ys, missing = _measurements(batch)
+    ys, missing = batch.ys, batch.missing
     name = spec.name
     if name in ("sgf", "savgol"):
         out = baselines.savgol(ys, params["window"], params["polyorder"], max_gap=params["max_gap"])
@@ -597,7 +615,7 @@ def _run_baseline(
         out = baselines.kinect_double_exponential(
             batch.positions,
             tracking_state=batch.states,
-            **{k: v for k, v in params.items()},
+            **params,
         )
     else:  # pragma: no cover - registry and runners are kept in step
         raise AssertionError(name)
@@ -707,12 +725,15 @@ def _smooth_group(
     states = None
     if ref.tracking_state is not None:
         states = np.stack([s.tracking_state for s in seqs], axis=1)
+    ys, missing = _measurements(positions, states)
     batch = _Batch(
         positions=positions,
         states=states,
         steps=steps,
         is_reference=is_reference,
         up_axis=ref.topology.up_axis if up_axis is None else up_axis,
+        ys=ys,
+        missing=missing,
     )
     if ref.n_frames == 0:
         est, clipped = positions.copy(), np.zeros(positions.shape[:-1], dtype=bool)
@@ -720,7 +741,6 @@ def _smooth_group(
         est, clipped = _run_kalman(spec, params, batch, offline, factor)
     else:
         est, clipped = _run_baseline(spec, params, batch)
-    _, missing = _measurements(batch)
     filled = missing & np.isfinite(est).all(axis=-1)
     T = max(ref.n_frames, 1)
     used = dict(params)
