@@ -155,3 +155,18 @@ def test_resolve_method_specs() -> None:
         resolve_method("bogus")[1](None)
     with pytest.raises(ValueError, match="method spec"):
         resolve_method(("a", "b", "c", "d"))
+
+
+def test_samples_missing_from_raw_are_in_no_glitch_class(track) -> None:
+    # the raw track loses a hand for 30 frames; a method that fills the gap is scored on
+    # the gap overall, but its per-class RMSEs stay on the samples raw is scored on
+    holey = track.positions.copy()
+    holey[50:80, 7] = np.nan
+    raw = track.replace(positions=holey)
+    filled = ("filled", lambda s: track.replace(positions=track.positions + 0.01))
+    tab = evaluate_methods(raw, track.positions, ["raw", filled])
+    r, f = tab.score("raw"), tab.score("filled")
+    assert f.counts["all"] == r.counts["all"] + 30
+    for name in ("fine", "short_glitch", "sustained"):
+        assert f.counts[name] == r.counts[name] == tab.class_counts[name]
+    assert f.rmse_by_class["fine"] == pytest.approx(0.01 * np.sqrt(3))

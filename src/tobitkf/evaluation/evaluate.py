@@ -466,7 +466,12 @@ def score_estimate(
     truth_angles: Mapping[str, NDArray] | None = None,
     clipped_fraction: float | None = None,
 ) -> MethodScore:
-    """Score one (T, J, 3) estimate against ``truth`` (see :class:`MethodScore`)."""
+    """Score one (T, J, 3) estimate against ``truth`` (see :class:`MethodScore`).
+
+    ``raw_classes`` is (T, J) from :func:`~tobitkf.evaluation.metrics.classify_glitches`;
+    samples labelled with no class code (e.g. -1 where the raw track is missing) count in
+    the overall and group RMSEs but in no per-class RMSE.
+    """
     est = np.asarray(estimate, dtype=float)
     tp = truth.positions
     err = joint_errors(est, tp)
@@ -725,6 +730,9 @@ def evaluate_methods(
     raw_err = joint_errors(track.positions, truth.positions)
     raw_err[:, ~truth.paired] = np.nan
     classes = classify_glitches(raw_err, glitch_threshold, short_max)
+    # a sample the raw track misses has no raw class: a method that fills it is scored on
+    # it overall, but the per-class RMSEs stay on the samples raw is scored on
+    classes[~np.isfinite(raw_err)] = -1
     groups = track.topology.joint_groups()
     hands = [i for i in groups.get("hands", []) if truth.paired[i]]
     truth_angles = joint_angles(truth.positions, truth.joint_names)

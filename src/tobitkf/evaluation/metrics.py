@@ -96,7 +96,9 @@ def classify_glitches(
     Returns
     -------
     (T, J) int8: ``FINE`` (0), ``SHORT_GLITCH`` (1), ``SUSTAINED_GLITCH`` (2); missing
-    samples are FINE-labelled but excluded by the metrics through NaN errors.
+    samples (NaN raw error) are FINE-labelled, so a caller scoring methods that fill
+    gaps must take them out (:func:`~tobitkf.evaluation.evaluate.evaluate_methods` labels
+    them -1).
     """
     err = np.asarray(raw_errors, dtype=float)
     flags = np.nan_to_num(err, nan=0.0) > threshold
