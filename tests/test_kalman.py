@@ -229,3 +229,25 @@ def test_input_errors():
         kalman_filter(m, np.zeros((3, 2)), diagonal=True)
     with pytest.raises(ValueError, match="batch shape"):
         kalman_filter(model.replace(x0=np.zeros((4, 3))), np.zeros((5, 2, 3)))
+
+
+def test_zero_time_steps_give_empty_results_of_the_documented_shapes():
+    """T = 0 (an empty recording) is not an error: every field has a leading 0 axis."""
+    from tobitkf.tobit import adaptive_tobit_filter, tobit_filter
+
+    rng = np.random.default_rng(6)
+    for model in (_random_model(rng, 3, 3, diagonal=True), _random_model(rng, 3, 2)):
+        n, p = model.n, model.p
+        ys = np.zeros((0, 4, p))
+        for res in (
+            kalman_filter(model, ys),
+            tobit_filter(model, ys, -1.0, 1.0),
+            tobit_filter(model, ys, -1.0, 1.0, variant="standard"),
+            adaptive_tobit_filter(model, ys, c=0.3),
+        ):
+            assert res.means.shape == res.predicted_means.shape == (0, 4, n)
+            assert res.covs.shape == res.predicted_covs.shape == (0, 4, n, n)
+            assert res.loglik.shape == (0, 4)
+            for arr in (res.p_uncensored, res.clipped, res.lower, res.upper):
+                assert arr.shape == (0, 4, p)
+            assert rts_smooth(model, res).covs.shape == (0, 4, n, n)

@@ -465,7 +465,7 @@ def prepare_inputs(
         raise ValueError(f"ys: expected shape (T, *batch, p) with p={p}, found {y.shape}")
     T = y.shape[0]
     batch = tuple(y.shape[1:-1])
-    finite_steps = np.isfinite(y).reshape(T, -1).all(axis=1)
+    finite_steps = np.isfinite(y).all(axis=tuple(range(1, y.ndim)))
     if not finite_steps.all() and np.any(np.isinf(y[~finite_steps])):
         raise ValueError("ys: contains infinite values (use NaN for missing components)")
     try:
@@ -713,7 +713,7 @@ def _deferred_limits(
         T = inp.T
         lo = np.empty((T, *full))
         up = np.empty((T, *full))
-        lo[0], up[0] = -np.inf, np.inf
+        lo[:1], up[:1] = -np.inf, np.inf
         if T > 1:
             centre = means[:-1] if sm.h_identity else sm.H * means[:-1]
             c = inp.c[1:] if inp.c_seq else inp.c
