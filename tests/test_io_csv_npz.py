@@ -110,6 +110,29 @@ def test_csv_multibody_round_trip(tmp_path):
         _assert_same(a, b)
 
 
+def test_csv_multibody_keeps_64_bit_ids_and_never_merges_bodies(tmp_path):
+    rng = np.random.default_rng(6)
+    topo = get_topology("kinect_v2")
+    p = tmp_path / "m.csv"
+    # NTU body ids exceed 2**53: as floats these two would be one body
+    ntu = [
+        _random_sequence(rng, 4, topo, body_id=b) for b in (72057594037931101, 72057594037931102)
+    ]
+    save(ntu, p, format="csv")
+    back = load(p)
+    assert [s.body_id for s in back] == [72057594037931101, 72057594037931102]
+    for a, b in zip(ntu, back, strict=True):
+        _assert_same(a, b)
+    # an id that equals another body's index, or ids that are not integers: numbered instead
+    for ids in ((1, None), ("a", "b"), (3, 3)):
+        seqs = [_random_sequence(rng, 4, topo, body_id=b) for b in ids]
+        save(seqs, p, format="csv")
+        back = load(p)
+        assert [s.body_id for s in back] == [0, 1]
+        for a, b in zip(seqs, back, strict=True):
+            np.testing.assert_array_equal(a.positions, b.positions)
+
+
 @settings(max_examples=20, deadline=None)
 @given(
     hnp.arrays(

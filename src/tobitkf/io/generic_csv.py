@@ -108,6 +108,16 @@ def _topology(names: list[str], hint: str | None, up_axis: int | None) -> Topolo
     )
 
 
+def _body_id(text: str) -> int | float:
+    """A body-id field as an exact int when it is integral (else the float)."""
+    text = text.strip()
+    try:
+        return int(text)
+    except ValueError:
+        v = float(text)  # parse_rows accepted the field, so it is a number
+        return int(v) if v.is_integer() else v
+
+
 def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     """Read a generic skeleton CSV (see the module docstring for the layout).
 
@@ -178,18 +188,20 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         if np.isnan(ids).any():
             k = int(np.flatnonzero(np.isnan(ids))[0])
             raise ReadError(path, numbers[k], "expected a body id, found an empty field")
-        _, first = np.unique(ids, return_index=True)
-        groups = [ids == ids[i] for i in sorted(first)]
+        # from the text, not the float: 64-bit Kinect body ids (NTU: 72057594037931101)
+        # do not fit a double, and neighbouring ids would merge into one body
+        body_ids = [_body_id(r.split(sep)[body_col]) for r in rows]
+        order = list(dict.fromkeys(body_ids))  # first appearance
+        groups = [np.array([b == o for b in body_ids]) for o in order]
     else:
+        order = [None]
         groups = [np.ones(len(rows), dtype=bool)]
     out = []
-    for g in groups:
+    for g, group_id in zip(groups, order, strict=True):
         d = data[g]
         nos = [n for n, keep in zip(numbers, g, strict=True) if keep]
         idx = np.array(xyz, dtype=int)
-        positions = d[:, idx]  # (T, J, 3)
-        if np.isinf(positions).any():
-            raise ReadError(path, None, "positions must be finite or empty")
+        positions = d[:, idx]  # (T, J, 3); parse_rows has rejected inf
         state = None
         if state_cols:
             state = np.full((len(d), len(joints)), 2, dtype=np.int8)
@@ -213,11 +225,8 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
             if back.size:
                 k = int(back[0]) + 1
                 raise ReadError(path, nos[k], "expected non-decreasing time values")
-        body_id = None
-        if body_col is not None:
-            v = float(d[0, body_col])
-            body_id = int(v) if v.is_integer() else v
-        elif "body_id" in comments:
+        body_id = group_id
+        if body_col is None and "body_id" in comments:
             body_id = comments["body_id"]
             if body_id.lstrip("-").isdigit():
                 body_id = int(body_id)
@@ -241,7 +250,8 @@ def write_csv(
     """Write sequences as a generic CSV (exact round trip through :func:`read_csv`).
 
     All sequences must share the same joints. Columns: ``time`` (when any sequence has
-    timestamps), ``body`` (when more than one sequence), then per joint
+    timestamps), ``body`` (when more than one sequence: the body ids when they are
+    distinct integers, else 0, 1, ...), then per joint
     ``_x, _y, _z`` and ``_state`` (when tracking states are present).
     """
     seqs = list(sequences)
@@ -252,6 +262,14 @@ def write_csv(
         if s.joint_names != names:
             raise ValueError("all sequences written to one CSV must have the same joints")
     multi = len(seqs) > 1
+    # the body column holds the sequences' own ids when they are distinct integers, else
+    # their index: a mix (ids 1 and None -> 1 and 1) would merge two bodies on reading
+    ids = [s.body_id for s in seqs]
+    if not (
+        all(isinstance(b, (int, np.integer)) and not isinstance(b, bool) for b in ids)
+        and len(set(ids)) == len(ids)
+    ):
+        ids = list(range(len(seqs)))
     with_state = any(s.tracking_state is not None for s in seqs)
     with_time = any(s.timestamps is not None for s in seqs)
     header = []
@@ -273,7 +291,7 @@ def write_csv(
     lines.append(sep.join(header))
     for k, s in enumerate(seqs):
         times = s.times() if with_time else None
-        body = s.body_id if isinstance(s.body_id, int) else k
+        body = int(ids[k])
         for t in range(s.n_frames):
             vals = []
             if times is not None:
