@@ -182,3 +182,19 @@ def test_run_benchmark_smoothing_removes_spikes_not_sustained_failures() -> None
     # a 10-50 frame failure is not a glitch to a smoother: it stays (within 25 %)
     assert sgf.rmse_by_label["sustained"] > 0.75 * raw.rmse_by_label["sustained"]
     assert raw.smoothness_M > sgf.smoothness_M
+
+
+def test_seed_spread_is_mean_and_sd_over_seeds() -> None:
+    from tobitkf.evaluation.benchmark import seed_spread
+
+    tabs = [run_benchmark(seed=s, methods=["raw", "sgf"], duration=4.0) for s in (0, 1)]
+    spread = seed_spread(tabs)
+    assert [r["method"] for r in spread] == ["raw", "sgf"]
+    for r in spread:
+        a, b = (t.row(r["method"]) for t in tabs)
+        assert r["rmse"] == pytest.approx(((a.rmse + b.rmse) / 2, abs(a.rmse - b.rmse) / 2))
+        for k, v in a.rmse_by_label.items():
+            w = b.rmse_by_label[k]
+            assert r[k] == pytest.approx(((v + w) / 2, abs(v - w) / 2))
+    with pytest.raises(ValueError, match="no tables"):
+        seed_spread([])

@@ -463,7 +463,7 @@ def report(track, truth, output, methods, pairs, no_gif):
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def benchmark(seed, seeds, motion, source, duration, methods, as_json):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
-    from tobitkf.evaluation.benchmark import run_benchmark
+    from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
     from tobitkf.evaluation.evaluate import DEFAULT_METHODS
     from tobitkf.skeleton.smooth import METHODS
 
@@ -484,22 +484,13 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json):
     if seeds == 1:
         console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
         return
-    import numpy as np
-
-    rows = []
-    for i, r0 in enumerate(tables[0].rows):
-        keys = ["rmse", *r0.rmse_by_label]
-        vals = []
-        for k in keys:
-            v = np.array(
-                [t.rows[i].rmse if k == "rmse" else t.rows[i].rmse_by_label[k] for t in tables]
-            )
-            vals.append(f"{100 * np.nanmean(v):.2f} ± {100 * np.nanstd(v):.2f}")
-        rows.append([r0.method, *vals])
+    spread = seed_spread(tables)
+    keys = [k for k in spread[0] if k != "method"]
+    rows = [
+        [r["method"], *[f"{100 * r[k][0]:.2f} ± {100 * r[k][1]:.2f}" for k in keys]] for r in spread
+    ]
     _print_table(
-        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}",
-        ["method", "rmse", *tables[0].rows[0].rmse_by_label],
-        rows,
+        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}", ["method", *keys], rows
     )
 
 

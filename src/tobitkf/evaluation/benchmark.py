@@ -11,7 +11,6 @@ alignment is needed: the truth is known in the track's frame and clock.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from tobitkf.evaluation.corruption import LABEL_NAMES, CorruptedTrack, CorruptionModel, corrupt
-from tobitkf.evaluation.evaluate import DEFAULT_METHODS, MethodLike, resolve_method
+from tobitkf.evaluation.evaluate import DEFAULT_METHODS, MethodLike, _jsonable, resolve_method
 from tobitkf.evaluation.metrics import joint_errors, rmse, smoothness, velocity_lag
 
-__all__ = ["BenchmarkRow", "BenchmarkTable", "benchmark_track", "run_benchmark"]
+__all__ = ["BenchmarkRow", "BenchmarkTable", "benchmark_track", "run_benchmark", "seed_spread"]
 
 
 @dataclass(frozen=True)
@@ -65,16 +64,7 @@ class BenchmarkTable:
         raise KeyError(f"no method {method!r}; have {[r.method for r in self.rows]}")
 
     def to_dict(self) -> dict[str, Any]:
-        def clean(x: Any) -> Any:
-            if isinstance(x, dict):
-                return {k: clean(v) for k, v in x.items()}
-            if isinstance(x, (list, tuple)):
-                return [clean(v) for v in x]
-            if isinstance(x, float | np.floating):
-                return float(x) if math.isfinite(x) else None
-            return x
-
-        return clean(
+        return _jsonable(
             {
                 "rows": [r.row() for r in self.rows],
                 "label_counts": self.label_counts,
@@ -201,3 +191,31 @@ def run_benchmark(
             "model": corrupted.model.to_dict(),
         },
     )
+
+
+def seed_spread(tables: Sequence[BenchmarkTable]) -> list[dict[str, Any]]:
+    """Mean and standard deviation over seeds of each method's RMSE (``tobitkf benchmark
+    --seeds K``).
+
+    Parameters
+    ----------
+    tables : one :class:`BenchmarkTable` per seed, with the same methods.
+
+    Returns
+    -------
+    list of dicts, one per method in the first table's order: ``method`` and, for
+    ``rmse`` and every label of ``rmse_by_label``, a ``(mean, sd)`` pair in metres (NaN
+    where no seed had samples of that label).
+    """
+    if not tables:
+        raise ValueError("seed_spread: no tables")
+    out = []
+    for r0 in tables[0].rows:
+        rows = [t.row(r0.method) for t in tables]
+        entry: dict[str, Any] = {"method": r0.method}
+        for key in ("rmse", *r0.rmse_by_label):
+            v = np.array([r.rmse if key == "rmse" else r.rmse_by_label[key] for r in rows])
+            v = v[np.isfinite(v)]
+            entry[key] = (float(v.mean()), float(v.std())) if v.size else (np.nan, np.nan)
+        out.append(entry)
+    return out
