@@ -251,3 +251,16 @@ def test_zero_time_steps_give_empty_results_of_the_documented_shapes():
             for arr in (res.p_uncensored, res.clipped, res.lower, res.upper):
                 assert arr.shape == (0, 4, p)
             assert rts_smooth(model, res).covs.shape == (0, 4, n, n)
+
+
+def test_rts_with_singular_predicted_covariance_matches_joint_posterior():
+    """Q and P0 singular (state 0 known exactly and constant): P⁻ is singular at every
+    step; the smoother must still give the exact posterior (pseudo-inverse gain)."""
+    model = LinearGaussian(
+        A=np.eye(2), H=[[1.0, 1.0]], Q=np.diag([0.0, 0.2]), R=[[0.3]], x0=[0.5, 0.0],
+        P0=np.diag([0.0, 1.0]),
+    )  # fmt: skip
+    ys = np.random.default_rng(9).normal(size=(6, 1))
+    ys[3] = np.nan
+    res = _check_against_brute_force(model, ys)
+    assert np.linalg.matrix_rank(res.predicted_covs[2]) == 1

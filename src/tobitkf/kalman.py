@@ -772,7 +772,7 @@ def rts_smooth(model: LinearGaussian, result: FilterResult) -> SmootherResult:
 
     For t = T-2, ..., 0 with A = A_{t+1} (the transition used to predict step t+1)::
 
-        G_t   = P_t Aᵀ (P⁻_{t+1})⁻¹
+        G_t   = P_t Aᵀ (P⁻_{t+1})⁻¹      (pseudo-inverse when P⁻_{t+1} is singular)
         x^s_t = x_t + G_t (x^s_{t+1} - x⁻_{t+1})
         P^s_t = P_t + G_t (P^s_{t+1} - P⁻_{t+1}) G_tᵀ
 
@@ -811,7 +811,13 @@ def rts_smooth(model: LinearGaussian, result: FilterResult) -> SmootherResult:
     for t in range(T - 2, -1, -1):
         A = model.A if A_seq is None else A_seq[t + 1]
         # Gᵀ = (P⁻)⁻¹ A P  (P⁻, P symmetric)
-        Gt = np.linalg.solve(Pp[t + 1], A @ Pf[t])
+        APf = A @ Pf[t]
+        try:
+            Gt = np.linalg.solve(Pp[t + 1], APf)
+        except np.linalg.LinAlgError:
+            # singular P⁻ (a singular Q with a singular P0): the pseudo-inverse gives the
+            # minimum-norm gain, as the per-axis path does with G = 0 where P⁻ = 0
+            Gt = np.linalg.pinv(Pp[t + 1], hermitian=True) @ APf
         G = np.swapaxes(Gt, -1, -2)
         xs[t] = xf[t] + np.einsum("...ij,...j->...i", G, xs[t + 1] - xp[t + 1])
         Pn = Pf[t] + G @ (Ps[t + 1] - Pp[t + 1]) @ Gt
