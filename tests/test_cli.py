@@ -138,3 +138,23 @@ def test_demo_runs_on_builtin_recording(tmp_path):
     assert (tmp_path / "d" / "report.html").stat().st_size > 10_000
     raw = load(tmp_path / "d" / "synthetic_kinect.csv")[0]
     assert raw.n_joints == 25 and raw.n_frames > 100
+
+
+def test_report_shows_a_doubtful_time_alignment(tmp_path):
+    # UI-PRMD m02 e01: the Vicon file covers about half of the Kinect recording
+    path = "ui-prmd/Segmented Movements/{}/Positions/m02_s01_e01_positions.txt.gz"
+    out = tmp_path / "report.html"
+    res = _run(
+        "report",
+        str(data_file(path.format("Kinect"))),
+        "--truth",
+        str(data_file(path.format("Vicon"))),
+        "-o",
+        str(out),
+        "--methods",
+        "raw",
+        "--no-gif",
+    )
+    assert res.exit_code == 0
+    assert "covers only" in out.read_text()
+    assert "covers only" in res.output

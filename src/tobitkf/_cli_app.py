@@ -432,6 +432,8 @@ def report(track, truth, output, methods, pairs, no_gif):
             _fail(str(exc))
         except (ValueError, KeyError) as exc:
             _fail(f"{track}: {exc}")
+    for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
+        err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
     console.print(table.to_text(), highlight=False, soft_wrap=True)
     console.print(f"report written to {Path(path).resolve()}")
 

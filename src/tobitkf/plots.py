@@ -129,12 +129,14 @@ def plot_joint_traces(
     plt = _pyplot()
     times = np.asarray(times, dtype=float)
     colours = _colours(list(series))
+    # half a frame on each side of a shaded episode, in the track's own time step
+    half = 0.5 * float(np.median(np.diff(times))) if len(times) > 1 else 0.0
     fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
     for k, ax in enumerate(axes):
         for start, stop in shade:
             lo = times[min(start, len(times) - 1)]
             hi = times[min(max(stop - 1, start), len(times) - 1)]
-            ax.axvspan(lo - 0.5 / 30, hi + 0.5 / 30, color="tab:red", alpha=0.12, lw=0)
+            ax.axvspan(lo - half, hi + half, color="tab:red", alpha=0.12, lw=0)
         for name, values in series.items():
             v = np.asarray(values, dtype=float)
             style = {"lw": 1.6 if name == "truth" else 1.1}

@@ -72,8 +72,9 @@ def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITC
     -------
     (T, J) bool
     """
-    err = np.linalg.norm(np.asarray(raw, float) - np.asarray(reference, float), axis=-1)
-    return np.nan_to_num(err, nan=0.0) > threshold
+    from tobitkf.evaluation.metrics import joint_errors
+
+    return np.nan_to_num(joint_errors(raw, reference), nan=0.0) > threshold
 
 
 def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
@@ -268,6 +269,8 @@ def track_report(
     truth_positions = None
     if mocap is not None or truth is not None:
         gt = prepare_truth(track, mocap, pairs=pairs) if mocap is not None else truth
+        if mocap is not None:  # a doubtful time fit must be seen on the page, not only in a log
+            notes = [*notes, *(f"Warning: {w}." for w in gt.notes.get("warnings", []))]
         table = evaluate_methods(track, gt, methods, outputs=outputs)
         truth_positions = gt.positions if mocap is not None else np.asarray(truth, float)
         tables = [
