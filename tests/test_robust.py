@@ -217,6 +217,15 @@ def test_irregular_timestamps_and_validation():
         robust_smooth(seq, v_max={"hands": 8.0})  # missing regions
     with pytest.raises(TypeError):
         robust_smooth(truth)
+    # checked as smooth() checks them, not coerced (bool("no") is True, int(1.5) is 1)
+    for bad in ({"bones": "no"}, {"lookback": 1.5}, {"inferred_noise_factor": np.nan}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            robust_smooth(seq, **bad)
+    # per-joint arrays are still accepted and equal the same values given per region
+    J = seq.n_joints
+    by_joint = robust_smooth(seq, v_max=np.full(J, 6.0), speed_sd=np.full(J, 0.5))
+    by_number = robust_smooth(seq, v_max=6.0, speed_sd=0.5)
+    np.testing.assert_array_equal(by_joint.positions, by_number.positions)
 
 
 def test_gate_relocks_after_max_reject():

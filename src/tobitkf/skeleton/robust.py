@@ -566,13 +566,21 @@ def robust_smooth(
     margin : speed-gate noise allowance, m (default 0.05).
     bone_tol_abs, bone_tol_rel : bone gate ``|length - L| <= abs + rel * L`` (default
         0.03 m + 15 %).
-    q_accel : white-acceleration spectral density, m²/s³ (number, (J,) or per region;
-        default hands 10, arms 4, torso 1, legs 4).
+    speed_sd : stationary (rms) joint speed of the OU velocity model, m/s (number, (J,)
+        or per region; default hands 1.0, arms 0.6, torso 0.3, legs 0.6); the velocity
+        noise density is ``q = 2 speed_sd² / tau`` (``speed_sd²`` when ``tau = inf``).
+    tau : velocity correlation time, s (default 0.15; ``inf`` = constant velocity).
     noise_sd : measurement noise standard deviation, m (default hands 15 mm, arms 10,
         torso 7, legs 10).
     inferred_noise_factor : variance multiplier for INFERRED joints (default 4).
     bones : use the bone gate (default True).
     two_pass : offline only: also gate backwards in time (default True).
+    max_reject : s; a joint rejected longer than this is re-acquired as soon as it moves
+        plausibly from frame to frame (default 2).
+    lookback : online only: accepted frames dropped from the state when a rejection
+        starts (default 2).
+    min_run : offline only: an accepted run between two rejections shorter than this
+        (s) is rejected too (default 0.1).
 
     Returns
     -------
@@ -585,39 +593,40 @@ def robust_smooth(
     """
     if not isinstance(sequence, SkeletonSequence):
         raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
-    d = ROBUST_DEFAULTS
     topo = sequence.topology
-    params = {
-        "v_max": d["v_max"] if v_max is None else v_max,
-        "margin": d["margin"] if margin is None else float(margin),
-        "bone_tol_abs": d["bone_tol_abs"] if bone_tol_abs is None else float(bone_tol_abs),
-        "bone_tol_rel": d["bone_tol_rel"] if bone_tol_rel is None else float(bone_tol_rel),
-        "speed_sd": d["speed_sd"] if speed_sd is None else speed_sd,
-        "tau": d["tau"] if tau is None else float(tau),
-        "noise_sd": d["noise_sd"] if noise_sd is None else noise_sd,
-        "inferred_noise_factor": d["inferred_noise_factor"]
-        if inferred_noise_factor is None
-        else float(inferred_noise_factor),
-        "bones": d["bones"] if bones is None else bool(bones),
-        "two_pass": d["two_pass"] if two_pass is None else bool(two_pass),
-        "max_reject": d["max_reject"] if max_reject is None else float(max_reject),
-        "lookback": d["lookback"] if lookback is None else int(lookback),
-        "min_run": d["min_run"] if min_run is None else float(min_run),
-        "offline": bool(offline),
+    given = {
+        "v_max": v_max,
+        "margin": margin,
+        "bone_tol_abs": bone_tol_abs,
+        "bone_tol_rel": bone_tol_rel,
+        "speed_sd": speed_sd,
+        "tau": tau,
+        "noise_sd": noise_sd,
+        "inferred_noise_factor": inferred_noise_factor,
+        "bones": bones,
+        "two_pass": two_pass,
+        "max_reject": max_reject,
+        "lookback": lookback,
+        "min_run": min_run,
     }
-    for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
-        v = params[name]
-        if not np.isfinite(v) or v < 0:
-            raise ValueError(f"{name} must be >= 0, got {v!r}")
-    if params["inferred_noise_factor"] < 1:
-        raise ValueError(
-            f"inferred_noise_factor must be >= 1, got {params['inferred_noise_factor']!r}"
-        )
+    # the registry's validators, so a direct call is checked as smooth() checks it (no
+    # silent bool("no") or int(1.5)); per-joint (J,) arrays are left to region_values
+    params: dict[str, Any] = {}
+    for name in ROBUST_DEFAULTS:
+        value = given[name]
+        if value is None:
+            params[name] = ROBUST_DEFAULTS[name]
+        elif name == "inferred_noise_factor":
+            v = _v_pos(name, value)
+            if not (1.0 <= v < np.inf):
+                raise ValueError(f"inferred_noise_factor must be >= 1 and finite, got {value!r}")
+            params[name] = v
+        elif ROBUST_VALIDATORS[name] is _v_region and np.ndim(value) > 0:
+            params[name] = value
+        else:
+            params[name] = ROBUST_VALIDATORS[name](name, value)
+    params["offline"] = bool(offline)
     vmax = region_values(topo, params["v_max"], "v_max")
-    if not (params["tau"] > 0):
-        raise ValueError(
-            f"tau must be > 0 (seconds; inf = constant velocity), got {params['tau']!r}"
-        )
     spd = region_values(topo, params["speed_sd"], "speed_sd")
     # stationary velocity variance of the OU model is q tau / 2
     qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
