@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._kinematics import axis_rotation, forward_kinematics
 from tobitkf.io._text import nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -164,19 +165,6 @@ def parse_bvh_hierarchy(path, lines: list[str], stop: int) -> list[BvhJoint]:
     return joints
 
 
-def _axis_rot(axis: int, deg: np.ndarray) -> np.ndarray:
-    a = np.deg2rad(deg)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros((*a.shape, 3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    R[..., axis, axis] = 1.0
-    R[..., i, i] = c
-    R[..., j, j] = c
-    R[..., i, j] = -s
-    R[..., j, i] = s
-    return R
-
-
 def _header_value(path, lines: list[str], k: int, key: str) -> str:
     while k < len(lines) and not lines[k].strip():
         k += 1
@@ -259,26 +247,19 @@ def read_bvh(
     )
     T = n_frames
     J = len(joints)
-    rot_g = np.empty((T, J, 3, 3))
-    pos_g = np.empty((T, J, 3))
+    # local rotation (channels multiplied in the order listed) and offset of each joint
+    rot_l = np.broadcast_to(np.eye(3), (T, J, 3, 3)).copy()
+    pos_l = np.broadcast_to(np.array([jt.offset for jt in joints], dtype=float), (T, J, 3)).copy()
     col = 0
     for j, jt in enumerate(joints):
-        R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-        t_local = np.broadcast_to(jt.offset, (T, 3)).copy()
         for kind, axis in jt.channels:
             values = data[:, col]
             col += 1
             if kind == "p":
-                t_local[:, axis] = values
+                pos_l[:, j, axis] = values
             else:
-                R = R @ _axis_rot(axis, values)
-        if jt.parent < 0:
-            rot_g[:, j] = R
-            pos_g[:, j] = t_local
-        else:
-            p = jt.parent
-            rot_g[:, j] = rot_g[:, p] @ R
-            pos_g[:, j] = pos_g[:, p] + np.einsum("tab,tb->ta", rot_g[:, p], t_local)
+                rot_l[:, j] = rot_l[:, j] @ axis_rotation(axis, values)
+    _, pos_g = forward_kinematics(rot_l, pos_l, [jt.parent for jt in joints])
     keep = [j for j, jt in enumerate(joints) if end_sites or not jt.end_site]
     names = [joints[j].name for j in keep]
     if len(set(names)) != len(names):

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import fmt_float, nonempty, parse_rows, read_lines
+from tobitkf.io._text import fmt_float, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
@@ -218,9 +218,7 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
             for (name, _), v in zip(BODY_FIELDS, values, strict=True):
                 body_meta[name][f] = v
         state = raw_state.copy()
-        zero = np.all(positions == 0.0, axis=-1)
-        positions[zero] = np.nan
-        state[zero] = TrackingState.NOT_TRACKED
+        zeros_to_nan(positions, state)
         state[~present] = TrackingState.NOT_TRACKED
         out.append(
             SkeletonSequence(

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._kinematics import axis_rotation, forward_kinematics
 from tobitkf.io._text import nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -85,24 +86,6 @@ def positions_path_for(angles_path: str | os.PathLike[str]) -> Path:
     return folder / name
 
 
-def _rot_x(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([o, z, z, z, c, -s, z, s, c], axis=-1).reshape(*a.shape, 3, 3)
-
-
-def _rot_y(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([c, z, s, z, o, z, -s, z, c], axis=-1).reshape(*a.shape, 3, 3)
-
-
-def _rot_z(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([c, -s, z, s, c, z, z, z, o], axis=-1).reshape(*a.shape, 3, 3)
-
-
 def euler_zxy(angles_deg: np.ndarray) -> np.ndarray:
     """E(a) = Rz(a_z) · Rx(a_x) · Ry(a_y) for angles (..., 3) = (a_x, a_y, a_z) in degrees.
 
@@ -110,8 +93,8 @@ def euler_zxy(angles_deg: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 3, 3)
     """
-    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
-    return _rot_z(a[..., 2]) @ _rot_x(a[..., 0]) @ _rot_y(a[..., 1])
+    a = np.asarray(angles_deg, dtype=float)
+    return axis_rotation(2, a[..., 2]) @ axis_rotation(0, a[..., 0]) @ axis_rotation(1, a[..., 1])
 
 
 def reconstruct_uiprmd(
@@ -132,19 +115,7 @@ def reconstruct_uiprmd(
     -------
     ndarray, shape (T, J, 3), same units as ``relative``.
     """
-    J = relative.shape[1]
-    local = euler_zxy(angles_deg)  # (T, J, 3, 3)
-    rot = np.empty_like(local)
-    pos = np.empty_like(relative)
-    for j in range(J):
-        p = parents[j]
-        if p < 0:
-            rot[:, j] = local[:, j]
-            pos[:, j] = relative[:, j]
-        else:
-            rot[:, j] = rot[:, p] @ local[:, j]
-            pos[:, j] = pos[:, p] + np.einsum("tab,tb->ta", rot[:, p], relative[:, j])
-    return pos
+    return forward_kinematics(euler_zxy(angles_deg), relative, parents)[1]
 
 
 def read_uiprmd_kinect(
