@@ -158,3 +158,28 @@ def test_report_shows_a_doubtful_time_alignment(tmp_path):
     assert res.exit_code == 0
     assert "covers only" in out.read_text()
     assert "covers only" in res.output
+
+
+def test_bad_input_is_one_clear_error_with_a_nonzero_status(tmp_path):
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    junk = tmp_path / "junk.txt"
+    junk.write_text("hello world\n")
+    kinect = str(data_file("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt"))
+    cases = [
+        (["evaluate", str(tmp_path / "missing.csv")], 2, "does not exist"),
+        (["evaluate", str(empty)], 1, "empty file"),
+        (["evaluate", str(junk)], 1, "unrecognised content"),
+        (["evaluate", kinect, "--truth", str(empty)], 1, "cannot read truth"),
+        (["evaluate", kinect, "--truth", kinect, "--methods", "raw"], 1, "cannot pair"),
+        # an unknown method fails before any file is read
+        (["evaluate", str(junk), "--methods", "raw,nosuch"], 2, "unknown method 'nosuch'"),
+        (["report", str(junk), "--methods", "nosuch"], 2, "unknown method 'nosuch'"),
+        (["fit", str(empty)], 1, "empty file"),
+    ]
+    for args, status, message in cases:
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code == status, (args, res.output)
+        assert message in res.output, (args, res.output)
+        assert res.exception is None or isinstance(res.exception, SystemExit), args
+        assert "Traceback" not in res.output, args

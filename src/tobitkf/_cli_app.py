@@ -272,11 +272,18 @@ def _load_one(path: str, what: str):
 
 
 def _method_list(text: str | None) -> list[str] | None:
+    from tobitkf.evaluation.evaluate import resolve_method
+
     if not text:
         return None
     names = [m.strip() for m in text.split(",") if m.strip()]
     if not names:
         raise click.BadParameter("no method named", param_hint="--methods")
+    for name in names:  # an unknown name fails before any file is read or fitted
+        try:
+            resolve_method(name)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--methods") from exc
     return names
 
 
@@ -420,9 +427,9 @@ def report(track, truth, output, methods, pairs, no_gif):
     from tobitkf.report import track_report
     from tobitkf.skeleton.smooth import METHODS
 
+    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
     raw = _load_one(track, "track")
     mocap = _load_one(truth, "truth") if truth else None
-    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
     with console.status("evaluating and drawing..."):
         try:
             path, table = track_report(

@@ -66,6 +66,7 @@ from tobitkf.evaluation.pairs import (
     UIPRMD_PAIRS,
     PairingTable,
     ResolvedPairs,
+    builtin_pairs,
     normalise_name,
     read_pairs,
 )
@@ -240,7 +241,7 @@ def prepare_truth(
     elif isinstance(pairs, PairingTable):
         table = pairs
     elif isinstance(pairs, str) and normalise_name(pairs) in ("keraal", "uiprmd"):
-        table = KERAAL_PAIRS if normalise_name(pairs) == "keraal" else UIPRMD_PAIRS
+        table = builtin_pairs(pairs)
     else:
         table = read_pairs(pairs)
     resolved = table.resolve(track.joint_names, mocap.joint_names)
