@@ -170,3 +170,14 @@ def test_samples_missing_from_raw_are_in_no_glitch_class(track) -> None:
     for name in ("fine", "short_glitch", "sustained"):
         assert f.counts[name] == r.counts[name] == tab.class_counts[name]
     assert f.rmse_by_class["fine"] == pytest.approx(0.01 * np.sqrt(3))
+
+
+def test_default_methods_are_the_issue_comparison_plus_registered_robust_methods() -> None:
+    from tobitkf.evaluation.evaluate import DEFAULT_METHODS, default_methods
+    from tobitkf.skeleton.smooth import METHODS
+
+    names = default_methods()
+    assert names[: len(DEFAULT_METHODS)] == list(DEFAULT_METHODS)
+    assert set(names[len(DEFAULT_METHODS) :]) == {"robust", "robust_online"} & set(METHODS)
+    for name in names:  # every default resolves
+        resolve_method(name)

@@ -333,15 +333,14 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
     (smoothness M) and the largest jumps.
     """
     from tobitkf.evaluation.evaluate import (
-        DEFAULT_METHODS,
+        default_methods,
         evaluate_methods,
         evaluate_without_truth,
         pool_scores,
         prepare_truth,
     )
-    from tobitkf.skeleton.smooth import METHODS
 
-    method_specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    method_specs = _method_list(methods) or default_methods()
     if truths and len(truths) != len(tracks):
         _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
     results: dict[str, Any] = {}
@@ -390,11 +389,6 @@ def _scaled(value: Any, factor: float) -> Any:
     return value * factor if isinstance(value, float) and factor != 1.0 else value
 
 
-def _default_eval_methods(defaults, registry) -> list[str]:
-    extra = [m for m in ("robust", "robust_online") if m in registry]
-    return [*defaults, *extra]
-
-
 # --------------------------------------------------------------------------- report
 @app.command()
 @click.argument("track", type=click.Path(exists=True, dir_okay=False))
@@ -423,11 +417,10 @@ def _default_eval_methods(defaults, registry) -> list[str]:
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
 def report(track, truth, output, methods, pairs, no_gif):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
+    from tobitkf.evaluation.evaluate import default_methods
     from tobitkf.report import track_report
-    from tobitkf.skeleton.smooth import METHODS
 
-    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    specs = _method_list(methods) or default_methods()
     raw = _load_one(track, "track")
     mocap = _load_one(truth, "truth") if truth else None
     with console.status("evaluating and drawing..."):
@@ -473,10 +466,9 @@ def report(track, truth, output, methods, pairs, no_gif):
 def benchmark(seed, seeds, motion, source, duration, methods, as_json):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
     from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
-    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
-    from tobitkf.skeleton.smooth import METHODS
+    from tobitkf.evaluation.evaluate import default_methods
 
-    specs = _method_list(methods) or _default_eval_methods(DEFAULT_METHODS, METHODS)
+    specs = _method_list(methods) or default_methods()
     tables = []
     for s in range(seed, seed + seeds):
         try:
@@ -657,16 +649,9 @@ def fit(paths, per_joint, q_structure, fit_r, form, as_json):
 def demo(outdir, seed, no_gif):
     """The main job end to end on the built-in synthetic recording (no files needed)."""
     from tobitkf.demo import run_demo
-    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
-    from tobitkf.skeleton.smooth import METHODS
 
     with console.status("generating, smoothing, scoring, drawing..."):
-        result = run_demo(
-            outdir,
-            seed=seed,
-            gif=not no_gif,
-            methods=_default_eval_methods(DEFAULT_METHODS, METHODS),
-        )
+        result = run_demo(outdir, seed=seed, gif=not no_gif)
     console.print("[bold]RMSE against the known truth, by glitch type (cm)[/bold]")
     console.print(result.table.to_text(), highlight=False, soft_wrap=True)
     for f in result.files:

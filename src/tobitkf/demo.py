@@ -44,14 +44,14 @@ def run_demo(
     DemoResult
     """
     from tobitkf.evaluation.benchmark import run_benchmark
-    from tobitkf.evaluation.evaluate import DEFAULT_METHODS
+    from tobitkf.evaluation.evaluate import default_methods
     from tobitkf.io import save
     from tobitkf.report import FOCUS_METHODS, ReportInput, TableSpec, write_report
 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Any] = {}
-    table = run_benchmark(seed=seed, methods=list(methods or DEFAULT_METHODS), outputs=outputs)
+    table = run_benchmark(seed=seed, methods=list(methods or default_methods()), outputs=outputs)
     corrupted = outputs["corrupted"]
     truth = outputs["truth"]
     raw = corrupted.sequence

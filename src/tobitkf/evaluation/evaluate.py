@@ -83,6 +83,7 @@ __all__ = [
     "GroundTruth",
     "MethodScore",
     "NoTruthTable",
+    "default_methods",
     "evaluate_methods",
     "evaluate_paths",
     "evaluate_without_truth",
@@ -97,6 +98,17 @@ __all__ = [
 DEFAULT_METHODS = ("raw", "kf", "atkf", "atkf2016", "sgf", "kf+rts", "one_euro", "kinect")
 
 MethodLike = str | tuple
+
+
+def default_methods() -> list[str]:
+    """:data:`DEFAULT_METHODS` plus our robust smoothers when registered.
+
+    What ``tobitkf evaluate``, ``report``, ``benchmark`` and the demo run when no method
+    is named.
+    """
+    from tobitkf.skeleton.smooth import METHODS
+
+    return [*DEFAULT_METHODS, *(m for m in ("robust", "robust_online") if m in METHODS)]
 
 
 # ------------------------------------------------------------------------------ truth
