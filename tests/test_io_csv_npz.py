@@ -54,7 +54,8 @@ def test_handwritten_csv(tmp_path):
         ("a_x,a_y,a_z\n1,2\n", 2, "expected 3 values"),
         ("a_x,a_y,a_z\n1,2,x\n", 2, "field 3"),
         ("a_x,a_y,a_z,foo\n1,2,3,4\n", 1, "unexpected column 'foo'"),
-        ("time,a_x,a_y,a_z\n1,0,0,0\n0.5,0,0,0\n", 3, "non-decreasing"),
+        ("time,a_x,a_y,a_z\n1,0,0,0\n0.5,0,0,0\n", 3, r"non-decreasing .*found 0\.5 after 1\.0"),
+        ("time,a_x,a_y,a_z\n0,0,0,0\n,1,1,1\n", 3, "expected a time value, found an empty"),
         ("a_x,a_y,a_z,a_state\n1,2,3,7\n", 2, "state 0, 1 or 2"),
     ],
 )

@@ -76,6 +76,14 @@ def test_qualisys_errors(tmp_path):
     with pytest.raises(ReadError, match="field 3") as e:
         read_qualisys(p)
     assert e.value.line == 2
+    p.write_text("MARKER_NAMES\tA\nFrame\tTime\tA X\tA Y\tA Z\n1\t0.01\t1\t2\t3\n2\t0\t1\t2\t3\n")
+    with pytest.raises(ReadError, match=r"non-decreasing Time values, found 0\.0 after 0\.01") as e:
+        read_qualisys(p)
+    assert e.value.line == 4
+    p.write_text("MARKER_NAMES\tA\nFrame\tTime\tA X\tA Y\tA Z\n1\t\t1\t2\t3\n")
+    with pytest.raises(ReadError, match="expected a Time value, found an empty field") as e:
+        read_qualisys(p)
+    assert e.value.line == 3
 
 
 # ---------------------------------------------------------------------- C3D

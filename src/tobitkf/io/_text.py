@@ -176,6 +176,32 @@ def _locate_bad_token(
     raise ReadError(path, None, "could not parse the numeric data")
 
 
+def check_times(
+    path: str | os.PathLike[str],
+    times: np.ndarray,
+    line_numbers: Sequence[int],
+    what: str = "time value",
+) -> None:
+    """Raise :class:`ReadError` at the first row whose time is missing or goes backwards.
+
+    ``times`` (N,) seconds as parsed (NaN for an empty field); ``line_numbers`` the file
+    line of each row. Equal consecutive times are allowed (duplicated stamps).
+    """
+    missing = np.flatnonzero(~np.isfinite(times))
+    if missing.size:
+        k = int(missing[0])
+        raise ReadError(path, line_numbers[k], f"expected a {what}, found an empty field")
+    back = np.flatnonzero(np.diff(times) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise ReadError(
+            path,
+            line_numbers[k],
+            f"expected non-decreasing {what}s, found {float(times[k])!r} after "
+            f"{float(times[k - 1])!r}",
+        )
+
+
 def zeros_to_nan(positions: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
     """Mark joints reported at exactly (0, 0, 0) as missing, in place.
 

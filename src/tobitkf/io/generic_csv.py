@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import fmt_float, nonempty, parse_rows, read_lines
+from tobitkf.io._text import check_times, fmt_float, nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
@@ -218,13 +218,7 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         timestamps = None
         if time_col is not None:
             timestamps = d[:, time_col]
-            if not np.all(np.isfinite(timestamps)):
-                k = int(np.flatnonzero(~np.isfinite(timestamps))[0])
-                raise ReadError(path, nos[k], "expected a time value, found none")
-            back = np.flatnonzero(np.diff(timestamps) < 0)
-            if back.size:
-                k = int(back[0]) + 1
-                raise ReadError(path, nos[k], "expected non-decreasing time values")
+            check_times(path, timestamps, nos)
         body_id = group_id
         if body_col is None and "body_id" in comments:
             body_id = comments["body_id"]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import KINECT_V2_JOINTS, Topology, get_topology
@@ -99,17 +99,7 @@ def read_krajjat(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         path, rows, numbers, sep="\t", ncols=ncols, what=f"a timestamp and {len(names)} joints x 3"
     )
     times = data[:, 0].copy()
-    if np.isnan(times).any():
-        k = int(np.flatnonzero(np.isnan(times))[0])
-        raise ReadError(path, numbers[k], "expected a timestamp, found NaN")
-    back = np.flatnonzero(np.diff(times) < 0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise ReadError(
-            path,
-            numbers[k],
-            f"expected non-decreasing timestamps, found {times[k]} after {times[k - 1]}",
-        )
+    check_times(path, times, numbers, "timestamp")
     positions = np.ascontiguousarray(data[:, 1:].reshape(-1, len(names), 3))
     zero = zeros_to_nan(positions)
     state = None

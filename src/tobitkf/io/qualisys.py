@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
@@ -119,13 +119,7 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
     timestamps = None
     if with_time:
         timestamps = data[:, 1].copy()
-        bad = np.flatnonzero(~np.isfinite(timestamps))
-        if bad.size:
-            raise ReadError(path, numbers[int(bad[0])], "expected a time value, found none")
-        back = np.flatnonzero(np.diff(timestamps) < 0)
-        if back.size:
-            k = int(back[0]) + 1
-            raise ReadError(path, numbers[k], "expected non-decreasing Time values")
+        check_times(path, timestamps, numbers, "Time value")
         data = data[:, 2:]
     positions = np.ascontiguousarray(data.reshape(-1, n_markers, 3)) * _UNIT_SCALE[units]
     zeros_to_nan(positions)
