@@ -390,7 +390,11 @@ def make_step_model(
         return StepModel(_diag(A), _diag(Q), _diag(H), r, True, a_identity, h_identity)
     if R_scale is not None:
         d = np.sqrt(R_scale)
+        r = _diag(R) * R_scale
         R = R * d[..., :, None] * d[..., None, :]
+        # the variances exactly as on the per-axis path (d² rounds differently from R_scale)
+        idx = np.arange(R.shape[-1])
+        R[..., idx, idx] = r
     return StepModel(A, Q, H, R, False, a_identity, h_identity)
 
 

@@ -124,8 +124,8 @@ def tkf_update(
     if sm.diagonal:
         h, r = sm.H, sm.R
         m = h * xp
-        HPH = h * h * Pp
         Pxy0 = h * Pp
+        HPH = h * Pxy0  # rounded as (H P⁻) Hᵀ on the general path
     else:
         H = sm.H
         m = xp @ H.T
