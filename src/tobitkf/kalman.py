@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.model import FilterResult, LinearGaussian, SmootherResult, check_covariance
+from tobitkf.model import FilterResult, LinearGaussian, SmootherResult, _is_diag, check_covariance
 
 __all__ = [
     "KF",
@@ -152,6 +152,41 @@ def observed_mask(y: Array, full: bool | None = None) -> tuple[NDArray[np.bool_]
     return obs, bool(obs.all())
 
 
+def _mask_unobserved(Pyy: Array, obs: NDArray[np.bool_]) -> Array:
+    """Pyy (*batch, p, p) with the rows and columns of unobserved components replaced by
+    those of the identity (a new array): solving with it ignores those components, and
+    its log-determinant is that of the observed block."""
+    both = obs[..., :, None] & obs[..., None, :]
+    Pyy = np.where(both, Pyy, 0.0)
+    idx = np.arange(Pyy.shape[-1])
+    Pyy[..., idx, idx] += ~obs
+    return Pyy
+
+
+def gain_update_diag(
+    xp: Array,
+    vp: Array,
+    Pxy: Array,
+    Pyy: Array,
+    e: Array,
+    obs: NDArray[np.bool_] | None,
+    full: bool,
+    out_x: Array | None = None,
+) -> tuple[Array, Array, Array]:
+    """Per-axis update x = x⁻ + K e, v = v⁻ - K Pxy with K = Pxy / Pyy (diagonal path).
+
+    All arguments elementwise over (*batch, p) (variances may carry fewer batch axes);
+    unobserved components (``~obs``, ignored when ``full``) get zero gain. ``out_x``:
+    optional buffer for the new mean. Returns x, v and K.
+    """
+    K = Pxy / Pyy
+    if not full:
+        K = np.where(obs, K, 0.0)
+        e = np.where(obs, e, 0.0)
+    x = np.add(xp, K * e, out=out_x)
+    return x, vp - K * Pxy, K
+
+
 def gain_update_general(
     xp: Array, Pp: Array, Pxy: Array, Pyy: Array, e: Array, obs: NDArray[np.bool_], full: bool
 ) -> tuple[Array, Array, Array, Array]:
@@ -172,10 +207,7 @@ def gain_update_general(
     n = xp.shape[-1]
     p = e.shape[-1]
     if not full:
-        both = obs[..., :, None] & obs[..., None, :]
-        Pyy = np.where(both, Pyy, 0.0)
-        idx = np.arange(p)
-        Pyy[..., idx, idx] += ~obs
+        Pyy = _mask_unobserved(Pyy, obs)
         Pxy = Pxy * obs[..., None, :]
         e = np.where(obs, e, 0.0)
     batch = np.broadcast_shapes(Pyy.shape[:-2], Pxy.shape[:-2], e.shape[:-1])
@@ -217,14 +249,9 @@ def _kf_update_diag(
         m = sm.H * xp
         Pxy = sm.H * vp
         S = sm.H * Pxy + r
-    K = Pxy / S
     e = y - m
     obs, full = observed_mask(y, full)
-    if not full:
-        e = np.where(obs, e, 0.0)
-        K = np.where(obs, K, 0.0)
-    x = np.add(xp, K * e, out=out_x)
-    v = vp - K * Pxy
+    x, v, K = gain_update_diag(xp, vp, Pxy, S, e, obs, full, out_x)
     inv_S = 1.0 / S
     if not full:
         terms = np.where(obs, np.log(S) + e * e * inv_S + _LOG_2PI, 0.0)
@@ -258,10 +285,7 @@ def _kf_update_general(
     x, P, K, w = gain_update_general(xp, Pp, Pxy, S, e, obs, full)
     # log N(y_obs; m_obs, S_obs): logdet of the masked Pyy equals logdet S_obs
     if not full:
-        both = obs[..., :, None] & obs[..., None, :]
-        S = np.where(both, S, 0.0)
-        idx = np.arange(S.shape[-1])
-        S[..., idx, idx] += ~obs
+        S = _mask_unobserved(S, obs)
         e = np.where(obs, e, 0.0)
     _, logdet = np.linalg.slogdet(S)
     k = S.shape[-1] if full else obs.sum(axis=-1)
@@ -356,11 +380,6 @@ def filter_step(
 # --------------------------------------------------------------------------------------
 def _diag(M: Array) -> Array:
     return np.ascontiguousarray(np.diagonal(M, axis1=-2, axis2=-1))
-
-
-def _all_diag(M: Array) -> bool:
-    n = M.shape[-1]
-    return not np.any(M[..., ~np.eye(n, dtype=bool)])
 
 
 def make_step_model(
@@ -513,10 +532,8 @@ def prepare_inputs(
         up = _param("upper", upper, full, np.inf)
     if np.any(np.isnan(lo)) or np.any(np.isnan(up)):
         raise ValueError("lower/upper: NaN limits (use -inf / inf for no limit)")
-    if np.any(lo >= up):
+    if np.any(lo >= up):  # also rules out lower = +inf and upper = -inf
         raise ValueError("lower/upper: every lower limit must be < the upper limit")
-    if np.any(lo == np.inf) or np.any(up == -np.inf):
-        raise ValueError("lower/upper: lower = +inf or upper = -inf")
     cc = None
     if c is not None and c_seq is not None:
         raise ValueError("give either c or c_seq, not both")
@@ -528,9 +545,9 @@ def prepare_inputs(
         raise ValueError("c: half-widths must be > 0 (inf allowed)")
     can_diag = (
         model.is_diagonal
-        and (A_s is None or _all_diag(A_s))
-        and (Q_s is None or _all_diag(Q_s))
-        and (R_s is None or _all_diag(R_s))
+        and (A_s is None or _is_diag(A_s))
+        and (Q_s is None or _is_diag(Q_s))
+        and (R_s is None or _is_diag(R_s))
     )
     if diagonal is None:
         diagonal = can_diag

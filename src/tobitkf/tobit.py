@@ -59,6 +59,7 @@ from tobitkf.kalman import (
     Method,
     StepModel,
     UpdateOut,
+    gain_update_diag,
     gain_update_general,
     observed_mask,
     prepare_inputs,
@@ -146,13 +147,7 @@ def tkf_update(
     floor = r * (ts.v_t + EPS_CENSORED * (Pa + Pb))
     if sm.diagonal:
         Pxy = Pxy0 * Pu
-        Pyy = Pu * Pu * HPH + floor
-        K = Pxy / Pyy
-        if not full:
-            K = np.where(obs, K, 0.0)
-            e = np.where(obs, e, 0.0)
-        x = np.add(xp, K * e, out=out_x)
-        P = Pp - K * Pxy
+        x, P, K = gain_update_diag(xp, Pp, Pxy, Pu * Pu * HPH + floor, e, obs, full, out_x)
     else:
         Pxy = Pxy0 * Pu[..., None, :]
         Pyy = HPH * Pu[..., :, None] * Pu[..., None, :]
@@ -193,15 +188,9 @@ def tkfc_update(
         Pxy0 = h * Pp
         S = h * Pxy0 + sm.R
         Ey, Vy, Pa, Pu, Pb = clipped_normal_variance_diag(m, S, lower, upper)
-        e = y - Ey
         Pxy = Pxy0 * Pu
         Pyy = Vy + EPS_CENSORED * S * (Pa + Pb)
-        K = Pxy / Pyy
-        if not full:
-            K = np.where(obs, K, 0.0)
-            e = np.where(obs, e, 0.0)
-        x = np.add(xp, K * e, out=out_x)
-        P = Pp - K * Pxy
+        x, P, K = gain_update_diag(xp, Pp, Pxy, Pyy, y - Ey, obs, full, out_x)
         s2 = S
     else:
         H = sm.H
