@@ -163,6 +163,14 @@ def test_streaming_errors():
         f.step(np.zeros((4, 3)), lower=2.0)
     with pytest.raises(ValueError, match="Q: expected shape"):
         f.step(np.zeros((4, 3)), Q=np.eye(2))
+    # arguments that do not broadcast to the frame are named (not numpy's message)
+    with pytest.raises(ValueError, match=r"lower: shape \(2,\) does not broadcast"):
+        f.step(np.zeros((4, 3)), lower=np.zeros(2))
+    with pytest.raises(ValueError, match=r"R_scale: shape \(5, 3\) does not broadcast"):
+        f.step(np.zeros((4, 3)), R_scale=np.ones((5, 3)))
+    g = StreamingFilter(model, "atkf", c=[0.3, 0.3])
+    with pytest.raises(ValueError, match=r"c: shape \(2,\) does not broadcast"):
+        g.step(np.zeros(3))
 
 
 def test_streaming_equals_batch_atkf_constant_identity_model():

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.kalman import StepOutput, filter_step, initial_state, make_step_model
+from tobitkf.kalman import StepOutput, _param, filter_step, initial_state, make_step_model
 from tobitkf.model import LinearGaussian, check_covariance, embed_diagonal
 from tobitkf.tobit import METHODS
 
@@ -191,9 +191,10 @@ class StreamingFilter:
             check_covariance("R", R_, definite=True)
         if A_ is not None and not np.all(np.isfinite(A_)):
             raise ValueError("A: contains NaN or infinite entries")
+        full = yv.shape
         Rs = None
         if R_scale is not None:
-            Rs = np.asarray(R_scale, dtype=float)
+            Rs = _param("R_scale", R_scale, full, 1.0)
             if not np.all(np.isfinite(Rs)) or np.any(Rs <= 0):
                 raise ValueError("R_scale: entries must be finite and > 0")
         if self.diagonal and any(
@@ -214,23 +215,16 @@ class StreamingFilter:
             )
         lo = _opt_array("lower", lower)
         up = _opt_array("upper", upper)
-        lo = self.lower if lo is None else lo
-        up = self.upper if up is None else up
-        full = yv.shape
-        lo_b = np.asarray(-np.inf) if lo is None else lo
-        up_b = np.asarray(np.inf) if up is None else up
-        for name, arr in (("lower", lo_b), ("upper", up_b)):
-            if np.broadcast_shapes(arr.shape, full) != full:
-                raise ValueError(f"{name}: shape {arr.shape} does not broadcast to {full}")
+        lo_b = _param("lower", self.lower if lo is None else lo, full, -np.inf)
+        up_b = _param("upper", self.upper if up is None else up, full, np.inf)
         if np.any(lo_b >= up_b):
             raise ValueError("lower/upper: every lower limit must be < the upper limit")
         cc = _opt_array("c", c)
         cc = self.c if cc is None else cc
         if cc is not None:
+            cc = _param("c", cc, full, np.inf)
             if np.any(cc <= 0):
                 raise ValueError("c: half-widths must be > 0 (inf allowed)")
-            if np.broadcast_shapes(cc.shape, full) != full:
-                raise ValueError(f"c: shape {cc.shape} does not broadcast to {full}")
         sm = make_step_model(model, self.diagonal, A=A_, Q=Q_, R=R_, R_scale=Rs)
         st = filter_step(self._method, self.t == 0, self._x, self._P, yv, sm, lo_b, up_b, cc)
         self.last = st
