@@ -153,10 +153,13 @@ def test_corrected_equals_gaussian_without_limits():
 def test_nan_measurements_contribute_nothing(data):
     y = data[:50, :3].copy()
     full = censored_loglik(model(), y, [LO], [HI], per_sequence=True)
+    last = tobit_filter(model(), y, [LO], [HI]).loglik[-1, 0]
     y[-1, 0, 0] = np.nan  # last step of sequence 0 unobserved
     part = censored_loglik(model(), y, [LO], [HI], per_sequence=True)
     np.testing.assert_allclose(part[1:], full[1:], rtol=1e-12)
-    assert part[0] > full[0] - 50 and part[0] != full[0]
+    # the earlier steps are untouched, so exactly that step's term is missing
+    assert last != 0.0
+    assert part[0] == pytest.approx(full[0] - last, rel=1e-12)
 
 
 def test_true_parameters_beat_half_and_double(data):

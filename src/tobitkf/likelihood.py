@@ -46,7 +46,7 @@ _Q_STRUCTURES = ("scalar", "diagonal", "full")
 _R_STRUCTURES = ("scalar", "diagonal")
 
 
-def _check_form(form: str, c: Any) -> None:
+def _check_form(form: str, c: Any, lower: Any, upper: Any) -> None:
     if form not in FORMS:
         raise ValueError(f"form must be one of {FORMS}, got {form!r}")
     if c is not None and form == "standard":
@@ -54,6 +54,8 @@ def _check_form(form: str, c: Any) -> None:
             "the adaptive filter (c given) has only the corrected likelihood; use "
             "form='corrected' or form='gaussian'"
         )
+    if c is not None and (lower is not None or upper is not None):
+        raise ValueError("give either fixed limits (lower/upper) or adaptive half-widths c")
 
 
 def _run_filter(
@@ -75,10 +77,7 @@ def _run_filter(
         return adaptive_tobit_filter(model, ys, c, **filter_kwargs)
     from tobitkf.tobit import tobit_filter
 
-    p = model.H.shape[0]
-    lo = np.full(p, -np.inf) if lower is None else lower
-    hi = np.full(p, np.inf) if upper is None else upper
-    return tobit_filter(model, ys, lo, hi, variant=form, **filter_kwargs)
+    return tobit_filter(model, ys, lower, upper, variant=form, **filter_kwargs)
 
 
 def censored_loglik(
@@ -113,9 +112,7 @@ def censored_loglik(
     -------
     float, or ndarray of shape ``batch`` when ``per_sequence``.
     """
-    _check_form(form, c)
-    if c is not None and (lower is not None or upper is not None):
-        raise ValueError("give either fixed limits (lower/upper) or adaptive half-widths c")
+    _check_form(form, c, lower, upper)
     ys = np.asarray(ys, dtype=float)
     res = _run_filter(model, ys, lower, upper, form, c, filter_kwargs)
     ll = np.asarray(res.loglik, dtype=float)
@@ -383,13 +380,11 @@ def fit_noise(
 
     from tobitkf.model import LinearGaussian
 
-    _check_form(form, c)
+    _check_form(form, c, lower, upper)
     if q_structure not in _Q_STRUCTURES:
         raise ValueError(f"q_structure must be one of {_Q_STRUCTURES}, got {q_structure!r}")
     if r_structure not in _R_STRUCTURES:
         raise ValueError(f"r_structure must be one of {_R_STRUCTURES}, got {r_structure!r}")
-    if c is not None and (lower is not None or upper is not None):
-        raise ValueError("give either fixed limits (lower/upper) or adaptive half-widths c")
     A = np.atleast_2d(np.asarray(A, dtype=float))
     H = np.atleast_2d(np.asarray(H, dtype=float))
     n, p = A.shape[0], H.shape[0]
@@ -527,10 +522,7 @@ def fit_noise(
             sd = np.sqrt(np.maximum(var, 0.0))
             se_q = sd[: n * n].reshape(n, n)
             if fit_r:
-                se_r = np.diag(sd[n * n :])
-                if r_structure == "diagonal" or p == 1:
-                    off = ~np.eye(p, dtype=bool)
-                    se_r[off] = 0.0
+                se_r = np.diag(sd[n * n :])  # R is diagonal: its off-diagonal entries are 0
     return NoiseFit(
         Q=Q_hat,
         R=R_hat,
