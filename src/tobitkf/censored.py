@@ -468,7 +468,7 @@ def clipped_normal_variance_diag(
 
 
 def _j_large(h: NDArray, k: NDArray, rho: NDArray) -> NDArray:
-    """``J(h, k; ρ)`` for ``|ρ| >= 0.925`` from the closed form ``K(h, k) - ρ Q(h) Q(k)``.
+    """``J(h, k; ρ)`` for ``|ρ| >= 0.99`` from the closed form ``K(h, k) - ρ Q(h) Q(k)``.
 
     ``K`` is MATH.md §2's ``K(t1, t2) = E[(Z1-t1)⁺ (Z2-t2)⁺] - E[(Z1-t1)⁺] E[(Z2-t2)⁺]``
     with the bivariate normal from Genz's algorithm. Absolute accuracy ~1e-15; relative
