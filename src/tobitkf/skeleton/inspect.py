@@ -37,7 +37,7 @@ def describe_sequence(seq) -> dict[str, Any]:
     """Summary of one :class:`~tobitkf.skeleton.sequence.SkeletonSequence` as plain data."""
     pos = np.asarray(seq.positions, dtype=float)
     missing = ~np.isfinite(pos).all(axis=-1)
-    jump, frame = largest_jumps(pos)
+    jump, frame = seq.largest_jumps()
     times = np.asarray(seq.times(), dtype=float) if seq.n_frames else np.zeros(0)
     out: dict[str, Any] = {
         "body_id": seq.body_id,

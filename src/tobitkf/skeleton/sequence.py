@@ -206,14 +206,6 @@ class SkeletonSequence:
         frames : ndarray of int, shape (J,)
             Frame ``t`` at which the largest jump lands (``-1`` when ``jumps`` is NaN).
         """
-        J = self.n_joints
-        if self.n_frames < 2:
-            return np.full(J, np.nan), np.full(J, -1, dtype=int)
-        step = np.linalg.norm(np.diff(self.positions, axis=0), axis=-1)  # (T-1, J)
-        valid = ~np.isnan(step)
-        filled = np.where(valid, step, -1.0)
-        arg = np.argmax(filled, axis=0)
-        has = valid.any(axis=0)
-        jumps = np.where(has, filled[arg, np.arange(J)], np.nan)
-        frames = np.where(has, arg + 1, -1)
-        return jumps, frames
+        from tobitkf.skeleton.inspect import largest_jumps
+
+        return largest_jumps(self.positions)

@@ -73,6 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tobitkf.skeleton import baselines
+from tobitkf.skeleton.limits import REFERENCE_DT  # the paper's frame step (30 fps)
 from tobitkf.skeleton.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 
@@ -90,8 +91,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: the paper's reference frame step (30 fps)
-REFERENCE_DT = 1.0 / 30.0
 #: measurement-variance multiplier for INFERRED joints (2x standard deviation, see module doc)
 DEFAULT_INFERRED_NOISE_FACTOR = 4.0
 #: Kinect device limits of the 2020 paper, Kinect camera axes (x, y up, z depth), metres
