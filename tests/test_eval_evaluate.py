@@ -181,3 +181,14 @@ def test_default_methods_are_the_issue_comparison_plus_registered_robust_methods
     assert set(names[len(DEFAULT_METHODS) :]) == {"robust", "robust_online"} & set(METHODS)
     for name in names:  # every default resolves
         resolve_method(name)
+
+
+def test_pool_scores_ignores_a_recording_without_scored_samples(track) -> None:
+    a = evaluate_methods(track, track.positions + 0.01, ["raw"])
+    empty = evaluate_methods(track, np.full_like(track.positions, np.nan), ["raw"])
+    assert np.isnan(empty.scores[0].max)
+    for tables in ([a, empty], [empty, a]):  # the order of the recordings does not matter
+        p = pool_scores(tables)[0]
+        assert p["max_cm"] == pytest.approx(100 * a.scores[0].max)
+        assert p["M"] == pytest.approx(a.scores[0].smoothness_M)
+        assert p["rmse_cm"] == pytest.approx(100 * a.scores[0].rmse)

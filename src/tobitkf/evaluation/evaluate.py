@@ -574,13 +574,15 @@ def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
             row["rmse_cm" if key == "all" else f"{key}_cm"] = (
                 100 * math.sqrt(num / den) if den else float("nan")
             )
-        n_all = [p.counts.get("all", 0) for p in parts]
+        # recordings with no scored sample (NaN M and max) must not turn the pool into NaN
+        scored = [p for p in parts if p.counts.get("all", 0)]
+        n_all = [p.counts["all"] for p in scored]
         row["M"] = (
-            sum(n * p.smoothness_M for n, p in zip(n_all, parts, strict=True)) / sum(n_all)
-            if sum(n_all)
+            sum(n * p.smoothness_M for n, p in zip(n_all, scored, strict=True)) / sum(n_all)
+            if scored
             else float("nan")
         )
-        row["max_cm"] = 100 * max(p.max for p in parts)
+        row["max_cm"] = 100 * max((p.max for p in scored), default=float("nan"))
         row["frames_over"] = sum(p.frames_over for p in parts)
         row["n_samples"] = sum(p.counts.get("all", 0) for p in parts)
         out.append(row)
