@@ -87,6 +87,16 @@ def test_skeleton_helper_and_first_observed():
     np.testing.assert_array_equal(d.x0, np.zeros(3))
 
 
+def test_skeleton_helper_names_a_wrong_shape():
+    for kw, name in (
+        (dict(q=[1e-3, 2e-3]), "q"),
+        (dict(r=[[0.01] * 3]), "r"),
+        (dict(p0=[1, 2]), "p0"),
+    ):
+        with pytest.raises(ValueError, match=rf"^{name}: expected one value or one per axis"):
+            LinearGaussian.skeleton(**kw)
+
+
 def test_replace_revalidates():
     m = _model()
     m2 = m.replace(R=[[2.0]])

@@ -225,15 +225,25 @@ class LinearGaussian:
         LinearGaussian
             n = p = 3, diagonal, batch shape that of ``x0``.
         """
-        qv = np.broadcast_to(np.asarray(q, dtype=float), (3,))
-        rv = np.broadcast_to(np.asarray(r, dtype=float), (3,))
-        pv = rv if p0 is None else np.broadcast_to(np.asarray(p0, dtype=float), (3,))
+        qv = _per_axis("q", q)
+        rv = _per_axis("r", r)
+        pv = rv if p0 is None else _per_axis("p0", p0)
         if x0 is None:
             if ys is None:
                 x0 = np.zeros(3)
             else:
                 x0 = first_observed(ys)
         return cls(A=np.eye(3), H=np.eye(3), Q=np.diag(qv), R=np.diag(rv), x0=x0, P0=np.diag(pv))
+
+
+def _per_axis(name: str, value: ArrayLike) -> Array:
+    """One value or one per axis (x, y, z) as a (3,) array; the error names the argument."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape not in ((), (1,), (3,)):
+        raise ValueError(
+            f"{name}: expected one value or one per axis, shape (3,); found {arr.shape}"
+        )
+    return np.broadcast_to(arr, (3,))
 
 
 def first_observed(ys: ArrayLike) -> Array:
