@@ -15,9 +15,6 @@ these into :func:`tobitkf.smooth`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import savgol_filter
@@ -433,7 +430,6 @@ def kinect_double_exponential(
         inferred = state[k] == _INFERRED
         jit = np.where(inferred, 2.0 * jitter0, jitter0)[..., None]
         mdev = np.where(inferred, 2.0 * maxdev0, maxdev0)
-        count = np.where(valid, count, 0)
         rr = np.where(valid[..., None], r, 0.0)
         # frame 1: start
         f0 = rr
@@ -462,12 +458,3 @@ def kinect_double_exponential(
         b_prev = np.where(valid[..., None], b, b_prev)
         count = np.where(valid, count + 1, 0)
     return out
-
-
-#: name -> function, for callers that dispatch on a string
-BASELINES: dict[str, Callable[..., Any]] = {
-    "savgol": savgol,
-    "one_euro": one_euro,
-    "kinect": kinect_double_exponential,
-    "moving_average": moving_average,
-}

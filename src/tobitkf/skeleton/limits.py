@@ -42,7 +42,8 @@ class LimitsFit:
     fps : float or None
         Frame rate used (None when per-step timestamps were used).
     n_steps : int
-        Number of finite displacement samples per joint and axis, summed over joints.
+        Number of displacements used: (step, joint) pairs with all three axes finite,
+        over all inputs.
     up_axis : int
         Vertical axis of the input (0, 1 or 2).
     """
