@@ -393,6 +393,7 @@ def test_skeleton_fit_recovers_random_walk_q():
     assert set(per) == {0, 1}
 
 
+@pytest.mark.realdata
 def test_skeleton_fit_on_kinect_recording():
     from conftest import data_file
     from tobitkf.io import load
