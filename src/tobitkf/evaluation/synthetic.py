@@ -226,9 +226,6 @@ def generate_motion(
         positions (T, 25, 3) metres in Kinect camera space, topology ``kinect_v2``,
         all joints TRACKED, timestamps ``k / fps``, ``metadata["motion"] = kind``.
     """
-    from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
-    from tobitkf.skeleton.topology import get_topology
-
     if kind not in MOTIONS:
         raise ValueError(f"unknown motion {kind!r}; expected one of {MOTIONS}")
     if duration <= 0 or fps <= 0:
@@ -247,14 +244,23 @@ def generate_motion(
     pos = generate_positions(params, scale=h / 1.75)
     start = np.array([rng.uniform(-0.3, 0.3), 0.0, rng.uniform(3.0, 3.4)])
     pos = pos + start
-    T = len(pos)
+    return _kinect_sequence(
+        pos, fps, {"motion": kind, "height_m": h, "seed": seed, "format": "synthetic"}
+    )
+
+
+def _kinect_sequence(positions: NDArray, fps: float, metadata: dict) -> object:
+    """A Kinect V2 SkeletonSequence of clean positions: all TRACKED, timestamps ``k / fps``."""
+    from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+
+    T, J = positions.shape[:2]
     return SkeletonSequence(
-        positions=pos,
+        positions=positions,
         topology=get_topology("kinect_v2"),
-        tracking_state=np.full((T, 25), int(TrackingState.TRACKED), dtype=np.int8),
+        tracking_state=np.full((T, J), int(TrackingState.TRACKED), dtype=np.int8),
         timestamps=np.arange(T) / fps,
         fps=fps,
-        metadata={"motion": kind, "height_m": h, "seed": seed, "format": "synthetic"},
+        metadata=metadata,
     )
 
 
@@ -291,8 +297,6 @@ def bvh_to_kinect(
     """
     from tobitkf.evaluation.alignment import resample
     from tobitkf.io.bvh import read_bvh
-    from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
-    from tobitkf.skeleton.topology import get_topology
 
     (bvh,) = read_bvh(path, end_sites=True)
     names, pos, ft = bvh.joint_names, bvh.positions, 1.0 / float(bvh.fps)
@@ -311,12 +315,4 @@ def bvh_to_kinect(
     kin = kin - np.array([centre[0], 0.0, centre[2]])
     kin[..., 2] += distance
     kin[..., 1] += floor_y - np.nanmin(kin[:, [_J["FootLeft"], _J["FootRight"]], 1])
-    T = len(kin)
-    return SkeletonSequence(
-        positions=kin,
-        topology=get_topology("kinect_v2"),
-        tracking_state=np.full((T, 25), int(TrackingState.TRACKED), dtype=np.int8),
-        timestamps=np.arange(T) / fps,
-        fps=fps,
-        metadata={"source": str(path), "format": "bvh_to_kinect"},
-    )
+    return _kinect_sequence(kin, fps, {"source": str(path), "format": "bvh_to_kinect"})
