@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from tobitkf.io import ReadError, detect_format, load
+from tobitkf.io import OptionError, ReadError, detect_format, load
 from tobitkf.io.bvh import read_bvh
 from tobitkf.io.qualisys import read_qualisys
 
@@ -140,6 +140,11 @@ def test_c3d_point_selection():
     assert all(n.endswith("O") for n in centres.joint_names)
     with pytest.raises(ValueError, match="points"):
         load(path, points="bones")
+    # a bad units= is the caller's mistake, not the file's
+    with pytest.raises(OptionError, match="units"):
+        load(path, units="furlong")
+    in_cm = load(path, units="cm")[0]
+    np.testing.assert_allclose(in_cm.positions, 10 * default.positions, equal_nan=True)
 
 
 def test_c3d_garbage_and_truncation_are_read_errors(tmp_path):

@@ -91,7 +91,7 @@ def read_c3d(
     points : {"positions", "all", "markers", "joint_centres"}
         Which POINT entries to return (see module docstring).
     units : str, optional
-        Override ``POINT:UNITS`` (``"mm"``, ``"cm"``, ``"m"``).
+        Override ``POINT:UNITS`` (``"mm"``, ``"cm"``, ``"m"``, ``"dm"``, ``"in"``).
 
     Returns
     -------
@@ -102,6 +102,8 @@ def read_c3d(
         raise OptionError(
             f"points must be 'positions', 'all', 'markers' or 'joint_centres', found {points!r}"
         )
+    if units is not None and units.lower() not in _UNITS:
+        raise OptionError(f"units must be one of {sorted(_UNITS)}, found {units!r}")
     c3d = _import_c3d()
     caught: list[warnings.WarningMessage] = []
     try:
