@@ -155,6 +155,11 @@ def test_resolve_method_specs() -> None:
         resolve_method("bogus")[1](None)
     with pytest.raises(ValueError, match="method spec"):
         resolve_method(("a", "b", "c", "d"))
+    # "+rts" on a method without an RTS pass would only relabel it
+    assert resolve_method("kf+rts")[0] == "kf+rts"
+    for name in ("sgf+rts", "one_euro+rts", "robust+rts"):
+        with pytest.raises(ValueError, match="Kalman-type"):
+            resolve_method(name)
 
 
 def test_samples_missing_from_raw_are_in_no_glitch_class(track) -> None:

@@ -384,6 +384,9 @@ def _smooth(name: str, params: Mapping[str, Any]) -> Callable[[Any], Any]:
             base, offline = name[: -len(suffix)], True
     if base not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: raw, {', '.join(sorted(METHODS))}")
+    if offline and getattr(METHODS[base], "kind", "kalman") != "kalman":
+        # smooth() ignores offline for the baselines and robust methods: the label would lie
+        raise ValueError(f"{name!r}: the RTS smoother exists for Kalman-type methods only")
     return lambda s: smooth(s, method=base, offline=offline, **params)
 
 
