@@ -272,3 +272,15 @@ def test_bvh_errors(tmp_path, edit, match):
                                        r1="0 0 90")))  # fmt: skip
     with pytest.raises(ReadError, match=match):
         read_bvh(p)
+
+
+def test_c3d_labels_made_unique_without_collisions():
+    from tobitkf.io.c3d import _unique
+
+    for labels in (["A", "A", "A_2"], ["A", "", "A", "A"], ["", "P1"], ["B_2", "B", "B"]):
+        out = _unique(labels)
+        assert len(set(out)) == len(out) == len(labels)
+        # the first occurrence of a non-empty label keeps its name
+        for k, lab in enumerate(labels):
+            if lab and lab not in labels[:k]:
+                assert out[k] == lab

@@ -68,16 +68,24 @@ def classify_labels(labels: list[str]) -> list[str]:
 
 
 def _unique(labels: list[str]) -> list[str]:
-    seen: dict[str, int] = {}
+    """Labels made unique: the first of each keeps its name; an empty one becomes
+    ``P<i>`` and a repeat ``<label>_2``, ``_3``..., skipping names already in use (a real
+    ``A_2`` or ``P1`` label keeps its name)."""
+    taken = {lab for lab in labels if lab}
+    kept: set[str] = set()
     out = []
     for i, lab in enumerate(labels):
-        lab = lab or f"P{i + 1}"
-        if lab in seen:
-            seen[lab] += 1
-            lab = f"{lab}_{seen[lab]}"
-        else:
-            seen[lab] = 1
-        out.append(lab)
+        if lab and lab not in kept:
+            kept.add(lab)
+            out.append(lab)
+            continue
+        base = lab or f"P{i + 1}"
+        new, n = base, 1
+        while new in taken:
+            n += 1
+            new = f"{base}_{n}"
+        taken.add(new)
+        out.append(new)
     return out
 
 
