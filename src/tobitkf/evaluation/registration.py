@@ -275,6 +275,31 @@ def fit_registration(
     -------
     RigidRegistration
     """
+    return _fit_registration(
+        track, mocap, offset_mode=offset_mode, target_rotations=target_rotations, scale=scale,
+        tukey_c=tukey_c, anneal_start=anneal_start, anneal_rate=anneal_rate,
+        min_scale=min_scale, max_iter=max_iter, tol=tol, quaternion_order=quaternion_order,
+    )  # fmt: skip
+
+
+def _fit_registration(
+    track: ArrayLike,
+    mocap: ArrayLike,
+    *,
+    offset_mode: OffsetMode = "world",
+    target_rotations: ArrayLike | None = None,
+    scale: bool = False,
+    tukey_c: float = 4.685,
+    anneal_start: float = 0.5,
+    anneal_rate: float = 0.7,
+    min_scale: float = 0.005,
+    max_iter: int = 100,
+    tol: float = 1e-7,
+    quaternion_order: str | None = None,
+    world_start: RigidRegistration | None = None,
+) -> RigidRegistration:
+    """:func:`fit_registration`; ``world_start`` is the world-offset fit that a body-offset
+    fit starts from, when the caller already has it (:func:`choose_quaternion_order`)."""
     y = np.asarray(track, dtype=float)
     m = np.asarray(mocap, dtype=float)
     if y.ndim != 3 or y.shape[-1] != 3:
@@ -337,13 +362,13 @@ def fit_registration(
         # start from the offset-free fit: the whole skeleton's shape pins the rotation down,
         # whereas per-joint offsets leave only the motion to do it (little when most joints
         # stand still, e.g. one arm raised), so a random start could lock onto noise
-        init = fit_registration(
+        init = _fit_registration(
             y, m, offset_mode="none", scale=scale, tukey_c=tukey_c, anneal_start=anneal_start,
             anneal_rate=anneal_rate, min_scale=min_scale, max_iter=max_iter, tol=tol,
         )  # fmt: skip
     if offset_mode == "body":
         # start from the world-offset fit: its rotation, weights and (time-median) offsets
-        init = fit_registration(
+        init = world_start if world_start is not None else _fit_registration(
             y, m, offset_mode="world", scale=scale, tukey_c=tukey_c, anneal_start=anneal_start,
             anneal_rate=anneal_rate, min_scale=min_scale, max_iter=max_iter, tol=tol,
         )  # fmt: skip
@@ -421,15 +446,18 @@ def choose_quaternion_order(
     best : RigidRegistration (``quaternion_order`` set).
     scores : dict order -> inlier residual RMS (metres) for ``"xyzw"`` and ``"wxyz"``.
     """
+    # both orders start from the same world-offset fit: compute it once
+    world = fit_registration(track, mocap, offset_mode="world", **kwargs)
     fits = {}
     for order in ("xyzw", "wxyz"):
         rots = quat_to_matrix(quaternions, order=order)
-        fits[order] = fit_registration(
+        fits[order] = _fit_registration(
             track,
             mocap,
             offset_mode="body",
             target_rotations=rots,
             quaternion_order=order,
+            world_start=world,
             **kwargs,
         )
     # Compare by a robust score that does not depend on each fit's own inlier choice.
