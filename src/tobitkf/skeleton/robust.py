@@ -31,10 +31,15 @@ A valid measurement ``y_j(t)`` is *accepted* when
 A joint rejected for longer than ``max_reject`` (2 s) is re-acquired as soon as it moves
 plausibly from frame to frame (no lock-out behind a wrong reference).  Offline, the gate
 runs forwards and backwards in time and a measurement is rejected when either pass
-rejects it (failures often enter over 1–3 frames that only one direction flags), and an
-accepted run shorter than ``min_run`` (0.1 s) between two rejections is rejected too.
-Online, when a rejection starts the last ``lookback`` (2) accepted frames are dropped
-from the filter state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
+rejects it (failures often enter over 1–3 frames that only one direction flags), an
+accepted run shorter than ``min_run`` (0.1 s) between two rejections is rejected too, and
+the chain rule is applied once more to the combined mask (:func:`enforce_chain`), so a
+wrist that failed together with its elbow is not left in place beside a bridged elbow.
+Online, after a rejection of at least ``min_run`` a joint is believed again only once its
+measurements have passed the gates for ``min_run`` (:func:`confirm_reacquisition`, the
+causal form of the same rule), the chain rule is applied forwards in time, and when a
+rejection starts the last ``lookback`` (2) accepted frames are dropped from the filter
+state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
 missing; ``INFERRED`` joints get ``inferred_noise_factor`` times the measurement
 variance.
 
@@ -413,6 +418,83 @@ def _cv_smooth(
     return out
 
 
+def enforce_chain(
+    acc: NDArray[np.bool_],
+    ys: Array,
+    times: Array,
+    parents: Any,
+    v_max: Array,
+    margin: float,
+    *,
+    backward: bool = True,
+) -> NDArray[np.bool_]:
+    """Apply the chain rule (gate rule 3) to a combined accept mask, both ways in time.
+
+    Offline the forward and backward gates are combined by AND, joint by joint; a wrist
+    may then be accepted by both passes in frames where its elbow is rejected by one of
+    them, which leaves a bridged elbow next to a failed wrist (a worse limb than either
+    raw or fully bridged).  Here a joint whose parent is rejected (or missing) in frame
+    ``t`` stays accepted only if it was accepted in the neighbouring frame and did not
+    jump from it; the sweep runs forwards, then (unless ``backward=False``, the causal
+    form used online) backwards, from the root outwards.
+    """
+    out = acc.copy()
+    T = out.shape[0]
+    par = np.asarray(parents, dtype=int)
+    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
+    sweeps = [(range(1, T), -1), (range(T - 2, -1, -1), 1)]
+    for order, step in sweeps if backward else sweeps[:1]:
+        for t in order:
+            s = t + step
+            bound = v_max * abs(times[t] - times[s]) + margin
+            for idx in levels:
+                orphan = out[t, idx] & ~out[t, par[idx]]
+                if not orphan.any():
+                    continue
+                moved = np.linalg.norm(ys[t, idx] - ys[s, idx], axis=-1)
+                keep = out[s, idx] & (moved <= bound[idx])
+                out[t, idx] &= ~orphan | keep
+    return out
+
+
+def confirm_reacquisition(
+    acc: NDArray[np.bool_], missing: NDArray[np.bool_], times: Array, min_run: float
+) -> NDArray[np.bool_]:
+    """Causal counterpart of :func:`drop_short_runs` for the online filter.
+
+    After a rejection that lasted at least ``min_run`` seconds (a sustained failure, not
+    a one-frame spike), a joint's measurements are believed again only once they have
+    kept passing the gates for ``min_run`` seconds; until then they stay rejected.
+    Inside a long failure a wrong sample sometimes passes the gates for a frame or two
+    (its bone happens to fit); online we cannot look ahead, so we wait.
+    """
+    out = acc.copy()
+    T, J = acc.shape
+    if min_run <= 0 or T < 2:
+        return out
+    rej_begin = np.full(J, np.nan)  # start of the current rejection stretch
+    conf_begin = np.full(J, np.nan)  # start of the current confirmation, if any
+    for t in range(T):
+        valid = ~missing[t]
+        r = valid & ~acc[t]
+        a = valid & acc[t]
+        # a rejection starts a stretch, or continues it and cancels its confirmation
+        rej_begin[r & np.isnan(rej_begin)] = times[t]
+        conf_begin[r] = np.nan
+        # the first accepted sample after a stretch: a long stretch needs confirmation
+        first = a & np.isfinite(rej_begin) & np.isnan(conf_begin)
+        long = first & (times[t] - rej_begin >= min_run)
+        conf_begin[long] = times[t]
+        rej_begin[first & ~long] = np.nan
+        waiting = a & np.isfinite(conf_begin)
+        still = waiting & (times[t] - conf_begin < min_run)
+        out[t, still] = False
+        done = waiting & ~still
+        conf_begin[done] = np.nan
+        rej_begin[done] = np.nan
+    return out
+
+
 def drop_short_runs(
     acc: NDArray[np.bool_], rejected: NDArray[np.bool_], times: Array, min_run: float
 ) -> NDArray[np.bool_]:
@@ -658,6 +740,11 @@ def robust_smooth(
         acc = gate_measurements(ys, times, parents, vmax, online_bones=True, **gate_kw)
     if offline and params["min_run"] > 0:
         acc = drop_short_runs(acc, ~missing & ~acc, times, params["min_run"])
+    if offline and params["two_pass"]:
+        acc = enforce_chain(acc, ys, times, parents, vmax, params["margin"])
+    if not offline and params["min_run"] > 0:
+        acc = confirm_reacquisition(acc, missing, times, params["min_run"])
+        acc = enforce_chain(acc, ys, times, parents, vmax, params["margin"], backward=False)
     rejected = ~missing & ~acc
     yk = ys.copy()
     yk[~acc] = np.nan
