@@ -456,6 +456,7 @@ def test_fuzz_any_method_finite_where_observed(
             steps[rng.random(T) < 0.3] = 0.0
         kw["timestamps"] = np.cumsum(steps)
     seq = _seq(pos, **kw)
+    offline = offline and METHODS[method].kind == "kalman"  # others refuse it (tested below)
     res = smooth(seq, method, offline=offline)
     out = res.positions
     assert out.shape == pos.shape
@@ -482,3 +483,10 @@ def test_atkf_keeps_still_feet_still_on_keraal():
         assert np.max(np.abs(new - raw_mean)) < 0.015  # every frame within 1.5 cm
         # no added jitter (the ankles drift slowly, so a lagging filter may not reduce it)
         assert np.all(new.std(axis=0) <= 1.1 * raw.std(axis=0))
+
+
+@pytest.mark.parametrize("method", ["sgf", "one_euro", "kinect", "robust", "robust_online"])
+def test_offline_is_refused_where_there_is_no_rts_pass(method):
+    seq = _seq(np.zeros((10, 2, 3)))
+    with pytest.raises(ValueError, match="offline=True"):
+        smooth(seq, method, offline=True)

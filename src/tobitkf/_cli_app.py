@@ -133,6 +133,8 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
+    if offline and METHODS[method].kind != "kalman":
+        _fail(f"--offline runs the RTS smoother of the Kalman-type methods; not for {method!r}")
     passed_over: list[Path] = []
     try:
         pairs = discover_inputs(inputs, pattern, skip=not_a_recording, skipped=passed_over)

@@ -385,7 +385,7 @@ def _smooth(name: str, params: Mapping[str, Any]) -> Callable[[Any], Any]:
     if base not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: raw, {', '.join(sorted(METHODS))}")
     if offline and getattr(METHODS[base], "kind", "kalman") != "kalman":
-        # smooth() ignores offline for the baselines and robust methods: the label would lie
+        # checked here too so that a bad method list fails before any recording is loaded
         raise ValueError(f"{name!r}: the RTS smoother exists for Kalman-type methods only")
     return lambda s: smooth(s, method=base, offline=offline, **params)
 

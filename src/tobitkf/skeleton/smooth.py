@@ -645,8 +645,9 @@ def smooth(
         A name from :data:`METHODS` (default ``"atkf"``).
     offline : bool
         Kalman-type methods: run the RTS smoother after the filter (uses future frames).
-        Ignored by the baselines (``sgf`` and centred ``moving_average`` are offline by
-        nature).
+        ``ValueError`` for the baselines (``sgf`` and centred ``moving_average`` are
+        offline by nature) and the robust methods (``robust`` is offline,
+        ``robust_online`` causal).
     up_axis : int, optional
         Vertical axis (0, 1, 2) for the ATKF limits; default: ``sequence.topology.up_axis``.
     inferred_noise_factor : float
@@ -669,6 +670,16 @@ def smooth(
         up_axis = _check_up_axis(up_axis)
     factor = _inferred_factor(inferred_noise_factor)
     offline = _bool("offline", offline)
+    if offline and spec.kind != "kalman":
+        # silently ignoring it would label a causal or non-causal output wrongly
+        hint = (
+            "use method 'robust' (offline) or 'robust_online' (causal)"
+            if spec.kind == "robust"
+            else "it is a baseline without an RTS pass"
+        )
+        raise ValueError(
+            f"offline=True runs the RTS smoother of the Kalman-type methods; {method!r}: {hint}"
+        )
     if spec.kind == "robust":  # the method name decides offline / online
         from tobitkf.skeleton.robust import robust_smooth
 
