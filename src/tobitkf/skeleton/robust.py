@@ -43,6 +43,14 @@ state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
 missing; ``INFERRED`` joints get ``inferred_noise_factor`` times the measurement
 variance.
 
+Carrying
+--------
+A rejected joint is not left behind in space while the body moves on: it gets a
+pseudo-measurement at its parent's position plus its offset from the parent the last
+time both were accepted (:func:`carry_with_parent`; offline, a stretch with no earlier
+good offset takes the next one), with a standard deviation equal to that bone's length,
+since the limb may have rotated about the parent.  ``carry=False`` turns this off.
+
 Smoothing
 ---------
 Each axis of each joint is an integrated Ornstein–Uhlenbeck velocity model,
@@ -102,6 +110,8 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "lookback": 2,
     # offline: an accepted run between two rejections must last this long, s
     "min_run": 0.1,
+    # rejected joints follow their parent (offset from the last good frame, sd = bone)
+    "carry": True,
 }
 
 
@@ -169,6 +179,7 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "max_reject": _v_pos,
     "lookback": _v_int,
     "min_run": _v_nonneg,
+    "carry": _v_bool,
 }
 
 
@@ -495,6 +506,44 @@ def confirm_reacquisition(
     return out
 
 
+def carry_with_parent(ys: Array, acc: NDArray[np.bool_], parents: Any) -> tuple[Array, Array]:
+    """Pseudo-measurements that carry rejected joints along with their parents (causal).
+
+    A rejected joint is placed at its parent's position (measured, or itself carried)
+    plus the joint's offset from the parent the last time both were accepted: a hand
+    whose measurement is rejected moves on with its wrist instead of staying behind in
+    space.  The joint may have rotated about its parent since, so the pseudo-measurement
+    is only as certain as that offset is long.
+
+    Returns
+    -------
+    pseudo : (T, J, 3) positions, NaN where there is none (accepted or missing samples,
+        roots, no earlier offset, no parent position).
+    radius : (T, J) length of the offset used (the bone length), NaN where no pseudo.
+    """
+    T, J, _ = ys.shape
+    par = np.asarray(parents, dtype=int)
+    valid = np.isfinite(ys).all(axis=-1)
+    pseudo = np.full_like(ys, np.nan)
+    radius = np.full((T, J), np.nan)
+    anchor = np.where(acc[..., None], ys, np.nan)
+    off = np.full((J, 3), np.nan)
+    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
+    for t in range(T):
+        for idx in levels:
+            p = par[idx]
+            rej = valid[t, idx] & ~acc[t, idx]
+            cand = anchor[t, p] + off[idx]
+            put = rej & np.isfinite(cand).all(axis=-1)
+            if put.any():
+                pseudo[t, idx[put]] = cand[put]
+                anchor[t, idx[put]] = cand[put]
+                radius[t, idx[put]] = np.linalg.norm(off[idx[put]], axis=-1)
+            both = acc[t, idx] & acc[t, p]
+            off[idx[both]] = ys[t, idx[both]] - ys[t, p[both]]
+    return pseudo, radius
+
+
 def drop_short_runs(
     acc: NDArray[np.bool_], rejected: NDArray[np.bool_], times: Array, min_run: float
 ) -> NDArray[np.bool_]:
@@ -535,6 +584,7 @@ def _causal_filter(
     r: Array,
     r_scale: Array | None,
     lookback: int,
+    carried: NDArray[np.bool_] | None = None,
 ) -> Array:
     """Causal OU-velocity Kalman filter per axis with roll-back at rejection onsets.
 
@@ -549,6 +599,10 @@ def _causal_filter(
     N = J * 3
     y = ys.reshape(T, N)
     ok = np.repeat(acc, 3, axis=1) & np.isfinite(y)
+    if carried is None:
+        extra = np.zeros_like(ok)
+    else:
+        extra = np.repeat(carried, 3, axis=1) & np.isfinite(y)
     qn = np.repeat(q, 3)
     rn = np.repeat(r, 3)[None, :] * (1.0 if r_scale is None else r_scale.reshape(T, N))
     rn = np.broadcast_to(rn, (T, N))
@@ -591,7 +645,7 @@ def _causal_filter(
             P[new, 0, 0] = rn[t, new]
             P[new, 1, 1] = v0[new]
             started |= new
-        upd = ok[t] & ~new
+        upd = (ok[t] | extra[t]) & ~new & started
         if upd.any():
             S = P[upd, 0, 0] + rn[t, upd]
             K = P[upd, :, 0] / S[:, None]
@@ -634,6 +688,7 @@ def robust_smooth(
     max_reject: float | None = None,
     lookback: int | None = None,
     min_run: float | None = None,
+    carry: bool | None = None,
 ) -> SkeletonSequence:
     """Reject physically impossible measurements, then smooth (module docstring).
 
@@ -663,6 +718,9 @@ def robust_smooth(
         starts (default 2).
     min_run : offline only: an accepted run between two rejections shorter than this
         (s) is rejected too (default 0.1).
+    carry : rejected joints are carried along with their parent (pseudo-measurement at
+        the parent plus the last good offset, standard deviation = that bone's length),
+        instead of only being predicted by their own motion model (default True).
 
     Returns
     -------
@@ -690,6 +748,7 @@ def robust_smooth(
         "max_reject": max_reject,
         "lookback": lookback,
         "min_run": min_run,
+        "carry": carry,
     }
     # the registry's validators, so a direct call is checked as smooth() checks it (no
     # silent bool("no") or int(1.5)); per-joint (J,) arrays are left to region_values
@@ -749,11 +808,33 @@ def robust_smooth(
     yk = ys.copy()
     yk[~acc] = np.nan
     r_scale = _inferred_r_scale(states, ~missing, params["inferred_noise_factor"])
+    carried = np.zeros((T, J), dtype=bool)
+    if params["carry"]:
+        pseudo, radius = carry_with_parent(ys, acc, parents)
+        if offline:  # a stretch with no earlier good offset takes the next one
+            pb, rb = carry_with_parent(ys[::-1], acc[::-1], parents)
+            take = ~np.isfinite(radius) & np.isfinite(rb[::-1])
+            pseudo[take], radius[take] = pb[::-1][take], rb[::-1][take]
+        carried = np.isfinite(pseudo).all(axis=-1)
+        yk[carried] = pseudo[carried]
+        # standard deviation = the bone length: the joint may have rotated about its parent
+        scale = np.maximum(1.0, (np.nan_to_num(radius) / sd[None, :]) ** 2)
+        rs = np.ones((T, J, 3)) if r_scale is None else r_scale.copy()
+        rs[carried] = scale[carried][:, None]
+        r_scale = rs
     if offline:
         est = _cv_smooth(yk, steps, params["tau"], qa, sd**2, r_scale, True)
     else:
         est = _causal_filter(
-            yk, acc, steps, params["tau"], qa, sd**2, r_scale, int(params["lookback"])
+            yk,
+            acc,
+            steps,
+            params["tau"],
+            qa,
+            sd**2,
+            r_scale,
+            int(params["lookback"]),
+            carried,
         )
     # no estimate before a joint's first valid measurement, none for joints never accepted
     valid = ~missing
