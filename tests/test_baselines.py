@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tobitkf.skeleton.baselines import (
+from tobitkf.smoothing.baselines import (
     kinect_double_exponential,
     moving_average,
     one_euro,

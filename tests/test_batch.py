@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tobitkf.batch import discover_inputs, parse_param, plan_jobs, strip_extension
+from tobitkf.app.batch import discover_inputs, parse_param, plan_jobs, strip_extension
 
 
 def _touch(path: Path) -> Path:
@@ -121,7 +121,7 @@ def test_discover_skips_companion_files_only_inside_folders(tmp_path):
 
 
 def test_not_a_recording_passes_over_docs_and_companions_but_not_bad_recordings(tmp_path):
-    from tobitkf.batch import not_a_recording
+    from tobitkf.app.batch import not_a_recording
 
     assert not_a_recording(_touch(tmp_path / "README.md"))
     assert not_a_recording(_touch(tmp_path / "photo.png"))

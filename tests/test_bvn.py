@@ -1,4 +1,4 @@
-"""Bivariate normal CDF (tobitkf._bvn): scipy agreement, exact identities, tails."""
+"""Bivariate normal CDF (tobitkf.core._bvn): scipy agreement, exact identities, tails."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from scipy import integrate
 from scipy.special import ndtr
 from scipy.stats import multivariate_normal
 
-from tobitkf._bvn import bivariate_normal_cdf, bivariate_normal_upper
+from tobitkf.core._bvn import bivariate_normal_cdf, bivariate_normal_upper
 
 finite = st.floats(-8.0, 8.0, allow_nan=False)
 corr = st.floats(-1.0, 1.0, allow_nan=False)

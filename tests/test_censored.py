@@ -1,4 +1,4 @@
-"""Clipped-normal moments (tobitkf.censored): reference file, high-precision values,
+"""Clipped-normal moments (tobitkf.core.censored): reference file, high-precision values,
 Monte Carlo, properties, tails, likelihood."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm, truncnorm
 
-from tobitkf.censored import (
+from tobitkf.core.censored import (
     ClippedMoments,
     TruncatedStats,
     censored_logpdf,

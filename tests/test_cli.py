@@ -13,7 +13,7 @@ click = pytest.importorskip("click")
 from click.testing import CliRunner  # noqa: E402
 
 from conftest import data_file  # noqa: E402
-from tobitkf._cli_app import app  # noqa: E402
+from tobitkf.app.commands import app  # noqa: E402
 from tobitkf.io import load, save  # noqa: E402
 from tobitkf.skeleton.sequence import SkeletonSequence  # noqa: E402
 from tobitkf.skeleton.topology import get_topology  # noqa: E402

@@ -179,7 +179,7 @@ def test_samples_missing_from_raw_are_in_no_glitch_class(track) -> None:
 
 def test_default_methods_are_the_issue_comparison_plus_registered_robust_methods() -> None:
     from tobitkf.evaluation.evaluate import DEFAULT_METHODS, default_methods
-    from tobitkf.skeleton.smooth import METHODS
+    from tobitkf.smoothing.api import METHODS
 
     names = default_methods()
     assert names[: len(DEFAULT_METHODS)] == list(DEFAULT_METHODS)

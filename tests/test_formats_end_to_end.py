@@ -7,7 +7,7 @@ import pytest
 
 from conftest import data_file
 from tobitkf.io import load, save
-from tobitkf.skeleton.smooth import METHODS, smooth
+from tobitkf.smoothing.api import METHODS, smooth
 
 #: one real recording per format in ../shared/data
 FILES = {

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tobitkf.kalman import kalman_filter, rts_smooth
-from tobitkf.model import LinearGaussian
+from tobitkf.core.kalman import kalman_filter, rts_smooth
+from tobitkf.core.model import LinearGaussian
 
 # ---------------------------------------------------------------------------- brute force
 
@@ -233,7 +233,7 @@ def test_input_errors():
 
 def test_zero_time_steps_give_empty_results_of_the_documented_shapes():
     """T = 0 (an empty recording) is not an error: every field has a leading 0 axis."""
-    from tobitkf.tobit import adaptive_tobit_filter, tobit_filter
+    from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
 
     rng = np.random.default_rng(6)
     for model in (_random_model(rng, 3, 3, diagonal=True), _random_model(rng, 3, 2)):

@@ -35,15 +35,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from tobitkf.likelihood import (
+from tobitkf.core.likelihood import (
     _q_from_params,
     _q_to_params,
     censored_loglik,
     fit_noise,
     fit_skeleton_noise,
 )
-from tobitkf.model import LinearGaussian
-from tobitkf.tobit import tobit_filter
+from tobitkf.core.model import LinearGaussian
+from tobitkf.core.tobit import tobit_filter
 
 A_AR, Q_TRUE, R_TRUE = 0.95, 0.1, 0.1
 LO, HI = -1.2, 0.7

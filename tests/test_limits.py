@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import data_file
-from tobitkf.skeleton.limits import fit_limits
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing.fit import fit_limits
 
 
 def _seq(pos, up_axis=1, **kw):

@@ -7,10 +7,10 @@ import pytest
 
 from conftest import data_file
 from tobitkf.io import load
-from tobitkf.skeleton.live import LIVE_METHODS, LiveSmoother
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
-from tobitkf.skeleton.smooth import smooth
 from tobitkf.skeleton.topology import get_topology
+from tobitkf.smoothing.api import smooth
+from tobitkf.smoothing.live import LIVE_METHODS, LiveSmoother
 
 
 def _stream(seq: SkeletonSequence, method: str, fps: float | None = None, **params) -> np.ndarray:

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tobitkf.model import (
+from tobitkf.core.model import (
     FilterResult,
     LinearGaussian,
     SmootherResult,

@@ -15,19 +15,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tobitkf.evaluation.oscillator import (
-    OscillatorConfig,
-    noncredibility_index,
-    oscillator_experiment,
-    rmse_per_run,
-    simulate_oscillator,
-)
-from tobitkf.evaluation.paper import (
+from tobitkf.paper.covariance import (
     EXAMPLE_BRACKET,
     PAPER_EQ24_EXACT,
     PAPER_EQ25_STANDARD_TKF,
     covariance_example,
     monte_carlo_clipped_covariance,
+)
+from tobitkf.paper.oscillator import (
+    OscillatorConfig,
+    noncredibility_index,
+    oscillator_experiment,
+    rmse_per_run,
+    simulate_oscillator,
 )
 
 # ---------------------------------------------------------------------------------------
@@ -212,7 +212,7 @@ def test_covariance_example_outputs(example):
 
 def test_covariance_example_figure(example, tmp_path):
     pytest.importorskip("matplotlib")
-    from tobitkf.evaluation.paper_figures import covariance_example_figure
+    from tobitkf.paper.figures import covariance_example_figure
 
     paths = covariance_example_figure(example, tmp_path / "figs")
     assert all(p.exists() and p.stat().st_size > 1000 for p in paths)
@@ -269,7 +269,7 @@ def test_oscillator_reduced_run_outputs(tmp_path):
     text = res.format_text()
     assert "Table 1" in text and "Table 2" in text and "0.4434" in text
     pytest.importorskip("matplotlib")
-    from tobitkf.evaluation.paper_figures import oscillator_figures
+    from tobitkf.paper.figures import oscillator_figures
 
     paths = oscillator_figures(res, tmp_path / "out")
     assert [p.name for p in paths] == [

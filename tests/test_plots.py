@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("matplotlib")
 
-from tobitkf import plots
+from tobitkf.app import plots
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -1,4 +1,4 @@
-"""Tests of tobitkf.skeleton.robust: physical gating + OU-velocity Kalman smoothing."""
+"""Tests of tobitkf.smoothing.robust: physical gating + OU-velocity Kalman smoothing."""
 
 from __future__ import annotations
 
@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from tobitkf.skeleton.robust import (
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.topology import get_topology
+from tobitkf.smoothing.robust import (
     _ou_matrices,
     bone_lengths,
     carry_with_parent,
@@ -16,8 +18,6 @@ from tobitkf.skeleton.robust import (
     joint_levels,
     robust_smooth,
 )
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
-from tobitkf.skeleton.topology import get_topology
 
 FPS = 30.0
 
@@ -389,7 +389,7 @@ def test_keraal_pooled_rmse_below_raw():
 
 
 def test_validators_for_the_registry():
-    from tobitkf.skeleton.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
+    from tobitkf.smoothing.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
 
     assert set(ROBUST_VALIDATORS) == set(ROBUST_DEFAULTS) - {"inferred_noise_factor"}
     for name, check in ROBUST_VALIDATORS.items():

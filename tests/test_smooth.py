@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 
 from conftest import data_file
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
-from tobitkf.skeleton.smooth import (
+from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing.api import (
     METHODS,
     check_params,
     method_defaults,
     smooth,
 )
-from tobitkf.skeleton.topology import Topology
 
 ALL_METHODS = sorted(METHODS)
 
@@ -288,8 +288,8 @@ def test_atkf_vertical_limit_follows_the_up_axis():
 
 
 def test_atkf_limits_widen_after_a_gap():
-    from tobitkf.model import LinearGaussian
-    from tobitkf.tobit import adaptive_tobit_filter
+    from tobitkf.core.model import LinearGaussian
+    from tobitkf.core.tobit import adaptive_tobit_filter
 
     _, pos = _still(T=60, J=1, sigma=0.003)
     pos[20:50] = np.nan  # one second unobserved ...
@@ -310,8 +310,8 @@ def test_atkf_limits_widen_after_a_gap():
 
 
 def test_atkf_irregular_steps_match_explicit_q_seq_and_c_seq():
-    from tobitkf.model import LinearGaussian
-    from tobitkf.tobit import adaptive_tobit_filter
+    from tobitkf.core.model import LinearGaussian
+    from tobitkf.core.tobit import adaptive_tobit_filter
 
     rng = np.random.default_rng(9)
     T = 50

@@ -7,10 +7,10 @@ import zlib
 import numpy as np
 import pytest
 
-from tobitkf.kalman import kalman_filter
-from tobitkf.model import LinearGaussian
-from tobitkf.streaming import StreamingFilter
-from tobitkf.tobit import adaptive_tobit_filter, tobit_filter
+from tobitkf.core.kalman import kalman_filter
+from tobitkf.core.model import LinearGaussian
+from tobitkf.core.streaming import StreamingFilter
+from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
 
 
 def _general_model(rng, batch=(2,)):

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from tobitkf.kalman import kalman_filter, make_step_model
-from tobitkf.model import LinearGaussian
-from tobitkf.tobit import (
+from tobitkf.core.kalman import kalman_filter, make_step_model
+from tobitkf.core.model import LinearGaussian
+from tobitkf.core.tobit import (
     EPS_CENSORED,
     adaptive_tobit_filter,
     atkf_update,
@@ -501,7 +501,7 @@ def test_atkf_on_real_kinect_glitches():
     assert np.all(at_j[tips] < 0.25 * raw_j[tips])
     assert not at.clipped[:, [0, 1, 12, 16]].any()  # SpineBase, SpineMid, hips: no clipping
     assert np.all(np.isfinite(at.means)) and np.all(at.covs >= 0)
-    from tobitkf.streaming import StreamingFilter
+    from tobitkf.core.streaming import StreamingFilter
 
     f = StreamingFilter(model, "atkf", c=c)
     for t in range(ys.shape[0]):

@@ -106,7 +106,7 @@ def default_methods() -> list[str]:
     What ``tobitkf evaluate``, ``report``, ``benchmark`` and the demo run when no method
     is named.
     """
-    from tobitkf.skeleton.smooth import METHODS
+    from tobitkf.smoothing.api import METHODS
 
     return [*DEFAULT_METHODS, *(m for m in ("robust", "robust_online") if m in METHODS)]
 
@@ -375,7 +375,7 @@ def resolve_method(spec: MethodLike) -> tuple[str, Callable[[Any], Any]]:
 
 
 def _smooth(name: str, params: Mapping[str, Any]) -> Callable[[Any], Any]:
-    from tobitkf.skeleton.smooth import METHODS, smooth
+    from tobitkf.smoothing.api import METHODS, smooth
 
     base, offline = name, False
     low = name.lower()

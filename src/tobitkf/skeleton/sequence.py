@@ -206,6 +206,6 @@ class SkeletonSequence:
         frames : ndarray of int, shape (J,)
             Frame ``t`` at which the largest jump lands (``-1`` when ``jumps`` is NaN).
         """
-        from tobitkf.skeleton.inspect import largest_jumps
+        from tobitkf.skeleton.describe import largest_jumps
 
         return largest_jumps(self.positions)

@@ -1,7 +1,7 @@
 """A self-contained HTML report: metrics tables, coordinate traces, skeleton snapshots, GIF.
 
 Every figure is embedded as a ``data:`` URI, so the page is one file that can be mailed
-or attached to a lab notebook. Plotting uses :mod:`tobitkf.plots` (matplotlib, lazily).
+or attached to a lab notebook. Plotting uses :mod:`tobitkf.app.plots` (matplotlib, lazily).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITC
 
 def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
     """Joints to plot: those with most glitch frames, then those with the largest jumps."""
-    from tobitkf.skeleton.inspect import largest_jumps
+    from tobitkf.skeleton.describe import largest_jumps
 
     counts = mask.sum(axis=0)
     jump, _ = largest_jumps(raw)
@@ -106,7 +106,7 @@ def _table_html(spec: TableSpec) -> str:
 
 def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> dict[str, bytes]:
     """Render the report's figures; returns name -> PNG or GIF bytes."""
-    from tobitkf import plots
+    from tobitkf.app import plots
 
     raw = np.asarray(inp.raw.positions, dtype=float)
     names = list(inp.methods)
@@ -177,7 +177,7 @@ th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
 
 def render_html(inp: ReportInput, figures: Mapping[str, bytes]) -> str:
     """The report page as one HTML string with embedded figures."""
-    from tobitkf.plots import png_data_uri
+    from tobitkf.app.plots import png_data_uri
 
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",

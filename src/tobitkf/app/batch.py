@@ -217,7 +217,7 @@ def _percent(values: Iterable[np.ndarray]) -> float:
 def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False) -> FileSummary:
     """Read, smooth and write one file; any failure becomes a summary with its reason."""
     from tobitkf.io import detect_format, load
-    from tobitkf.skeleton.smooth import smooth
+    from tobitkf.smoothing.api import smooth
 
     start = time.perf_counter()
     try:

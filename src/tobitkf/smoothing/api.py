@@ -72,10 +72,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.skeleton import baselines
-from tobitkf.skeleton.limits import REFERENCE_DT  # the paper's frame step (30 fps)
-from tobitkf.skeleton.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.smoothing import baselines
+from tobitkf.smoothing.fit import REFERENCE_DT  # the paper's frame step (30 fps)
+from tobitkf.smoothing.robust import ROBUST_DEFAULTS, ROBUST_VALIDATORS
 
 __all__ = [
     "COMMON_KEYWORDS",
@@ -536,8 +536,8 @@ def _run_kalman(
     inferred_noise_factor: float,
 ) -> tuple[Array, NDArray[np.bool_]]:
     """Kalman-type filtering; returns estimates (T, *batch, 3) and clipped (T, *batch)."""
-    from tobitkf.kalman import kalman_filter, rts_smooth
-    from tobitkf.model import LinearGaussian
+    from tobitkf.core.kalman import kalman_filter, rts_smooth
+    from tobitkf.core.model import LinearGaussian
 
     ys, missing = batch.ys, batch.missing
     T = ys.shape[0]
@@ -559,7 +559,7 @@ def _run_kalman(
         kwargs["R_scale"] = r_scale
     kind = spec.options["filter"]
     if kind == "atkf":
-        from tobitkf.tobit import adaptive_tobit_filter
+        from tobitkf.core.tobit import adaptive_tobit_filter
 
         c = _atkf_c(params, batch.up_axis)
         elapsed = _elapsed_since_valid(batch.steps, valid)  # (T, *batch)
@@ -572,7 +572,7 @@ def _run_kalman(
         if kind == "kf":
             result = kalman_filter(model, ys, **kwargs)
         else:
-            from tobitkf.tobit import tobit_filter
+            from tobitkf.core.tobit import tobit_filter
 
             result = tobit_filter(
                 model,
@@ -681,7 +681,7 @@ def smooth(
             f"offline=True runs the RTS smoother of the Kalman-type methods; {method!r}: {hint}"
         )
     if spec.kind == "robust":  # the method name decides offline / online
-        from tobitkf.skeleton.robust import robust_smooth
+        from tobitkf.smoothing.robust import robust_smooth
 
         def run(s: SkeletonSequence) -> SkeletonSequence:
             return robust_smooth(

@@ -388,8 +388,8 @@ def _cv_smooth(
     offline: bool,
 ) -> Array:
     """OU-velocity KF (+ RTS) per axis; ys (T, J, 3) with NaN missing; q, r (J,)."""
-    from tobitkf.kalman import kalman_filter, rts_smooth
-    from tobitkf.model import LinearGaussian
+    from tobitkf.core.kalman import kalman_filter, rts_smooth
+    from tobitkf.core.model import LinearGaussian
 
     out = np.full_like(ys, np.nan)
     A_seq, base_Q = _ou_matrices(steps, tau)
@@ -660,7 +660,7 @@ def _causal_filter(
 
 
 def _times(sequence: SkeletonSequence) -> tuple[Array, Array]:
-    from tobitkf.skeleton.smooth import frame_steps
+    from tobitkf.smoothing.api import frame_steps
 
     steps, _, _ = frame_steps(sequence)
     if sequence.timestamps is not None:
@@ -773,7 +773,7 @@ def robust_smooth(
     qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
     sd = region_values(topo, params["noise_sd"], "noise_sd")
 
-    from tobitkf.skeleton.smooth import _inferred_r_scale, _measurements
+    from tobitkf.smoothing.api import _inferred_r_scale, _measurements
 
     T, J = sequence.n_frames, sequence.n_joints
     states = sequence.tracking_state

@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import log_ndtr, ndtr
 
-from tobitkf._bvn import bivariate_normal_cdf, bivariate_normal_upper
+from tobitkf.core._bvn import bivariate_normal_cdf, bivariate_normal_upper
 
 __all__ = [
     "ClippedMoments",

@@ -68,14 +68,14 @@ def _run_filter(
     filter_kwargs: dict[str, Any],
 ) -> Any:
     if form == "gaussian":
-        from tobitkf.kalman import kalman_filter
+        from tobitkf.core.kalman import kalman_filter
 
         return kalman_filter(model, ys, **filter_kwargs)
     if c is not None:
-        from tobitkf.tobit import adaptive_tobit_filter
+        from tobitkf.core.tobit import adaptive_tobit_filter
 
         return adaptive_tobit_filter(model, ys, c, **filter_kwargs)
-    from tobitkf.tobit import tobit_filter
+    from tobitkf.core.tobit import tobit_filter
 
     return tobit_filter(model, ys, lower, upper, variant=form, **filter_kwargs)
 
@@ -95,7 +95,7 @@ def censored_loglik(
 
     Parameters
     ----------
-    model : :class:`tobitkf.model.LinearGaussian`.
+    model : :class:`tobitkf.core.model.LinearGaussian`.
     ys : (T, *batch, p) reported (already censored) measurements; NaN = unobserved
         (contributes 0).
     lower, upper : censoring limits broadcastable to (p,) or (*batch, p); ``None`` = ±inf.
@@ -378,7 +378,7 @@ def fit_noise(
     """
     from scipy.optimize import minimize
 
-    from tobitkf.model import LinearGaussian
+    from tobitkf.core.model import LinearGaussian
 
     _check_form(form, c, lower, upper)
     if q_structure not in _Q_STRUCTURES:

@@ -2,7 +2,7 @@
 
 Pure array functions over time-first arrays ``x`` of shape ``(T, *batch, d)`` (a 1-D
 ``(T,)`` series is accepted too and returned with the same shape). NaN marks a missing
-sample. Nothing here knows about skeleton files; :mod:`tobitkf.skeleton.smooth` wires
+sample. Nothing here knows about skeleton files; :mod:`tobitkf.smoothing.api` wires
 these into :func:`tobitkf.smooth`.
 
 - :func:`savgol`: Savitzky–Golay filter along time (``scipy.signal.savgol_filter``).

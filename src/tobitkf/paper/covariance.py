@@ -17,7 +17,7 @@ distribution is well defined (MATH.md §5).
 
 :func:`covariance_example` computes all three matrices and returns them next to the
 paper's printed values. The oscillator experiment of section 4.1 lives in
-:mod:`tobitkf.evaluation.oscillator`.
+:mod:`tobitkf.paper.oscillator`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.evaluation.oscillator import (
+from tobitkf.paper.oscillator import (
     PAPER_TABLE1_RMSE,
     PAPER_TABLE2_NCI,
     OscillatorConfig,
@@ -109,7 +109,7 @@ def standard_tkf_covariance(
     -------
     (p, p) ndarray
     """
-    from tobitkf.censored import truncated_standard_normal
+    from tobitkf.core.censored import truncated_standard_normal
 
     mean = np.asarray(mean, dtype=float)
     H = np.atleast_2d(np.asarray(H, dtype=float))
@@ -309,7 +309,7 @@ def covariance_example(*, samples: int = 1_000_000, seed: int | None = 0) -> Cov
     -------
     CovarianceExample
     """
-    from tobitkf.censored import clipped_normal_moments
+    from tobitkf.core.censored import clipped_normal_moments
 
     H = np.eye(3)
     R = np.eye(3)

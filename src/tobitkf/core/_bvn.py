@@ -14,7 +14,7 @@ The absolute error is below about 1e-15 everywhere (this is what Genz's rule is 
 for). The upper-orthant form ``P(X > h, Y > k)`` is returned without subtracting from 1,
 so small probabilities are not swamped by cancellation, but their relative accuracy in
 far tails is limited by the short rules: about 1e-6 at 8 sd with the 6-point rule
-(``|rho| < 0.3``), about 1e-10 with 20 points. ``tobitkf.censored`` does not rely on it
+(``|rho| < 0.3``), about 1e-10 with 20 points. ``tobitkf.core.censored`` does not rely on it
 there (it integrates Plackett's identity with 20 points itself).
 """
 

@@ -133,8 +133,8 @@ class OscillatorConfig:
 
 
 def oscillator_model(config: OscillatorConfig | None = None):
-    """The filters' :class:`tobitkf.model.LinearGaussian` for the oscillator (eq. 36–38)."""
-    from tobitkf.model import LinearGaussian
+    """The filters' :class:`tobitkf.core.model.LinearGaussian` for the oscillator (eq. 36–38)."""
+    from tobitkf.core.model import LinearGaussian
 
     config = config or OscillatorConfig()
     return LinearGaussian(
@@ -257,8 +257,8 @@ def noncredibility_index(
 
 
 def _run_filters(config: OscillatorConfig, sim: OscillatorSimulation) -> dict[str, Any]:
-    from tobitkf.kalman import kalman_filter
-    from tobitkf.tobit import tobit_filter
+    from tobitkf.core.kalman import kalman_filter
+    from tobitkf.core.tobit import tobit_filter
 
     model = oscillator_model(config)
     ys = sim.measurements

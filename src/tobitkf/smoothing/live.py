@@ -59,7 +59,7 @@ class LiveSmoother:
         inferred_noise_factor: float | None = None,
         **params: Any,
     ) -> None:
-        from tobitkf.skeleton import smooth as sm
+        from tobitkf.smoothing import api as sm
 
         if method not in LIVE_METHODS:
             raise ValueError(
@@ -97,8 +97,8 @@ class LiveSmoother:
         self.clipped: NDArray[np.bool_] | None = None
 
     def _make_filter(self, ys: NDArray[np.float64], valid: NDArray[np.bool_]):
-        from tobitkf.model import LinearGaussian
-        from tobitkf.streaming import StreamingFilter
+        from tobitkf.core.model import LinearGaussian
+        from tobitkf.core.streaming import StreamingFilter
 
         x0 = np.where(valid[..., None], ys, 0.0)
         model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=self._Q, R=self._R, x0=x0, P0=self._R)
@@ -153,7 +153,7 @@ class LiveSmoother:
         ndarray, shape like ``positions``
             Smoothed positions; NaN for a joint not measured yet.
         """
-        from tobitkf.skeleton import smooth as sm
+        from tobitkf.smoothing import api as sm
 
         shape = np.shape(positions)
         if len(shape) not in (2, 3) or shape[-1] != 3:

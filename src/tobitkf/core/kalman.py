@@ -2,7 +2,7 @@
 
 Every filter (KF, TKF, TKF^c, ATKF) is one *step function* (:func:`filter_step`) applied
 frame by frame: predict, (adaptive limits), update. The batch functions loop over time
-and call exactly the same step function as :class:`tobitkf.streaming.StreamingFilter`,
+and call exactly the same step function as :class:`tobitkf.core.streaming.StreamingFilter`,
 so the two cannot diverge.
 
 Two numerical paths
@@ -33,7 +33,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.model import FilterResult, LinearGaussian, SmootherResult, _is_diag, check_covariance
+from tobitkf.core.model import (
+    FilterResult,
+    LinearGaussian,
+    SmootherResult,
+    _is_diag,
+    check_covariance,
+)
 
 __all__ = [
     "KF",

@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from tobitkf.cli import dumps
+from tobitkf.app.cli import dumps
 
 console = Console()
 if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
@@ -44,7 +44,7 @@ def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: 
 
 
 def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
-    from tobitkf.batch import parse_param
+    from tobitkf.app.batch import parse_param
 
     out: dict[str, Any] = {}
     for text in params:
@@ -121,9 +121,9 @@ def app() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs, as_json):
     """Smooth skeleton recordings (files or folders, searched recursively)."""
-    from tobitkf.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
+    from tobitkf.app.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
     from tobitkf.io import detect_format
-    from tobitkf.skeleton.smooth import METHODS, check_params
+    from tobitkf.smoothing.api import METHODS, check_params
 
     if method not in METHODS:
         _fail(f"unknown method {method!r}; choose from: {', '.join(sorted(METHODS))}")
@@ -214,7 +214,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(path, input_format, as_json):
     """Describe what the reader finds in a recording."""
-    from tobitkf.skeleton.inspect import describe
+    from tobitkf.skeleton.describe import describe
 
     try:
         report = describe(path, format=input_format)
@@ -249,7 +249,7 @@ def info(path, input_format, as_json):
 @app.command()
 def methods():
     """List the smoothing methods and their default parameters."""
-    from tobitkf.skeleton.smooth import METHODS, method_defaults
+    from tobitkf.smoothing.api import METHODS, method_defaults
 
     rows = []
     for name in sorted(METHODS):
@@ -419,8 +419,8 @@ def _scaled(value: Any, factor: float) -> Any:
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
 def report(track, truth, output, methods, pairs, no_gif):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
+    from tobitkf.app.report import track_report
     from tobitkf.evaluation.evaluate import default_methods
-    from tobitkf.report import track_report
 
     specs = _method_list(methods) or default_methods()
     raw = _load_one(track, "track")
@@ -518,7 +518,7 @@ def reproduce():
 )
 def covariance_example_cmd(samples, seed, as_json, outdir):
     """Section 3.4: exact censored covariance vs the standard TKF's vs Monte Carlo."""
-    from tobitkf.evaluation.paper import covariance_example
+    from tobitkf.paper.covariance import covariance_example
 
     result = covariance_example(samples=samples, seed=seed)
     if as_json:
@@ -526,7 +526,7 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
     else:
         console.print(result.format_text(), highlight=False, soft_wrap=True)
     if outdir:
-        from tobitkf.evaluation.paper_figures import covariance_example_figure
+        from tobitkf.paper.figures import covariance_example_figure
 
         for p in covariance_example_figure(result, outdir):
             err_console.print(f"wrote {p}")
@@ -558,7 +558,7 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
 )
 def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
     """Section 4.1: Tables 1 and 2 (RMSE and NCI) for TKF, TKF^c and the KF."""
-    from tobitkf.evaluation.oscillator import oscillator_experiment
+    from tobitkf.paper.oscillator import oscillator_experiment
 
     with (
         console.status(f"{runs} runs x {steps} steps x {seeds} seed(s)...")
@@ -573,7 +573,7 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
     else:
         console.print(result.format_text(), highlight=False, soft_wrap=True)
     if outdir:
-        from tobitkf.evaluation.paper_figures import oscillator_figures
+        from tobitkf.paper.figures import oscillator_figures
 
         for p in oscillator_figures(result, outdir):
             err_console.print(f"wrote {p}")
@@ -602,7 +602,7 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def fit(paths, per_joint, q_structure, fit_r, form, as_json):
     """Maximum-likelihood estimate of the process noise Q of skeleton recordings."""
-    from tobitkf.likelihood import fit_skeleton_noise
+    from tobitkf.core.likelihood import fit_skeleton_noise
 
     results: dict[str, Any] = {}
     for path in paths:
@@ -650,7 +650,7 @@ def fit(paths, per_joint, q_structure, fit_r, form, as_json):
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
 def demo(outdir, seed, no_gif):
     """The main job end to end on the built-in synthetic recording (no files needed)."""
-    from tobitkf.demo import run_demo
+    from tobitkf.app.demo import run_demo
 
     with console.status("generating, smoothing, scoring, drawing..."):
         result = run_demo(outdir, seed=seed, gif=not no_gif)

@@ -57,13 +57,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from tobitkf.censored import (
+from tobitkf.core.censored import (
     censored_logpdf,
     clipped_normal_moments,
     clipped_normal_variance_diag,
     truncated_standard_normal,
 )
-from tobitkf.kalman import (
+from tobitkf.core.kalman import (
     KF,
     Method,
     StepModel,
@@ -74,7 +74,7 @@ from tobitkf.kalman import (
     prepare_inputs,
     run_filter,
 )
-from tobitkf.model import FilterResult, LinearGaussian
+from tobitkf.core.model import FilterResult, LinearGaussian
 
 __all__ = [
     "ATKF",
@@ -185,7 +185,7 @@ def tkfc_update(
 
     Probabilities from S = H P⁻ Hᵀ + R; E[y] and Pyy the exact mean and covariance of
     clip(N(m, S), a, b) (off-diagonal terms from the bivariate normal CDF, via
-    :func:`tobitkf.censored.clipped_normal_moments`); Pxy = P⁻ Hᵀ P_un (eq. 12, exact by
+    :func:`tobitkf.core.censored.clipped_normal_moments`); Pxy = P⁻ Hᵀ P_un (eq. 12, exact by
     Stein's lemma); plus the safeguard ε S_ii (P_a + P_b) on the diagonal of Pyy.
     Shapes as in :func:`tkf_update`.
     """
@@ -364,7 +364,7 @@ def tobit_filter(
     lower_seq, upper_seq : array_like, broadcastable to (T, *batch, p), optional
         Time-varying limits (instead of ``lower`` / ``upper``).
     A_seq, Q_seq, R_seq, R_scale, diagonal
-        As in :func:`tobitkf.kalman.kalman_filter`.
+        As in :func:`tobitkf.core.kalman.kalman_filter`.
 
     Returns
     -------
@@ -419,7 +419,7 @@ def adaptive_tobit_filter(
     c_seq : array_like, broadcastable to (T, *batch, p), optional
         Time-varying half-widths (instead of ``c``), e.g. scaled by the frame interval.
     A_seq, Q_seq, R_seq, R_scale, diagonal
-        As in :func:`tobitkf.kalman.kalman_filter`.
+        As in :func:`tobitkf.core.kalman.kalman_filter`.
 
     Returns
     -------

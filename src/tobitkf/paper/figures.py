@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
-    from tobitkf.evaluation.oscillator import OscillatorResult
-    from tobitkf.evaluation.paper import CovarianceExample
+    from tobitkf.paper.covariance import CovarianceExample
+    from tobitkf.paper.oscillator import OscillatorResult
 
 __all__ = ["covariance_example_figure", "oscillator_figures"]
 
@@ -43,7 +43,7 @@ def oscillator_figures(result: OscillatorResult, out_dir: str | Path) -> list[Pa
 
     Parameters
     ----------
-    result : an :class:`~tobitkf.evaluation.oscillator.OscillatorResult`.
+    result : an :class:`~tobitkf.paper.oscillator.OscillatorResult`.
     out_dir : output directory (created if missing).
 
     Returns

@@ -1,7 +1,7 @@
 """One frame at a time: the batch filters for live use.
 
 :class:`StreamingFilter` calls the very same step function
-(:func:`tobitkf.kalman.filter_step`) as the batch functions, so feeding the frames of a
+(:func:`tobitkf.core.kalman.filter_step`) as the batch functions, so feeding the frames of a
 batch one by one reproduces the batch result exactly (bit for bit when the same arguments
 are given).
 """
@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.kalman import StepOutput, _param, filter_step, initial_state, make_step_model
-from tobitkf.model import LinearGaussian, check_covariance, embed_diagonal
-from tobitkf.tobit import METHODS
+from tobitkf.core.kalman import StepOutput, _param, filter_step, initial_state, make_step_model
+from tobitkf.core.model import LinearGaussian, check_covariance, embed_diagonal
+from tobitkf.core.tobit import METHODS
 
 __all__ = ["StreamingFilter"]
 

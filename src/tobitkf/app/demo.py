@@ -43,10 +43,10 @@ def run_demo(
     -------
     DemoResult
     """
+    from tobitkf.app.report import FOCUS_METHODS, ReportInput, TableSpec, write_report
     from tobitkf.evaluation.benchmark import run_benchmark
     from tobitkf.evaluation.evaluate import default_methods
     from tobitkf.io import save
-    from tobitkf.report import FOCUS_METHODS, ReportInput, TableSpec, write_report
 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)

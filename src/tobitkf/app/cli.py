@@ -22,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
             "tobitkf: the command-line tool needs click and rich: pip install 'tobitkf[cli]'\n"
         )
         return 2
-    from tobitkf._cli_app import app
+    from tobitkf.app.commands import app
 
     try:
         app.main(args=argv, prog_name="tobitkf", standalone_mode=True)
