@@ -79,7 +79,7 @@ def main() -> None:
     q, r = 0.0025, 0.01
     c = np.array([0.34, 0.18, 0.34])
     ys = synthetic_skeletons(T, recs, joints)
-    model = tk.LinearGaussian.skeleton(q=q, r=r, x0=ys[0])
+    model = tk.skeleton_model(q=q, r=r, x0=ys[0])
     jf = T * recs * joints
     print(f"batch: T={T} frames x {recs} recordings x {joints} joints (3-D), {jf:.3g} joint-frames")
 

@@ -20,10 +20,10 @@ from tobitkf.evaluation.metrics import (
     classify_glitches,
     glitch_episodes,
     joint_errors,
-    largest_jumps,
     rmse,
     smoothness,
     smoothness_per_component,
+    top_jumps,
     velocity_lag,
 )
 from tobitkf.evaluation.synthetic import generate_motion
@@ -93,7 +93,7 @@ def test_velocity_lag_of_truth_delayed_by_two_frames() -> None:
 def test_largest_jumps() -> None:
     p = np.zeros((5, 2, 3))
     p[3, 1] = [0.0, 0.5, 0.0]
-    jumps = largest_jumps(p, ["a", "b"], n=2)
+    jumps = top_jumps(p, ["a", "b"], n=2)
     assert jumps[0] == {"frame": 3, "joint": "b", "jump_m": 0.5}
     assert jumps[1]["frame"] == 4 and jumps[1]["jump_m"] == 0.5
 

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from tobitkf.core.kalman import kalman_filter, rts_smooth
 from tobitkf.core.model import LinearGaussian
+from tobitkf.smoothing.paper import skeleton_model
 
 # ---------------------------------------------------------------------------- brute force
 
@@ -211,7 +212,7 @@ def test_r_scale_equals_scaled_r():
 
 
 def test_input_errors():
-    model = LinearGaussian.skeleton()
+    model = skeleton_model()
     with pytest.raises(ValueError, match="ys: expected shape"):
         kalman_filter(model, np.zeros((5, 2)))
     with pytest.raises(ValueError, match="infinite"):

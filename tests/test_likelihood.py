@@ -40,10 +40,10 @@ from tobitkf.core.likelihood import (
     _q_to_params,
     censored_loglik,
     fit_noise,
-    fit_skeleton_noise,
 )
 from tobitkf.core.model import LinearGaussian
 from tobitkf.core.tobit import tobit_filter
+from tobitkf.smoothing.fit import fit_skeleton_noise
 
 A_AR, Q_TRUE, R_TRUE = 0.95, 0.1, 0.1
 LO, HI = -1.2, 0.7

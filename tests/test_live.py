@@ -10,7 +10,9 @@ from tobitkf.io import load
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
 from tobitkf.smoothing.api import smooth
-from tobitkf.smoothing.live import LIVE_METHODS, LiveSmoother
+from tobitkf.smoothing.live import LiveSmoother, live_methods
+
+LIVE_METHODS = live_methods()
 
 
 def _stream(seq: SkeletonSequence, method: str, fps: float | None = None, **params) -> np.ndarray:

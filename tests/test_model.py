@@ -14,6 +14,7 @@ from tobitkf.core.model import (
     embed_diagonal,
     first_observed,
 )
+from tobitkf.smoothing.paper import skeleton_model
 
 
 def _model(**kw):
@@ -75,13 +76,13 @@ def test_skeleton_helper_and_first_observed():
     ys[2, 1, 2] = -1.0
     x0 = first_observed(ys)
     np.testing.assert_array_equal(x0, [[1.0, 7.0, 3.0], [0.0, 0.0, -1.0]])
-    m = LinearGaussian.skeleton(q=[1e-3, 2e-3, 3e-3], r=0.01, ys=ys)
+    m = skeleton_model(q=[1e-3, 2e-3, 3e-3], r=0.01, ys=ys)
     assert m.is_diagonal and m.batch_shape == (2,)
     np.testing.assert_array_equal(m.x0, x0)
     np.testing.assert_array_equal(np.diag(m.Q), [1e-3, 2e-3, 3e-3])
     np.testing.assert_array_equal(m.P0, 0.01 * np.eye(3))  # p0 defaults to r
     np.testing.assert_array_equal(m.A, np.eye(3))
-    d = LinearGaussian.skeleton()
+    d = skeleton_model()
     np.testing.assert_array_equal(d.Q, 0.0025 * np.eye(3))
     np.testing.assert_array_equal(d.R, 0.01 * np.eye(3))
     np.testing.assert_array_equal(d.x0, np.zeros(3))
@@ -94,7 +95,7 @@ def test_skeleton_helper_names_a_wrong_shape():
         (dict(p0=[1, 2]), "p0"),
     ):
         with pytest.raises(ValueError, match=rf"^{name}: expected one value or one per axis"):
-            LinearGaussian.skeleton(**kw)
+            skeleton_model(**kw)
 
 
 def test_replace_revalidates():

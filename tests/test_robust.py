@@ -8,15 +8,14 @@ import pytest
 from conftest import data_file
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
-from tobitkf.smoothing.robust import (
-    _ou_matrices,
+from tobitkf.smoothing.robust import _ou_matrices, robust_smooth
+from tobitkf.smoothing.robust_gating import (
     bone_lengths,
     carry_with_parent,
     confirm_reacquisition,
     enforce_chain,
     gate_measurements,
     joint_levels,
-    robust_smooth,
 )
 
 FPS = 30.0

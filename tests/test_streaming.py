@@ -11,6 +11,7 @@ from tobitkf.core.kalman import kalman_filter
 from tobitkf.core.model import LinearGaussian
 from tobitkf.core.streaming import StreamingFilter
 from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
+from tobitkf.smoothing.paper import skeleton_model
 
 
 def _general_model(rng, batch=(2,)):
@@ -56,7 +57,7 @@ def test_streaming_equals_batch_exactly(method, kind):
     rng = np.random.default_rng(zlib.crc32(f"{method}-{kind}".encode()))
     T = 25
     if kind == "diagonal":
-        model = LinearGaussian.skeleton(q=[1e-3, 2e-3, 3e-3], r=0.01, x0=rng.normal(size=(4, 3)))
+        model = skeleton_model(q=[1e-3, 2e-3, 3e-3], r=0.01, x0=rng.normal(size=(4, 3)))
         ys = _data(rng, T, (4, 3)) * 0.2
     else:
         model = _general_model(rng)
@@ -100,7 +101,7 @@ def test_streaming_time_varying_per_step_arguments(method):
     the batch *_seq arguments."""
     rng = np.random.default_rng(7)
     T = 20
-    model = LinearGaussian.skeleton(x0=rng.normal(size=(3, 3)))
+    model = skeleton_model(x0=rng.normal(size=(3, 3)))
     ys = _data(rng, T, (3, 3)) * 0.2
     dt = rng.uniform(0.02, 0.06, size=T)
     Q_seq = (dt / (1 / 30))[:, None, None] * 0.0025 * np.eye(3)
@@ -130,7 +131,7 @@ def test_streaming_time_varying_per_step_arguments(method):
 
 def test_non_diagonal_override_switches_to_general_path():
     rng = np.random.default_rng(9)
-    model = LinearGaussian.skeleton(x0=rng.normal(size=(2, 3)))
+    model = skeleton_model(x0=rng.normal(size=(2, 3)))
     ys = _data(rng, 12, (2, 3)) * 0.2
     Q_seq = np.broadcast_to(0.0025 * np.eye(3), (12, 3, 3)).copy()
     Q_seq[6:] += 0.001 * (np.ones((3, 3)) - np.eye(3))
@@ -146,7 +147,7 @@ def test_non_diagonal_override_switches_to_general_path():
 
 
 def test_streaming_errors():
-    model = LinearGaussian.skeleton()
+    model = skeleton_model()
     with pytest.raises(ValueError, match="method"):
         StreamingFilter(model, "ukf")
     with pytest.raises(ValueError, match="needs c"):
@@ -177,7 +178,7 @@ def test_streaming_equals_batch_atkf_constant_identity_model():
     """The batch ATKF on a constant A = H = I model forms its limits after the loop from
     the means; they must equal the ones the streaming filter forms at every step."""
     rng = np.random.default_rng(31)
-    model = LinearGaussian.skeleton(x0=rng.normal(size=(5, 3)))
+    model = skeleton_model(x0=rng.normal(size=(5, 3)))
     ys = _data(rng, 30, (5, 3)) * 0.3
     c = np.array([0.34, 0.18, 0.34])
     res = adaptive_tobit_filter(model, ys, c=c)

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from tobitkf.core.kalman import kalman_filter, make_step_model
+from tobitkf.core.engine import make_step_model
+from tobitkf.core.kalman import kalman_filter
 from tobitkf.core.model import LinearGaussian
 from tobitkf.core.tobit import (
     EPS_CENSORED,
@@ -19,6 +20,7 @@ from tobitkf.core.tobit import (
     tkfc_update,
     tobit_filter,
 )
+from tobitkf.smoothing.paper import skeleton_model
 
 # ---------------------------------------------------------------------------- helpers
 
@@ -457,7 +459,7 @@ def test_atkf_symmetric_closed_form_equals_tkfc_update(seed, scale):
 
 
 def test_input_errors():
-    m = LinearGaussian.skeleton()
+    m = skeleton_model()
     ys = np.zeros((4, 3))
     with pytest.raises(ValueError, match="variant"):
         tobit_filter(m, ys, variant="bogus")
@@ -486,7 +488,7 @@ def test_atkf_on_real_kinect_glitches():
 
     raw = np.loadtxt(data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt"))
     ys = raw.reshape(raw.shape[0], 25, 7)[..., :3]  # positions (T, 25, 3), y up
-    model = LinearGaussian.skeleton(ys=ys)
+    model = skeleton_model(ys=ys)
     c = np.array([0.34, 0.18, 0.34])
     at = adaptive_tobit_filter(model, ys, c=c)
     kf = kalman_filter(model, ys)

@@ -18,9 +18,6 @@ from typing import Any
 
 import numpy as np
 
-#: output format -> file extension
-OUTPUT_EXTENSIONS = {"csv": ".csv", "npz": ".npz", "ntu": ".skeleton"}
-
 #: compound extensions stripped from input names before naming outputs
 _COMPOUND = (".txt.gz", ".csv.gz", ".tsv.gz")
 
@@ -158,15 +155,14 @@ def plan_jobs(
                 except Exception:  # the reader will report the real problem later
                     in_fmt = None
             fmt = default_output_format(in_fmt)
-        if fmt not in OUTPUT_EXTENSIONS:
-            raise ValueError(
-                f"unknown output format {fmt!r}; expected one of {sorted(OUTPUT_EXTENSIONS)}"
-            )
+        from tobitkf.io import output_extension
+
+        ext = output_extension(fmt)  # ValueError naming the writable formats
         try:
             rel = src.parent.resolve().relative_to(base.resolve())
         except ValueError:
             rel = Path()
-        out = outdir / rel / f"{strip_extension(src.name)}.{method}{OUTPUT_EXTENSIONS[fmt]}"
+        out = outdir / rel / f"{strip_extension(src.name)}.{method}{ext}"
         key = out.resolve()
         if key in inputs:
             refused.append(

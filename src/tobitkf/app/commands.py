@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from tobitkf.app.cli import dumps
+from tobitkf.core.jsonable import dumps
 
 console = Console()
 if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
@@ -41,6 +41,32 @@ def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: 
     for row in rows:
         table.add_row(*[_fmt(v, digits) for v in row])
     console.print(table)
+
+
+class _RegistryChoice(click.Choice):
+    """A ``click.Choice`` whose values are read from a registry when first needed, so
+    that a method or format registered by a plugin is a valid choice and ``--help`` of
+    the other commands does not pay for loading the registry."""
+
+    def __init__(self, load: Any, extra: tuple[str, ...] = ()) -> None:
+        self._load, self._extra = load, extra
+        self.case_sensitive = True
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        return (*self._extra, *self._load())
+
+
+def _method_names() -> list[str]:
+    from tobitkf.smoothing.api import method_names
+
+    return method_names()
+
+
+def _writable_formats() -> list[str]:
+    from tobitkf.io import writable_formats
+
+    return writable_formats()
 
 
 def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
@@ -78,6 +104,7 @@ def app() -> None:
     "--method",
     default="atkf",
     show_default=True,
+    type=_RegistryChoice(_method_names),
     help="Smoothing method (see `tobitkf methods`). atkf is the 2020 paper's filter; against "
     "Vicon it does not beat raw Kinect (docs/evaluation.md), our `robust` does.",
 )
@@ -87,7 +114,7 @@ def app() -> None:
     "output_format",
     default="auto",
     show_default=True,
-    type=click.Choice(["auto", "csv", "npz", "ntu"]),
+    type=_RegistryChoice(_writable_formats, extra=("auto",)),
     help="Output format; auto keeps NTU as NTU and writes CSV otherwise.",
 )
 @click.option(
@@ -123,18 +150,16 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
     """Smooth skeleton recordings (files or folders, searched recursively)."""
     from tobitkf.app.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
     from tobitkf.io import detect_format
-    from tobitkf.smoothing.api import METHODS, check_params
+    from tobitkf.smoothing.api import check_params, get_method
 
-    if method not in METHODS:
-        _fail(f"unknown method {method!r}; choose from: {', '.join(sorted(METHODS))}")
     kwargs = _parse_params(params)
     offline = bool(kwargs.pop("offline", False)) or offline  # -p offline=true == --offline
     try:
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
-    if offline and METHODS[method].kind != "kalman":
-        _fail(f"--offline runs the RTS smoother of the Kalman-type methods; not for {method!r}")
+    if offline and not get_method(method).offline_ok:
+        _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
     passed_over: list[Path] = []
     try:
         pairs = discover_inputs(inputs, pattern, skip=not_a_recording, skipped=passed_over)
@@ -214,7 +239,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(path, input_format, as_json):
     """Describe what the reader finds in a recording."""
-    from tobitkf.skeleton.describe import describe
+    from tobitkf.app.info import describe
 
     try:
         report = describe(path, format=input_format)
@@ -248,14 +273,15 @@ def info(path, input_format, as_json):
 # --------------------------------------------------------------------------- methods
 @app.command()
 def methods():
-    """List the smoothing methods and their default parameters."""
-    from tobitkf.smoothing.api import METHODS, method_defaults
+    """List the smoothing methods, what they are and their default parameters."""
+    from tobitkf.smoothing.api import methods as registered
 
     rows = []
-    for name in sorted(METHODS):
-        defaults = method_defaults(name)
-        rows.append([name, ", ".join(f"{k}={v}" for k, v in defaults.items())])
-    _print_table("smoothing methods", ["method", "defaults"], rows)
+    for name, spec in sorted(registered().items()):
+        kind = ("causal" if spec.is_causal() else "offline") + (", +rts" if spec.offline_ok else "")
+        defaults = ", ".join(f"{k}={v}" for k, v in spec.defaults.items())
+        rows.append([name, kind, spec.description, defaults])
+    _print_table("smoothing methods", ["method", "runs", "what it is", "defaults"], rows)
 
 
 # --------------------------------------------------------------------------- evaluate
@@ -602,7 +628,7 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def fit(paths, per_joint, q_structure, fit_r, form, as_json):
     """Maximum-likelihood estimate of the process noise Q of skeleton recordings."""
-    from tobitkf.core.likelihood import fit_skeleton_noise
+    from tobitkf.smoothing.fit import fit_skeleton_noise
 
     results: dict[str, Any] = {}
     for path in paths:

@@ -79,7 +79,7 @@ def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITC
 
 def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
     """Joints to plot: those with most glitch frames, then those with the largest jumps."""
-    from tobitkf.skeleton.describe import largest_jumps
+    from tobitkf.skeleton.sequence import largest_jumps
 
     counts = mask.sum(axis=0)
     jump, _ = largest_jumps(raw)

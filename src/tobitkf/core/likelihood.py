@@ -17,27 +17,23 @@ and maximises the sum over the noise covariances with :mod:`scipy.optimize`, in 
 unconstrained parameterisation (log variances, or log-Cholesky for a full ``Q``). Many
 sequences (a batch axis of ``ys``) share one parameter set.
 
-Only numpy and scipy are imported: no file access and no skeleton knowledge
-(:func:`fit_skeleton_noise` accepts a plain ``(T, J, 3)`` array or any object with a
-``positions`` attribute).
+Only numpy and scipy are imported: no file access and no skeleton knowledge (the
+skeleton front end, ``fit_skeleton_noise``, lives in :mod:`tobitkf.smoothing.fit`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
 __all__ = [
-    "DEFAULT_SKELETON_C",
     "FORMS",
-    "KINECT_DEVICE_LIMITS",
     "NoiseFit",
     "censored_loglik",
     "fit_noise",
-    "fit_skeleton_noise",
 ]
 
 Form = Literal["corrected", "standard", "gaussian"]
@@ -540,101 +536,3 @@ def fit_noise(
         n_obs=n_obs,
         n_evals=n_evals[0],
     )
-
-
-# ---------------------------------------------------------------------------------------
-# skeletons (thin; duck-typed so the math core needs no skeleton import)
-
-#: 2020 paper eq. 30–35: ATKF half-widths (x, y = up, z) in metres per frame at 30 fps.
-DEFAULT_SKELETON_C = (0.34, 0.18, 0.34)
-#: 2020 paper §4.2: Kinect v2 device limits (x, y = up, z) in metres, for TKF / TKF^c.
-KINECT_DEVICE_LIMITS = ((-3.0, -1.5, 0.5), (3.0, 3.0, 5.0))
-
-
-def fit_skeleton_noise(
-    sequence: Any,
-    *,
-    per_joint: bool = False,
-    c: Sequence[float] | np.ndarray | None = None,
-    lower: Any = None,
-    upper: Any = None,
-    r: float = 0.01,
-    fit_r: bool = False,
-    q_structure: Literal["scalar", "diagonal", "full"] = "scalar",
-    form: Form = "corrected",
-    p0: float | None = None,
-    joints: Sequence[int] | None = None,
-    **fit_kwargs: Any,
-) -> NoiseFit | dict[Any, NoiseFit]:
-    """Fit the skeleton filter's Q (A = H = I per joint, 3-D) to one recording.
-
-    Each joint is one sequence of the batch; by default all joints share one Q
-    (2020 paper §4.2: Q "can be estimated using the likelihood functions"); with
-    ``per_joint=True`` every joint gets its own fit.
-
-    Which limits are used:
-
-    - ``form="corrected"`` (default): the adaptive ATKF limits ``x̂_{k-1} ± c`` with
-      ``c`` defaulting to :data:`DEFAULT_SKELETON_C`; or, when ``lower``/``upper`` are
-      given, TKF^c with those fixed limits.
-    - ``form="standard"`` (eq. 29): fixed limits, ``lower``/``upper`` or by default the
-      Kinect v2 device limits :data:`KINECT_DEVICE_LIMITS`.
-    - ``form="gaussian"``: a plain KF, no limits (``c``, ``lower``, ``upper`` ignored).
-
-    Parameters
-    ----------
-    sequence : (T, J, 3) positions in metres (NaN = missing), or an object with a
-        ``positions`` attribute of that shape (e.g. ``tobitkf.SkeletonSequence``);
-        ``joint_names`` is used for the keys of the per-joint result when present.
-    per_joint : one fit per joint instead of one shared Q.
-    c : (3,) adaptive half-widths in metres per frame (the defaults are for 30 fps: scale
-        them for other frame rates).
-    lower, upper : (3,) fixed limits.
-    r : measurement-noise variance (R = r I), the start value when ``fit_r``.
-    fit_r, q_structure, form : as in :func:`fit_noise`.
-    p0 : initial covariance scale (default ``r``).
-    joints : indices of the joints to use (default all with at least 2 observed frames).
-    **fit_kwargs : passed on to :func:`fit_noise`.
-
-    Returns
-    -------
-    NoiseFit (shared Q) or ``{joint name or index: NoiseFit}`` when ``per_joint``.
-    """
-    pos = np.asarray(getattr(sequence, "positions", sequence), dtype=float)
-    if pos.ndim != 3 or pos.shape[-1] != 3:
-        raise ValueError(f"skeleton positions must be (T, J, 3), got shape {pos.shape}")
-    J = pos.shape[1]
-    jn = getattr(sequence, "joint_names", None)
-    if callable(jn):  # a method rather than a property
-        jn = jn()
-    names = list(jn) if jn is not None and len(jn) == J else list(range(J))
-    observed = np.isfinite(pos).all(axis=-1)  # (T, J)
-    idx = list(range(J)) if joints is None else [int(j) for j in joints]
-    idx = [j for j in idx if observed[:, j].sum() >= 2]
-    if not idx:
-        raise ValueError("no joint has at least two observed frames")
-    fixed = lower is not None or upper is not None
-    if c is not None and fixed:
-        raise ValueError("give either c (adaptive limits) or lower/upper (fixed), not both")
-    if form == "gaussian":
-        c, lower, upper = None, None, None
-    elif form == "standard":
-        if c is not None:
-            raise ValueError("form='standard' uses fixed limits (lower/upper), not c")
-        if not fixed:
-            lower, upper = (np.asarray(v) for v in KINECT_DEVICE_LIMITS)
-    elif not fixed:
-        c = np.asarray(DEFAULT_SKELETON_C if c is None else c, dtype=float)
-    first = np.array([pos[np.argmax(observed[:, j]), j] for j in idx])  # (J', 3)
-    eye = np.eye(3)
-    P0 = (r if p0 is None else p0) * eye
-    common = dict(
-        A=eye, H=eye, P0=P0, q_structure=q_structure, fit_r=fit_r, R=r * eye, form=form, c=c
-    )
-    common.update(fit_kwargs)
-    if not per_joint:
-        return fit_noise(pos[:, idx], lower, upper, x0=first, **common)
-    out: dict[Any, NoiseFit] = {}
-    for k, j in enumerate(idx):
-        out[names[j]] = fit_noise(pos[:, j], lower, upper, x0=first[k], **common)
-    return out

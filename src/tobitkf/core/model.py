@@ -195,27 +195,29 @@ class LinearGaussian:
         return LinearGaussian(**fields)
 
     @classmethod
-    def skeleton(
+    def random_walk(
         cls,
-        q: ArrayLike = 0.0025,
-        r: ArrayLike = 0.01,
+        q: ArrayLike,
+        r: ArrayLike,
         x0: ArrayLike | None = None,
         p0: ArrayLike | None = None,
         *,
+        dim: int = 3,
         ys: ArrayLike | None = None,
     ) -> LinearGaussian:
-        """Per-joint 3-D position model of the 2020 paper (eq. 30, 35): A = H = I.
+        """Independent random walk per axis, observed directly: A = H = I (``dim`` axes).
 
         Parameters
         ----------
-        q, r : float or array_like, shape (3,)
-            Process / measurement variances, one value or one per axis (m² per frame).
-            Defaults Q = 0.0025 I, R = 0.01 I (eq. 35, 30).
-        x0 : array_like, shape (3,) or (*batch, 3), optional
-            Initial positions. Default: zeros, or taken from ``ys`` when given.
-        p0 : float or array_like, shape (3,), optional
+        q, r : float or array_like, shape (dim,)
+            Process / measurement variances, one value or one per axis.
+        x0 : array_like, shape (dim,) or (*batch, dim), optional
+            Initial state. Default: zeros, or taken from ``ys`` when given.
+        p0 : float or array_like, shape (dim,), optional
             Initial variances per axis. Default ``r`` (the state starts at a measurement).
-        ys : array_like, shape (T, *batch, 3), optional
+        dim : int
+            Number of axes (default 3).
+        ys : array_like, shape (T, *batch, dim), optional
             Measurements; each component of ``x0`` is set to the first non-NaN value of
             that component over time (0 when it is never observed). Ignored if ``x0`` is
             given.
@@ -223,27 +225,25 @@ class LinearGaussian:
         Returns
         -------
         LinearGaussian
-            n = p = 3, diagonal, batch shape that of ``x0``.
+            n = p = dim, diagonal, batch shape that of ``x0``.
         """
-        qv = _per_axis("q", q)
-        rv = _per_axis("r", r)
-        pv = rv if p0 is None else _per_axis("p0", p0)
+        qv = _per_axis("q", q, dim)
+        rv = _per_axis("r", r, dim)
+        pv = rv if p0 is None else _per_axis("p0", p0, dim)
         if x0 is None:
-            if ys is None:
-                x0 = np.zeros(3)
-            else:
-                x0 = first_observed(ys)
-        return cls(A=np.eye(3), H=np.eye(3), Q=np.diag(qv), R=np.diag(rv), x0=x0, P0=np.diag(pv))
+            x0 = np.zeros(dim) if ys is None else first_observed(ys)
+        eye = np.eye(dim)
+        return cls(A=eye, H=eye, Q=np.diag(qv), R=np.diag(rv), x0=x0, P0=np.diag(pv))
 
 
-def _per_axis(name: str, value: ArrayLike) -> Array:
-    """One value or one per axis (x, y, z) as a (3,) array; the error names the argument."""
+def _per_axis(name: str, value: ArrayLike, dim: int) -> Array:
+    """One value or one per axis as a (dim,) array; the error names the argument."""
     arr = np.asarray(value, dtype=float)
-    if arr.shape not in ((), (1,), (3,)):
+    if arr.shape not in ((), (1,), (dim,)):
         raise ValueError(
-            f"{name}: expected one value or one per axis, shape (3,); found {arr.shape}"
+            f"{name}: expected one value or one per axis, shape ({dim},); found {arr.shape}"
         )
-    return np.broadcast_to(arr, (3,))
+    return np.broadcast_to(arr, (dim,))
 
 
 def first_observed(ys: ArrayLike) -> Array:

@@ -11,9 +11,15 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.core.kalman import StepOutput, _param, filter_step, initial_state, make_step_model
+from tobitkf.core.engine import (
+    StepOutput,
+    broadcast_param,
+    filter_step,
+    initial_state,
+    make_step_model,
+)
 from tobitkf.core.model import LinearGaussian, check_covariance, embed_diagonal
-from tobitkf.core.tobit import METHODS
+from tobitkf.core.tobit import FILTER_METHODS
 
 __all__ = ["StreamingFilter"]
 
@@ -46,7 +52,7 @@ class StreamingFilter:
 
     Examples
     --------
-    >>> f = StreamingFilter(LinearGaussian.skeleton(), "atkf", c=[0.34, 0.18, 0.34])
+    >>> f = StreamingFilter(LinearGaussian.random_walk(0.0025, 0.01), "atkf", c=[0.34, 0.18, 0.34])
     >>> mean, cov = f.step(frame)          # frame (*batch, 3), NaN = missing   # doctest: +SKIP
     """
 
@@ -62,11 +68,11 @@ class StreamingFilter:
     ) -> None:
         if not isinstance(model, LinearGaussian):
             raise TypeError(f"model: expected LinearGaussian, found {type(model).__name__}")
-        if method not in METHODS:
-            raise ValueError(f"method: expected one of {sorted(METHODS)}, found {method!r}")
+        if method not in FILTER_METHODS:
+            raise ValueError(f"method: expected one of {sorted(FILTER_METHODS)}, found {method!r}")
         self.model = model
         self.method = method
-        self._method = METHODS[method]
+        self._method = FILTER_METHODS[method]
         if method == "atkf" and c is None:
             raise ValueError("method 'atkf' needs c (half-widths of the adaptive limits)")
         self.lower = _opt_array("lower", lower)
@@ -194,7 +200,7 @@ class StreamingFilter:
         full = yv.shape
         Rs = None
         if R_scale is not None:
-            Rs = _param("R_scale", R_scale, full, 1.0)
+            Rs = broadcast_param("R_scale", R_scale, full, 1.0)
             if not np.all(np.isfinite(Rs)) or np.any(Rs <= 0):
                 raise ValueError("R_scale: entries must be finite and > 0")
         if self.diagonal and any(
@@ -215,14 +221,14 @@ class StreamingFilter:
             )
         lo = _opt_array("lower", lower)
         up = _opt_array("upper", upper)
-        lo_b = _param("lower", self.lower if lo is None else lo, full, -np.inf)
-        up_b = _param("upper", self.upper if up is None else up, full, np.inf)
+        lo_b = broadcast_param("lower", self.lower if lo is None else lo, full, -np.inf)
+        up_b = broadcast_param("upper", self.upper if up is None else up, full, np.inf)
         if np.any(lo_b >= up_b):
             raise ValueError("lower/upper: every lower limit must be < the upper limit")
         cc = _opt_array("c", c)
         cc = self.c if cc is None else cc
         if cc is not None:
-            cc = _param("c", cc, full, np.inf)
+            cc = broadcast_param("c", cc, full, np.inf)
             if np.any(cc <= 0):
                 raise ValueError("c: half-widths must be > 0 (inf allowed)")
         sm = make_step_model(model, self.diagonal, A=A_, Q=Q_, R=R_, R_scale=Rs)

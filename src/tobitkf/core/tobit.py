@@ -63,7 +63,7 @@ from tobitkf.core.censored import (
     clipped_normal_variance_diag,
     truncated_standard_normal,
 )
-from tobitkf.core.kalman import (
+from tobitkf.core.engine import (
     KF,
     Method,
     StepModel,
@@ -331,7 +331,7 @@ TKF = Method("tkf", tkf_update)
 TKFC = Method("tkfc", tkfc_update)
 ATKF = Method("atkf", atkf_update, adaptive=True)
 
-METHODS: dict[str, Method] = {"kf": KF, "tkf": TKF, "tkfc": TKFC, "atkf": ATKF}
+FILTER_METHODS: dict[str, Method] = {"kf": KF, "tkf": TKF, "tkfc": TKFC, "atkf": ATKF}
 
 
 def tobit_filter(

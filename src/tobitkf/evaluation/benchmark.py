@@ -18,8 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.evaluation.corruption import LABEL_NAMES, CorruptedTrack, CorruptionModel, corrupt
-from tobitkf.evaluation.evaluate import DEFAULT_METHODS, MethodLike, _jsonable, resolve_method
+from tobitkf.evaluation.evaluate import DEFAULT_METHODS, MethodLike, resolve_method
 from tobitkf.evaluation.metrics import joint_errors, rmse, smoothness, velocity_lag
 
 __all__ = ["BenchmarkRow", "BenchmarkTable", "benchmark_track", "run_benchmark", "seed_spread"]
@@ -64,7 +65,7 @@ class BenchmarkTable:
         raise KeyError(f"no method {method!r}; have {[r.method for r in self.rows]}")
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable(
+        return to_jsonable(
             {
                 "rows": [r.row() for r in self.rows],
                 "label_counts": self.label_counts,

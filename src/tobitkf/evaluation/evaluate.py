@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.evaluation.alignment import (
     TimeAlignment,
     distance_signals,
@@ -56,9 +57,9 @@ from tobitkf.evaluation.metrics import (
     classify_glitches,
     glitch_episodes,
     joint_errors,
-    largest_jumps,
     rmse,
     smoothness,
+    top_jumps,
     velocity_lag,
 )
 from tobitkf.evaluation.pairs import (
@@ -106,9 +107,10 @@ def default_methods() -> list[str]:
     What ``tobitkf evaluate``, ``report``, ``benchmark`` and the demo run when no method
     is named.
     """
-    from tobitkf.smoothing.api import METHODS
+    from tobitkf.smoothing.api import method_names
 
-    return [*DEFAULT_METHODS, *(m for m in ("robust", "robust_online") if m in METHODS)]
+    known = method_names()
+    return [*DEFAULT_METHODS, *(m for m in ("robust", "robust_online") if m in known)]
 
 
 # ------------------------------------------------------------------------------ truth
@@ -152,7 +154,7 @@ class GroundTruth:
             if self.fitted_time_alignment is None
             else self.fitted_time_alignment.to_dict(),
             "pairs": None if self.pairs is None else [str(p) for p in self.pairs.pairs],
-            "notes": _jsonable(self.notes),
+            "notes": to_jsonable(self.notes),
         }
 
 
@@ -375,18 +377,18 @@ def resolve_method(spec: MethodLike) -> tuple[str, Callable[[Any], Any]]:
 
 
 def _smooth(name: str, params: Mapping[str, Any]) -> Callable[[Any], Any]:
-    from tobitkf.smoothing.api import METHODS, smooth
+    from tobitkf.smoothing.api import get_method, method_names, smooth
 
     base, offline = name, False
     low = name.lower()
     for suffix in ("+rts", "_rts", ":offline"):
         if low.endswith(suffix):
             base, offline = name[: -len(suffix)], True
-    if base not in METHODS:
-        raise ValueError(f"unknown method {name!r}; known: raw, {', '.join(sorted(METHODS))}")
-    if offline and getattr(METHODS[base], "kind", "kalman") != "kalman":
+    if base not in method_names():
+        raise ValueError(f"unknown method {name!r}; known: raw, {', '.join(method_names())}")
+    if offline and not get_method(base).offline_ok:
         # checked here too so that a bad method list fails before any recording is loaded
-        raise ValueError(f"{name!r}: the RTS smoother exists for Kalman-type methods only")
+        raise ValueError(f"{name!r}: method {base!r} has no RTS pass")
     return lambda s: smooth(s, method=base, offline=offline, **params)
 
 
@@ -447,24 +449,7 @@ class MethodScore:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["angles"] = {k: v.to_dict() for k, v in self.angles.items()}
-        return _jsonable(d)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
+        return to_jsonable(d)
 
 
 def score_estimate(
@@ -625,7 +610,7 @@ class EvaluationTable:
         raise KeyError(f"no method {method!r}; have {[s.method for s in self.scores]}")
 
     def to_dict(self) -> dict:
-        return _jsonable(
+        return to_jsonable(
             {
                 "scores": [s.to_dict() for s in self.scores],
                 "truth_M": self.truth_M,
@@ -820,7 +805,7 @@ class NoTruthTable:
     n_frames: int
 
     def to_dict(self) -> dict:
-        return _jsonable({"rows": list(self.rows), "n_frames": self.n_frames})
+        return to_jsonable({"rows": list(self.rows), "n_frames": self.n_frames})
 
     def to_text(self) -> str:
         lines = [f"{'method':>14}  {'M (1e-3 m²)':>12}  {'max jump cm':>11}  largest jump at"]
@@ -858,7 +843,7 @@ def evaluate_without_truth(
         if outputs is not None:
             outputs[label] = out
         p = out.positions
-        jumps = largest_jumps(p, track.joint_names, n_jumps)
+        jumps = top_jumps(p, track.joint_names, n_jumps)
         rows.append(
             {
                 "method": label,

@@ -28,10 +28,10 @@ __all__ = [
     "classify_glitches",
     "glitch_episodes",
     "joint_errors",
-    "largest_jumps",
     "rmse",
     "smoothness",
     "smoothness_per_component",
+    "top_jumps",
     "velocity_lag",
 ]
 
@@ -170,7 +170,7 @@ def velocity_lag(
     return res.lag, res.lag_refined, res.correlation
 
 
-def largest_jumps(
+def top_jumps(
     positions: ArrayLike, joint_names: Sequence[str] | None = None, n: int = 5
 ) -> list[dict]:
     """The ``n`` largest one-frame jumps ``|p[t+1] - p[t]|`` of any joint.

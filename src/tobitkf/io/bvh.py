@@ -25,6 +25,7 @@ import numpy as np
 from tobitkf.io._kinematics import axis_rotation, forward_kinematics
 from tobitkf.io._text import nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -288,3 +289,9 @@ def read_bvh(
 def sniff_bvh(path: Path, head: str) -> int:
     """Score: the file starts with ``HIERARCHY``."""
     return 95 if head.lstrip().upper().startswith("HIERARCHY") else 0
+
+
+register_format(
+    "bvh", read_bvh, None, (".bvh",), sniff_bvh,
+    description="BVH hierarchy + motion",
+)  # fmt: skip

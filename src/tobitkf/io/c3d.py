@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -189,3 +190,9 @@ def sniff_c3d(path: Path, head: str) -> int:
     if len(first) == 2 and first[1] == 0x50:
         return 90 if path.name.lower().endswith(".c3d") else 30
     return 0
+
+
+register_format(
+    "c3d", read_c3d, None, (".c3d",), sniff_c3d,
+    description="C3D (needs the optional 'c3d' package)",
+)  # fmt: skip

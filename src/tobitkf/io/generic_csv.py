@@ -30,6 +30,7 @@ import numpy as np
 
 from tobitkf.io._text import check_times, fmt_float, nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
 
@@ -314,3 +315,9 @@ def sniff_csv(path: Path, head: str) -> int:
             return 40
         return 0
     return 0
+
+
+register_format(
+    "csv", read_csv, write_csv, (".csv",), sniff_csv,
+    description="generic skeleton CSV", aliases=("generic_csv",),
+)  # fmt: skip

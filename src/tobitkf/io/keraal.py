@@ -22,6 +22,7 @@ import numpy as np
 
 from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
 
@@ -120,3 +121,14 @@ def sniff_keraal_kinect(path: Path, head: str) -> int:
 def sniff_keraal_vicon(path: Path, head: str) -> int:
     """Score: 119 space-separated values per line."""
     return 60 if _first_count(head) == VICON_TARGETS * 7 else 0
+
+
+register_format(
+    "keraal_kinect", read_keraal_kinect, None, (".txt",), sniff_keraal_kinect,
+    description="KERAAL Kinect V2 text (positions + quaternions w,x,y,z)",
+)  # fmt: skip
+
+register_format(
+    "keraal_vicon", read_keraal_vicon, None, (".txt",), sniff_keraal_vicon,
+    description="KERAAL Vicon text (17 ART targets, mm)",
+)  # fmt: skip

@@ -17,6 +17,7 @@ import numpy as np
 
 from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import get_topology
 
@@ -88,3 +89,9 @@ def sniff_kimore(path: Path, head: str) -> int:
             return 30
         return 0
     return 0
+
+
+register_format(
+    "kimore", read_kimore, None, (".csv",), sniff_kimore,
+    description="KIMORE JointPosition CSV with tracking states",
+)  # fmt: skip

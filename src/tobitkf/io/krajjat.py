@@ -19,6 +19,7 @@ import numpy as np
 
 from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import KINECT_V2_JOINTS, Topology, get_topology
 
@@ -128,3 +129,9 @@ def sniff_krajjat(path: Path, head: str) -> int:
             if fields[1].strip().upper().endswith("_X"):
                 return 70
     return 0
+
+
+register_format(
+    "krajjat", read_krajjat, None, (".tsv",), sniff_krajjat,
+    description="Kinect TSV with timestamps (krajjat)", aliases=("kinect_tsv",),
+)  # fmt: skip

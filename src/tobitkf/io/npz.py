@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -155,3 +156,9 @@ def read_npz(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
 def sniff_npz(path: Path, head: str) -> int:
     """Score: a zip archive with a ``.npz`` name."""
     return 80 if head.startswith("PK") and path.name.lower().endswith(".npz") else 0
+
+
+register_format(
+    "npz", read_npz, write_npz, (".npz",), sniff_npz,
+    description="lossless NumPy archive",
+)  # fmt: skip

@@ -35,6 +35,7 @@ import numpy as np
 
 from tobitkf.io._text import fmt_float, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
 
@@ -358,3 +359,9 @@ def sniff_ntu(path: Path, head: str) -> int:
     if len(rows) >= 5 and len(rows[2]) == 10 and rows[3] == ["25"] and len(rows[4]) == 12:
         return 95
     return 0
+
+
+register_format(
+    "ntu", read_ntu, write_ntu, (".skeleton",), sniff_ntu,
+    description="NTU RGB+D .skeleton (Kinect V2, multi-body)",
+)  # fmt: skip

@@ -17,6 +17,7 @@ import numpy as np
 
 from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -145,3 +146,9 @@ def sniff_qualisys(path: Path, head: str) -> int:
         if line.strip():
             return 90 if line.split("\t")[0].strip().upper() == "NO_OF_FRAMES" else 0
     return 0
+
+
+register_format(
+    "qualisys", read_qualisys, None, (".tsv",), sniff_qualisys,
+    description="Qualisys Track Manager TSV (mm)", aliases=("qtm",),
+)  # fmt: skip

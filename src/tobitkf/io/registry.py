@@ -25,9 +25,11 @@ __all__ = [
     "get_format",
     "is_companion_file",
     "load",
+    "output_extension",
     "register_format",
     "save",
     "unregister_format",
+    "writable_formats",
 ]
 
 Reader = Callable[..., list[SkeletonSequence]]
@@ -45,6 +47,7 @@ class FormatSpec:
     extensions: tuple[str, ...]
     sniff: Sniffer | None
     description: str = ""
+    companion: Callable[[Path], bool] | None = None
 
 
 _FORMATS: dict[str, FormatSpec] = {}
@@ -60,6 +63,7 @@ def register_format(
     *,
     description: str = "",
     aliases: Iterable[str] = (),
+    companion: Callable[[Path], bool] | None = None,
 ) -> FormatSpec:
     """Register (or replace) a file format.
 
@@ -75,6 +79,9 @@ def register_format(
         Score of the file's content (0 = not this format).
     aliases : iterable of str
         Other names accepted for this format.
+    companion : callable ``(path) -> bool``, optional
+        True for a file that is the second half of a recording read through another
+        file (batch tools skip it, see :func:`is_companion_file`).
     """
     spec = FormatSpec(
         name=name,
@@ -83,6 +90,7 @@ def register_format(
         extensions=tuple(e.lower() for e in extensions),
         sniff=sniff,
         description=description,
+        companion=companion,
     )
     _FORMATS[name] = spec
     for a in aliases:
@@ -99,14 +107,27 @@ def unregister_format(name: str) -> None:
 
 def is_companion_file(path: str | os.PathLike[str]) -> bool:
     """True when ``path`` is the second half of a recording read through another file
-    (a UI-PRMD Kinect ``..._angles`` file, whose ``..._positions`` sibling exists).
+    (e.g. a UI-PRMD Kinect ``..._angles`` file, whose ``..._positions`` sibling exists),
+    as the formats' ``companion`` predicates say.
 
     Loading a companion file works (it returns the pair's skeleton), but batch tools
     walking a folder should skip it so that each recording is processed once.
     """
-    from tobitkf.io.uiprmd import is_angles_file, positions_path_for
+    p = Path(path)
+    return any(s.companion is not None and s.companion(p) for s in _FORMATS.values())
 
-    return is_angles_file(path) and positions_path_for(path).exists()
+
+def writable_formats() -> list[str]:
+    """Sorted names of the registered formats that have a writer."""
+    return sorted(n for n, s in _FORMATS.items() if s.writer is not None)
+
+
+def output_extension(name: str) -> str:
+    """The file ending a writer's output gets: the format's first extension."""
+    spec = get_format(name)
+    if spec.writer is None or not spec.extensions:
+        raise ValueError(f"format {name!r} cannot be written; writable: {writable_formats()}")
+    return spec.extensions[0]
 
 
 def formats() -> dict[str, FormatSpec]:
@@ -237,7 +258,7 @@ def save(
     if format in (None, "auto"):
         names = [n for n in _extension_matches(p) if _FORMATS[n].writer is not None]
         if len(names) != 1:
-            writable = sorted(n for n, s in _FORMATS.items() if s.writer is not None)
+            writable = writable_formats()
             raise ValueError(
                 f"cannot choose an output format from the name {p.name!r}; "
                 f"pass format= one of {writable}"
@@ -245,6 +266,6 @@ def save(
         format = names[0]
     spec = get_format(format)
     if spec.writer is None:
-        writable = sorted(n for n, s in _FORMATS.items() if s.writer is not None)
+        writable = writable_formats()
         raise ValueError(f"format {spec.name!r} cannot be written; writable formats: {writable}")
     spec.writer(seqs, p, **options)

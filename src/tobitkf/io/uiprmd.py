@@ -24,6 +24,7 @@ import numpy as np
 from tobitkf.io._kinematics import axis_rotation, forward_kinematics
 from tobitkf.io._text import nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import UI_PRMD_PARENTS, get_topology
 
@@ -211,3 +212,15 @@ def sniff_uiprmd_kinect(path: Path, head: str) -> int:
 def sniff_uiprmd_vicon(path: Path, head: str) -> int:
     """Score: 117 comma-separated values per line."""
     return 60 if _first_comma_count(head) == VICON_MARKERS * 3 else 0
+
+
+register_format(
+    "uiprmd_kinect", read_uiprmd_kinect, None, (".txt.gz",),
+    sniff_uiprmd_kinect, description="UI-PRMD Kinect positions + angles",
+    companion=lambda p: is_angles_file(p) and positions_path_for(p).exists(),
+)  # fmt: skip
+
+register_format(
+    "uiprmd_vicon", read_uiprmd_vicon, None, (".txt.gz",), sniff_uiprmd_vicon,
+    description="UI-PRMD Vicon (39 Plug-in Gait markers, mm)",
+)  # fmt: skip

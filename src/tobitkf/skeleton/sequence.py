@@ -206,6 +206,29 @@ class SkeletonSequence:
         frames : ndarray of int, shape (J,)
             Frame ``t`` at which the largest jump lands (``-1`` when ``jumps`` is NaN).
         """
-        from tobitkf.skeleton.describe import largest_jumps
-
         return largest_jumps(self.positions)
+
+
+def largest_jumps(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Largest frame-to-frame displacement of each joint, and the frame where it ends.
+
+    Parameters
+    ----------
+    positions : (T, J, 3)
+
+    Returns
+    -------
+    jump : (J,) metres (NaN where a joint never has two consecutive valid frames)
+    frame : (J,) index of the later frame of the largest jump (-1 if none)
+    """
+    p = np.asarray(positions, dtype=float)
+    if p.shape[0] < 2:
+        j = p.shape[1]
+        return np.full(j, np.nan), np.full(j, -1)
+    step = np.linalg.norm(np.diff(p, axis=0), axis=-1)  # (T-1, J)
+    valid = np.isfinite(step)
+    filled = np.where(valid, step, -np.inf)
+    arg = np.argmax(filled, axis=0)
+    jump = filled[arg, np.arange(p.shape[1])]
+    has = valid.any(axis=0)
+    return np.where(has, jump, np.nan), np.where(has, arg + 1, -1)

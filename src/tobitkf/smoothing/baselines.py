@@ -2,8 +2,9 @@
 
 Pure array functions over time-first arrays ``x`` of shape ``(T, *batch, d)`` (a 1-D
 ``(T,)`` series is accepted too and returned with the same shape). NaN marks a missing
-sample. Nothing here knows about skeleton files; :mod:`tobitkf.smoothing.api` wires
-these into :func:`tobitkf.smooth`.
+sample. Each is registered as a method of :func:`tobitkf.smooth` at the end of this
+module. Baselines treat NOT_TRACKED as missing and ignore INFERRED, except ``kinect``,
+which uses the states as the SDK does.
 
 - :func:`savgol`: Savitzky–Golay filter along time (``scipy.signal.savgol_filter``).
 - :func:`one_euro`: the 1€ filter (Casiez, Roussel, Vogel, CHI 2012).
@@ -15,9 +16,22 @@ these into :func:`tobitkf.smooth`.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import savgol_filter
+
+from tobitkf.smoothing.params import (
+    as_bool,
+    at_least_int,
+    nonneg_float,
+    odd_window,
+    one_of,
+    optional,
+    positive_float,
+    unit_float,
+)
+from tobitkf.smoothing.registry import SmoothInput, register_method
 
 __all__ = [
     "KINECT_PRESETS",
@@ -135,6 +149,8 @@ def savgol(
     -------
     ndarray, same shape as ``x``
     """
+    from scipy.signal import savgol_filter  # 1 s to import: only when used
+
     arr, shape = _as_series(x)
     window = _positive_int(window)
     if window % 2 == 0:
@@ -458,3 +474,88 @@ def kinect_double_exponential(
         b_prev = np.where(valid[..., None], b, b_prev)
         count = np.where(valid, count + 1, 0)
     return out
+
+
+# --------------------------------------------------------------------------- registration
+
+
+def _check_savgol(params: dict[str, Any]) -> None:
+    if params["polyorder"] >= params["window"]:
+        raise ValueError(
+            f"polyorder ({params['polyorder']}) must be less than window ({params['window']})"
+        )
+
+
+def _check_moving_average(params: dict[str, Any]) -> None:
+    if params["centered"] and params["window"] % 2 == 0:
+        raise ValueError(f"a centred moving average needs an odd window, got {params['window']}")
+
+
+def _run_savgol(inp: SmoothInput, window: int, polyorder: int, max_gap: int | None) -> Any:
+    return savgol(inp.ys, window, polyorder, max_gap=max_gap)
+
+
+def _run_moving_average(inp: SmoothInput, window: int, centered: bool) -> Any:
+    return moving_average(inp.ys, window, centered)
+
+
+def _run_one_euro(inp: SmoothInput, **params: Any) -> Any:
+    return one_euro(inp.ys, timestamps=np.cumsum(inp.steps), **params)
+
+
+def _run_kinect(inp: SmoothInput, **params: Any) -> Any:
+    return kinect_double_exponential(inp.positions, tracking_state=inp.tracking_state, **params)
+
+
+_SAVGOL = {
+    "params": {"window": 9, "polyorder": 3, "max_gap": None},
+    "validators": {
+        "window": odd_window,
+        "polyorder": at_least_int(0),
+        "max_gap": optional(at_least_int(0)),
+    },
+    "check": _check_savgol,
+}
+register_method("sgf", _run_savgol, description="Savitzky-Golay filter (offline)", **_SAVGOL)
+register_method(
+    "savgol", _run_savgol, description="Savitzky-Golay filter (offline; same as sgf)", **_SAVGOL
+)
+register_method(
+    "one_euro",
+    _run_one_euro,
+    params={"mincutoff": 1.0, "beta": 0.0, "dcutoff": 1.0},
+    validators={"mincutoff": positive_float, "beta": nonneg_float, "dcutoff": positive_float},
+    description="1-euro filter (Casiez et al. 2012)",
+    causal=True,
+)
+register_method(
+    "kinect",
+    _run_kinect,
+    params={
+        "preset": "default",
+        "smoothing": None,
+        "correction": None,
+        "prediction": None,
+        "jitter_radius": None,
+        "max_deviation_radius": None,
+    },
+    validators={
+        "preset": one_of(*KINECT_PRESETS),
+        "smoothing": optional(unit_float),
+        "correction": optional(unit_float),
+        "prediction": optional(nonneg_float),
+        "jitter_radius": optional(nonneg_float),
+        "max_deviation_radius": optional(nonneg_float),
+    },
+    description="Kinect SDK double-exponential joint filter",
+    causal=True,
+)
+register_method(
+    "moving_average",
+    _run_moving_average,
+    params={"window": 5, "centered": True},
+    validators={"window": at_least_int(1), "centered": as_bool},
+    description="moving average (centred, or trailing: centered=False)",
+    check=_check_moving_average,
+    causal=lambda params: not params["centered"],
+)

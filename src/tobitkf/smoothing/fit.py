@@ -1,4 +1,8 @@
-"""Estimate the ATKF censoring limits ``c`` per axis from clean motion capture.
+"""Fit the skeleton filters to data: the ATKF limits from motion capture
+(:func:`fit_limits`) and the process noise from a recording (:func:`fit_skeleton_noise`).
+
+Limits
+------
 
 The 2020 paper (Sect. 5, before eq. 30) set ``c = (0.34, 0.18, 0.34)`` m per frame at
 30 fps from the largest per-frame displacement of each coordinate seen in Vicon data.
@@ -12,15 +16,22 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["REFERENCE_DT", "LimitsFit", "fit_limits"]
+from tobitkf.core.likelihood import Form, NoiseFit, fit_noise
+from tobitkf.smoothing.paper import (
+    ATKF_C_HORIZONTAL,
+    ATKF_C_VERTICAL,
+    KINECT_DEVICE_LOWER,
+    KINECT_DEVICE_UPPER,
+    PAPER_R,
+    REFERENCE_DT,
+)
 
-#: the time step the limits refer to (the paper's Kinect rate, 30 fps)
-REFERENCE_DT = 1.0 / 30.0
+__all__ = ["LimitsFit", "fit_limits", "fit_skeleton_noise"]
 
 
 @dataclass(frozen=True)
@@ -196,3 +207,99 @@ def fit_limits(
         n_steps=int(d.shape[0]),
         up_axis=int(up_axis),
     )
+
+
+# ---------------------------------------------------------------------------------------
+# skeleton noise: the likelihood of the core on (T, J, 3) tracks
+
+#: 2020 paper eq. 30–35: ATKF half-widths (x, y = up, z) in metres per frame at 30 fps.
+DEFAULT_SKELETON_C = (ATKF_C_HORIZONTAL, ATKF_C_VERTICAL, ATKF_C_HORIZONTAL)
+
+
+def fit_skeleton_noise(
+    sequence: Any,
+    *,
+    per_joint: bool = False,
+    c: Sequence[float] | np.ndarray | None = None,
+    lower: Any = None,
+    upper: Any = None,
+    r: float = PAPER_R,
+    fit_r: bool = False,
+    q_structure: Literal["scalar", "diagonal", "full"] = "scalar",
+    form: Form = "corrected",
+    p0: float | None = None,
+    joints: Sequence[int] | None = None,
+    **fit_kwargs: Any,
+) -> NoiseFit | dict[Any, NoiseFit]:
+    """Fit the skeleton filter's Q (A = H = I per joint, 3-D) to one recording.
+
+    Each joint is one sequence of the batch; by default all joints share one Q
+    (2020 paper §4.2: Q "can be estimated using the likelihood functions"); with
+    ``per_joint=True`` every joint gets its own fit.
+
+    Which limits are used:
+
+    - ``form="corrected"`` (default): the adaptive ATKF limits ``x̂_{k-1} ± c`` with
+      ``c`` defaulting to :data:`DEFAULT_SKELETON_C`; or, when ``lower``/``upper`` are
+      given, TKF^c with those fixed limits.
+    - ``form="standard"`` (eq. 29): fixed limits, ``lower``/``upper`` or by default the
+      Kinect v2 device limits :data:`~tobitkf.smoothing.paper.KINECT_DEVICE_LOWER` / ``_UPPER``.
+    - ``form="gaussian"``: a plain KF, no limits (``c``, ``lower``, ``upper`` ignored).
+
+    Parameters
+    ----------
+    sequence : (T, J, 3) positions in metres (NaN = missing), or an object with a
+        ``positions`` attribute of that shape (e.g. ``tobitkf.SkeletonSequence``);
+        ``joint_names`` is used for the keys of the per-joint result when present.
+    per_joint : one fit per joint instead of one shared Q.
+    c : (3,) adaptive half-widths in metres per frame (the defaults are for 30 fps: scale
+        them for other frame rates).
+    lower, upper : (3,) fixed limits.
+    r : measurement-noise variance (R = r I), the start value when ``fit_r``.
+    fit_r, q_structure, form : as in :func:`fit_noise`.
+    p0 : initial covariance scale (default ``r``).
+    joints : indices of the joints to use (default all with at least 2 observed frames).
+    **fit_kwargs : passed on to :func:`fit_noise`.
+
+    Returns
+    -------
+    NoiseFit (shared Q) or ``{joint name or index: NoiseFit}`` when ``per_joint``.
+    """
+    pos = np.asarray(getattr(sequence, "positions", sequence), dtype=float)
+    if pos.ndim != 3 or pos.shape[-1] != 3:
+        raise ValueError(f"skeleton positions must be (T, J, 3), got shape {pos.shape}")
+    J = pos.shape[1]
+    jn = getattr(sequence, "joint_names", None)
+    if callable(jn):  # a method rather than a property
+        jn = jn()
+    names = list(jn) if jn is not None and len(jn) == J else list(range(J))
+    observed = np.isfinite(pos).all(axis=-1)  # (T, J)
+    idx = list(range(J)) if joints is None else [int(j) for j in joints]
+    idx = [j for j in idx if observed[:, j].sum() >= 2]
+    if not idx:
+        raise ValueError("no joint has at least two observed frames")
+    fixed = lower is not None or upper is not None
+    if c is not None and fixed:
+        raise ValueError("give either c (adaptive limits) or lower/upper (fixed), not both")
+    if form == "gaussian":
+        c, lower, upper = None, None, None
+    elif form == "standard":
+        if c is not None:
+            raise ValueError("form='standard' uses fixed limits (lower/upper), not c")
+        if not fixed:
+            lower, upper = np.asarray(KINECT_DEVICE_LOWER), np.asarray(KINECT_DEVICE_UPPER)
+    elif not fixed:
+        c = np.asarray(DEFAULT_SKELETON_C if c is None else c, dtype=float)
+    first = np.array([pos[np.argmax(observed[:, j]), j] for j in idx])  # (J', 3)
+    eye = np.eye(3)
+    P0 = (r if p0 is None else p0) * eye
+    common = dict(
+        A=eye, H=eye, P0=P0, q_structure=q_structure, fit_r=fit_r, R=r * eye, form=form, c=c
+    )
+    common.update(fit_kwargs)
+    if not per_joint:
+        return fit_noise(pos[:, idx], lower, upper, x0=first, **common)
+    out: dict[Any, NoiseFit] = {}
+    for k, j in enumerate(idx):
+        out[names[j]] = fit_noise(pos[:, j], lower, upper, x0=first[k], **common)
+    return out

@@ -1,10 +1,10 @@
 """Live smoothing: one skeleton frame at a time, the same numbers as :func:`smooth`.
 
-:class:`LiveSmoother` wraps :class:`tobitkf.StreamingFilter` with what
-:func:`tobitkf.smooth` does for a whole recording: the process noise scales with the
-time step, the adaptive limits with the time since a joint was last measured, inferred
-joints get a larger measurement noise, not-tracked or missing joints are predicted, and
-a joint starts at its first measurement. Fed the frames of a recording one by one, it
+:class:`LiveSmoother` runs any *causal* registered method on a stream. A method that
+registered a per-frame stepper (the Kalman-type ones: constant work per frame) runs
+through it; any other causal method runs by re-running its batch form on the frames
+seen so far and returning the last frame, which is exact by causality but costs time
+proportional to the stream's length. Fed the frames of a recording one by one, it
 returns what ``smooth(recording, method)`` returns (tested), without looking ahead.
 
 Example
@@ -21,12 +21,52 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tobitkf.skeleton.sequence import TrackingState
 from tobitkf.skeleton.topology import Topology, get_topology
+from tobitkf.smoothing.api import DEFAULT_METHOD, check_params, get_method, method_names, run_method
+from tobitkf.smoothing.paper import REFERENCE_DT
+from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
+from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
+from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR, measurements
 
-__all__ = ["LIVE_METHODS", "LiveSmoother"]
+__all__ = ["LiveSmoother", "live_methods"]
 
-#: causal Kalman-type methods that can run live (the offline smoother cannot)
-LIVE_METHODS = ("atkf", "atkf2016", "kf", "tkf", "tkfc")
+Array = NDArray[np.float64]
+_STATES = tuple(int(s) for s in TrackingState)
+
+
+def live_methods() -> list[str]:
+    """Names of the registered methods that can run live (causal with their defaults)."""
+    return method_names(causal=True)
+
+
+class _HistoryStepper:
+    """A causal method without a stepper: re-run it on the history, keep the last frame."""
+
+    def __init__(self, spec: MethodSpec, topology: Topology, up_axis: int, factor: float,
+                 params: dict[str, Any]) -> None:  # fmt: skip
+        self.spec, self.topology, self.up_axis, self.factor = spec, topology, up_axis, factor
+        self.params = params
+        self._frames: list[tuple[Array, Array, NDArray[np.bool_], Any, float]] = []
+
+    def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
+             positions: Array | None = None) -> Array:  # fmt: skip
+        self._frames.append((ys if positions is None else positions, ys, missing, states, dt))
+        pos, y, miss, st, steps = zip(*self._frames, strict=True)
+        step_arr = np.asarray(steps, dtype=float)
+        inp = SmoothInput(
+            positions=np.stack(pos),
+            ys=np.stack(y),
+            missing=np.stack(miss),
+            tracking_state=None if st[0] is None else np.stack(st),
+            steps=step_arr,
+            times=np.concatenate([[0.0], np.cumsum(step_arr[1:])]),
+            is_reference=bool(np.allclose(step_arr, REFERENCE_DT, rtol=1e-9, atol=0.0)),
+            topology=self.topology,
+            up_axis=self.up_axis,
+            inferred_noise_factor=self.factor,
+        )
+        return np.asarray(run_method(self.spec, inp, self.params).positions[-1], dtype=float)
 
 
 class LiveSmoother:
@@ -36,8 +76,9 @@ class LiveSmoother:
     ----------
     topology : Topology or name
         Skeleton of the stream (its up axis places the vertical limit of ``atkf``).
-    method : {"atkf", "atkf2016", "kf", "tkf", "tkfc"}
-        Causal Kalman-type method; parameters as for :func:`tobitkf.smooth`.
+    method : str
+        A causal registered method (:func:`live_methods`); parameters as for
+        :func:`tobitkf.smooth`.
     fps : float
         Nominal frame rate, used when no timestamps are given (and for the first step).
     up_axis : int, optional
@@ -45,104 +86,108 @@ class LiveSmoother:
     inferred_noise_factor : float
         Measurement-noise variance multiplier for INFERRED joints (as in ``smooth``).
     **params
-        Method parameters (``q``, ``r``, ``c``, ``c_horizontal``, ``c_vertical``, ``lower``,
-        ``upper``); unknown names raise ``ValueError`` listing the valid ones.
+        Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
 
     def __init__(
         self,
         topology: Topology | str = "kinect_v2",
-        method: str = "atkf",
+        method: str = DEFAULT_METHOD,
         *,
         fps: float = 30.0,
         up_axis: int | None = None,
         inferred_noise_factor: float | None = None,
         **params: Any,
     ) -> None:
-        from tobitkf.smoothing import api as sm
-
-        if method not in LIVE_METHODS:
+        self.spec = get_method(method)
+        if "offline" in params:
+            raise ValueError("offline smoothing needs the whole recording: it cannot run live")
+        self.params = check_params(method, params)
+        if not self.spec.is_causal(self.params):
             raise ValueError(
-                f"method {method!r} cannot run live; choose one of {', '.join(LIVE_METHODS)} "
-                "(offline smoothing and the non-causal baselines need the whole recording)"
+                f"method {method!r} cannot run live (it looks ahead in time); causal "
+                f"methods: {', '.join(live_methods())}"
             )
-        if not (fps > 0 and np.isfinite(fps)):
+        try:
+            fps_ok = float(fps) > 0 and np.isfinite(float(fps))
+        except (TypeError, ValueError):
+            fps_ok = False
+        if not fps_ok:
             raise ValueError(f"fps must be a positive number, got {fps!r}")
         self.topology = get_topology(topology) if isinstance(topology, str) else topology
         self.method = method
-        self.spec = sm.METHODS[method]
-        self.params = sm.check_params(method, params)
-        self.up_axis = int(self.topology.up_axis) if up_axis is None else sm._check_up_axis(up_axis)
+        self.up_axis = int(self.topology.up_axis) if up_axis is None else check_up_axis(up_axis)
         self.inferred_noise_factor = (
-            sm.DEFAULT_INFERRED_NOISE_FACTOR
+            DEFAULT_INFERRED_NOISE_FACTOR
             if inferred_noise_factor is None
-            else sm._inferred_factor(inferred_noise_factor)
+            else check_inferred_factor(inferred_noise_factor)
         )
         self.fps = float(fps)
-        self._ref = sm.REFERENCE_DT
-        self._Q = sm._diag3(self.params["q"])
-        self._R = sm._diag3(self.params["r"])
-        kind = self.spec.options["filter"]
-        self._c = sm._atkf_c(self.params, self.up_axis) if kind == "atkf" else None
         self.reset()
 
     def reset(self) -> None:
         """Forget the stream; the next frame starts new tracks."""
-        self._filter = None
-        self._started: NDArray[np.bool_] | None = None
-        self._last_valid_time: NDArray[np.float64] | None = None
-        self._time = 0.0
+        self._stepper: LiveStepper | _HistoryStepper | None = None
+        self._shape: tuple[int, ...] | None = None
+        self._single = False
         self._last_timestamp: float | None = None
         self.n_frames = 0
-        self.clipped: NDArray[np.bool_] | None = None
 
-    def _make_filter(self, ys: NDArray[np.float64], valid: NDArray[np.bool_]):
-        from tobitkf.core.model import LinearGaussian
-        from tobitkf.core.streaming import StreamingFilter
+    @property
+    def clipped(self) -> NDArray[np.bool_] | None:
+        """Which joints' last measurements were clipped (censoring methods), else None."""
+        clipped = getattr(self._stepper, "clipped", None)
+        return clipped[0] if clipped is not None and self._single else clipped
 
-        x0 = np.where(valid[..., None], ys, 0.0)
-        model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=self._Q, R=self._R, x0=x0, P0=self._R)
-        kind = self.spec.options["filter"]
-        if kind == "atkf":
-            return StreamingFilter(model, "atkf", c=self._c)
-        if kind == "kf":
-            return StreamingFilter(model, "kf")
-        method = "tkf" if self.spec.options["variant"] == "standard" else "tkfc"
-        return StreamingFilter(
-            model,
-            method,
-            lower=np.asarray(self.params["lower"], dtype=float),
-            upper=np.asarray(self.params["upper"], dtype=float),
-        )
+    def _new_stepper(self) -> LiveStepper | _HistoryStepper:
+        args = (self.topology, self.up_axis, self.inferred_noise_factor)
+        if self.spec.live is not None:
+            return self.spec.live(*args, **self.params)
+        return _HistoryStepper(self.spec, *args, self.params)
 
-    def _step_seconds(self, timestamp: float | None) -> float:
+    def _step_seconds(self, timestamp: float | None) -> tuple[float, float | None]:
         nominal = 1.0 / self.fps
         if timestamp is None:
-            return nominal
-        t = float(timestamp)
+            return nominal, self._last_timestamp
+        try:
+            t = float(timestamp)
+        except (TypeError, ValueError):
+            raise ValueError(f"timestamp must be a number of seconds, got {timestamp!r}") from None
         if not np.isfinite(t):
             raise ValueError(f"timestamp must be finite, got {timestamp!r}")
         if self._last_timestamp is None:
-            dt = nominal
-        elif t < self._last_timestamp:
+            return nominal, t
+        if t < self._last_timestamp:
             raise ValueError(f"timestamps must not decrease: {t} after {self._last_timestamp}")
-        else:
-            dt = max(t - self._last_timestamp, 0.1 * nominal)
-        self._last_timestamp = t
-        return dt
+        return max(t - self._last_timestamp, 0.1 * nominal), t
+
+    def _check_states(self, tracking_state: ArrayLike | None, shape: tuple[int, ...]) -> Any:
+        if tracking_state is None:
+            return None
+        raw = np.asarray(tracking_state)
+        if raw.shape != shape:
+            raise ValueError(f"tracking_state: expected shape {shape}, found {raw.shape}")
+        if raw.dtype.kind not in "iu" or not np.isin(raw, _STATES).all():
+            raise ValueError(
+                "tracking_state: expected integers 0 (not tracked), 1 (inferred) or "
+                f"2 (tracked), found {raw.ravel()[~np.isin(raw.ravel(), _STATES)][:3].tolist()}"
+                if raw.dtype.kind in "iuf"
+                else f"tracking_state: expected integers 0, 1 or 2, found dtype {raw.dtype}"
+            )
+        return raw.astype(np.int8)
 
     def update(
         self,
         positions: ArrayLike,
         tracking_state: ArrayLike | None = None,
         timestamp: float | None = None,
-    ) -> NDArray[np.float64]:
+    ) -> Array:
         """Filter one frame.
 
         Parameters
         ----------
         positions : array_like, shape (J, 3) or (B, J, 3) for B bodies
-            Metres; NaN for a missing joint.
+            Metres; NaN for a missing joint (infinite values are refused).
         tracking_state : array_like of int, shape (J,) or (B, J), optional
             0 not tracked (treated as missing), 1 inferred (noisier), 2 tracked.
         timestamp : float, optional
@@ -152,10 +197,14 @@ class LiveSmoother:
         -------
         ndarray, shape like ``positions``
             Smoothed positions; NaN for a joint not measured yet.
-        """
-        from tobitkf.smoothing import api as sm
 
-        shape = np.shape(positions)
+        A frame that is refused (``ValueError``) leaves the stream unchanged.
+        """
+        try:
+            pos = np.asarray(positions, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("positions: expected numbers of shape (J, 3) or (B, J, 3)") from None
+        shape = pos.shape
         if len(shape) not in (2, 3) or shape[-1] != 3:
             raise ValueError(f"positions: expected shape (J, 3) or (B, J, 3), found {shape}")
         if shape[-2] != self.topology.n_joints:
@@ -163,44 +212,27 @@ class LiveSmoother:
                 f"positions: {shape[-2]} joints, but topology {self.topology.name!r} has "
                 f"{self.topology.n_joints}"
             )
-        if self._started is not None and shape[:-1] != self._started.shape:
-            # checked before the clock moves: a rejected frame leaves the stream unchanged
+        if np.isinf(pos).any():
+            raise ValueError("positions: infinite values (use NaN for a missing joint)")
+        if self._shape is not None and shape[:-1] != self._shape:
             raise ValueError(
-                f"positions: batch shape {shape[:-1]} differs from the stream's "
-                f"{self._started.shape}"
+                f"positions: batch shape {shape[:-1]} differs from the stream's {self._shape}"
             )
-        states = None if tracking_state is None else np.asarray(tracking_state)
-        if states is not None and states.shape != shape[:-1]:
-            raise ValueError(f"tracking_state: expected shape {shape[:-1]}, found {states.shape}")
-        ys, missing = sm._measurements(positions, states)
-        valid = ~missing
-        dt = self._step_seconds(timestamp)
-        self._time += dt
-        if self._filter is None:
-            self._filter = self._make_filter(ys, valid)
-            self._started = valid.copy()
-            self._last_valid_time = np.full(valid.shape, np.nan)
+        states = self._check_states(tracking_state, shape[:-1])
+        dt, stamp = self._step_seconds(timestamp)
+        # everything checked: from here on the frame is part of the stream
+        single = pos.ndim == 2
+        batch_pos = pos[None] if single else pos
+        batch_states = None if states is None else (states[None] if single else states)
+        ys, missing = measurements(batch_pos, batch_states)
+        if self._stepper is None:
+            self._stepper = self._new_stepper()
+            self._shape = shape[:-1]
+        if isinstance(self._stepper, _HistoryStepper):
+            out = self._stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
         else:
-            new = valid & ~self._started
-            if new.any():
-                self._filter.seed(new, ys)
-                self._started |= new
-        kwargs: dict[str, Any] = {}
-        ratio = dt / self._ref
-        kwargs["Q"] = self._Q * ratio
-        r_scale = sm._inferred_r_scale(states, valid, self.inferred_noise_factor)
-        if r_scale is not None:
-            kwargs["R_scale"] = r_scale
-        if self._c is not None:
-            last = self._last_valid_time
-            elapsed = np.where(np.isfinite(last), self._time - last, dt)
-            kwargs["c"] = self._c * (elapsed / self._ref)[..., None]
-        mean, _ = self._filter.step(ys, **kwargs)
-        last_out = self._filter.last
-        clipped = None if last_out is None else last_out.update.clipped
-        self.clipped = None if clipped is None else np.asarray(clipped).any(axis=-1) & valid
-        self._last_valid_time = np.where(valid, self._time, self._last_valid_time)
+            out = self._stepper.step(ys, missing, batch_states, dt)
+        self._last_timestamp = stamp
+        self._single = single
         self.n_frames += 1
-        out = np.array(mean, dtype=float)
-        out[~self._started] = np.nan
-        return out
+        return out[0] if single else out

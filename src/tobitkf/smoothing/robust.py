@@ -67,27 +67,47 @@ The physical reasoning for every default is in ``docs/robust.md``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.core.kalman import kalman_filter, rts_smooth
+from tobitkf.core.model import LinearGaussian
 from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing.params import (
+    as_bool,
+    at_least_int,
+    check_inferred_factor,
+    nonneg_float,
+    nonneg_or_inf,
+    positive_or_inf,
+    region_value,
+)
+from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
+from tobitkf.smoothing.robust_gating import (
+    bone_lengths,
+    carry_with_parent,
+    confirm_reacquisition,
+    drop_short_runs,
+    enforce_chain,
+    gate_measurements,
+    region_values,
+)
+from tobitkf.smoothing.timebase import (
+    DEFAULT_INFERRED_NOISE_FACTOR,
+    frame_steps,
+    frame_times,
+    inferred_r_scale,
+    measurements,
+)
 
-__all__ = [
-    "ROBUST_DEFAULTS",
-    "ROBUST_VALIDATORS",
-    "bone_lengths",
-    "gate_measurements",
-    "joint_levels",
-    "region_values",
-    "robust_smooth",
-]
+__all__ = ["ROBUST_DEFAULTS", "ROBUST_VALIDATORS", "robust_smooth"]
 
 Array = NDArray[np.float64]
 
-#: default parameters of :func:`robust_smooth` (see docs/robust.md for the reasoning)
+#: default parameters of the robust methods (see docs/robust.md for the reasoning)
 ROBUST_DEFAULTS: dict[str, Any] = {
     # largest plausible joint speed per body region, m/s
     "v_max": {"hands": 8.0, "arms": 5.0, "torso": 3.0, "legs": 10.0},
@@ -101,7 +121,6 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "tau": 0.15,
     # measurement noise standard deviation per region, m
     "noise_sd": {"hands": 0.015, "arms": 0.01, "torso": 0.007, "legs": 0.01},
-    "inferred_noise_factor": 4.0,
     "bones": True,
     "two_pass": True,
     # longest believable tracking failure, s (KERAAL's longest: 48 frames = 1.6 s)
@@ -114,236 +133,22 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "carry": True,
 }
 
-
-# ----------------------------------------------------------------------------- validators
-_REGIONS = ("hands", "arms", "torso", "legs")
-
-
-def _v_region(name: str, value: Any) -> Any:
-    """A positive number, or a mapping with a positive number for every body region."""
-    if isinstance(value, Mapping):
-        missing = [g for g in _REGIONS if g not in value]
-        extra = sorted(set(value) - set(_REGIONS))
-        if missing or extra:
-            raise ValueError(
-                f"{name} needs one value per body region {_REGIONS}; "
-                f"missing {missing}, unknown {extra}"
-            )
-        return {g: _v_pos(f"{name}[{g}]", value[g]) for g in _REGIONS}
-    return _v_pos(name, value)
-
-
-def _v_pos(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not (v > 0):
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-    return v
-
-
-def _v_nonneg(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not (v >= 0):
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
-    return v
-
-
-def _v_bool(name: str, value: Any) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be true or false, got {value!r}")
-    return bool(value)
-
-
-def _v_int(name: str, value: Any) -> int:
-    if isinstance(value, bool) or int(value) != value or int(value) < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
-    return int(value)
-
-
-#: parameter validators (name -> check(name, value) -> value), for the smooth() registry
+#: parameter validators (name -> check(name, value) -> value)
 ROBUST_VALIDATORS: dict[str, Any] = {
-    "v_max": _v_region,
-    "margin": _v_nonneg,
-    "bone_tol_abs": _v_nonneg,
-    "bone_tol_rel": _v_nonneg,
-    "speed_sd": _v_region,
-    "tau": _v_pos,
-    "noise_sd": _v_region,
-    "bones": _v_bool,
-    "two_pass": _v_bool,
-    "max_reject": _v_pos,
-    "lookback": _v_int,
-    "min_run": _v_nonneg,
-    "carry": _v_bool,
+    "v_max": region_value,
+    "margin": nonneg_or_inf,
+    "bone_tol_abs": nonneg_or_inf,
+    "bone_tol_rel": nonneg_or_inf,
+    "speed_sd": region_value,
+    "tau": positive_or_inf,
+    "noise_sd": region_value,
+    "bones": as_bool,
+    "two_pass": as_bool,
+    "max_reject": positive_or_inf,
+    "lookback": at_least_int(0),
+    "min_run": nonneg_float,
+    "carry": as_bool,
 }
-
-
-# ----------------------------------------------------------------------------- helpers
-def joint_levels(parents: tuple[int, ...] | list[int]) -> list[NDArray[np.intp]]:
-    """Joint indices grouped by depth in the tree (roots first)."""
-    J = len(parents)
-    depth = np.full(J, -1)
-    for _ in range(J + 1):
-        changed = False
-        for j, p in enumerate(parents):
-            if depth[j] >= 0:
-                continue
-            if p < 0:
-                depth[j] = 0
-                changed = True
-            elif depth[p] >= 0:
-                depth[j] = depth[p] + 1
-                changed = True
-        if not changed:
-            break
-    if np.any(depth < 0):
-        raise ValueError(f"parents {list(parents)} contain a cycle")
-    return [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)]
-
-
-def region_values(topology: Any, values: Any, name: str) -> Array:
-    """Per-joint values ``(J,)`` from a number, a ``(J,)`` array or a region mapping."""
-    J = topology.n_joints
-    if isinstance(values, Mapping):
-        groups = topology.joint_groups()
-        out = np.full(J, np.nan)
-        for g, idx in groups.items():
-            if idx:
-                if g not in values:
-                    raise ValueError(f"{name}: no value for body region {g!r}")
-                out[idx] = float(values[g])
-        return out
-    arr = np.broadcast_to(np.asarray(values, dtype=float), (J,)).copy()
-    if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
-        raise ValueError(f"{name} must be positive, got {values!r}")
-    return arr
-
-
-def bone_lengths(positions: Array, parents: Any) -> Array:
-    """Median length of each joint's bone to its parent over frames, ``(J,)`` (NaN for roots)."""
-    pos = np.asarray(positions, dtype=float)
-    J = pos.shape[1]
-    out = np.full(J, np.nan)
-    for j, p in enumerate(parents):
-        if p < 0:
-            continue
-        d = np.linalg.norm(pos[:, j] - pos[:, p], axis=-1)
-        d = d[np.isfinite(d)]
-        if d.size:
-            out[j] = float(np.median(d))
-    return out
-
-
-def gate_measurements(
-    ys: Array,
-    times: Array,
-    parents: Any,
-    v_max: Array,
-    *,
-    margin: float,
-    bone_len: Array | None,
-    bone_tol_abs: float,
-    bone_tol_rel: float,
-    online_bones: bool = False,
-    max_reject: float = np.inf,
-) -> NDArray[np.bool_]:
-    """Causal accept / reject decision for every measurement (module docstring).
-
-    Parameters
-    ----------
-    ys : (T, J, 3) measurements, NaN = missing.
-    times : (T,) seconds, non-decreasing.
-    parents : (J,) parent index per joint, -1 for roots.
-    v_max : (J,) speed bound, m/s.
-    margin : noise allowance of the speed gate, m.
-    bone_len : (J,) reference bone lengths (NaN: no bone check), or None for no bone gate.
-    bone_tol_abs, bone_tol_rel : bone tolerance ``abs + rel * L``.
-    online_bones : use, at frame t, the median of the bone lengths of the frames accepted
-        before t instead of ``bone_len`` (causal; the bone gate starts after 15 of them;
-        a joint re-locked by ``max_reject`` learns its bone length again, so wrong
-        first frames cannot lock it out).
-    max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
-        its measurement moves plausibly from the previous frame's (no lock-out when the
-        reference itself was wrong).
-
-    Returns
-    -------
-    (T, J) bool, True = accepted.
-    """
-    ys = np.asarray(ys, dtype=float)
-    T, J, _ = ys.shape
-    par = np.asarray(parents, dtype=int)
-    levels = joint_levels(tuple(int(p) for p in par))
-    acc = np.zeros((T, J), dtype=bool)
-    last = np.full((J, 3), np.nan)
-    last_t = np.full(J, np.nan)
-    prev_acc = np.zeros(J, dtype=bool)
-    rej_since = np.full(J, np.nan)
-    valid_all = np.isfinite(ys).all(axis=-1)
-    use_bones = bone_len is not None
-    hist: list[list[float]] = [[] for _ in range(J)]
-    L_cur = np.full(J, np.nan)
-    for t in range(T):
-        if online_bones and use_bones and t % 5 == 0:
-            for j in range(J):
-                if len(hist[j]) >= 15:
-                    L_cur[j] = float(np.median(hist[j][-600:]))
-        L = L_cur if online_bones else bone_len
-        tt = times[t]
-        dt_prev = times[t] - times[t - 1] if t > 0 else np.inf
-        acc_t = np.zeros(J, dtype=bool)
-        for idx in levels:
-            y = ys[t, idx]
-            valid = valid_all[t, idx]
-            d = np.linalg.norm(y - last[idx], axis=-1)
-            elapsed = tt - last_t[idx]
-            gate = v_max[idx] * elapsed + margin
-            has_last = np.isfinite(last_t[idx])
-            gate_ok = ~has_last | (d <= gate)
-            step_ok = prev_acc[idx] & (d <= v_max[idx] * dt_prev + margin)
-            if t > 0:
-                raw_step = np.linalg.norm(y - ys[t - 1, idx], axis=-1)
-                relock = (tt - rej_since[idx] > max_reject) & (
-                    raw_step <= v_max[idx] * dt_prev + margin
-                )
-            else:
-                relock = np.zeros(len(idx), dtype=bool)
-            p = par[idx]
-            is_root = p < 0
-            pp = np.where(is_root, 0, p)
-            parent_acc = np.where(is_root, True, acc_t[pp])
-            if use_bones:
-                blen = np.linalg.norm(y - ys[t, pp], axis=-1)
-                Lj = L[idx]
-                tol = bone_tol_abs + bone_tol_rel * Lj
-                bone_ok = ~np.isfinite(Lj) | ~(np.abs(blen - Lj) > tol)
-                bone_ok |= is_root
-            else:
-                bone_ok = np.ones(len(idx), dtype=bool)
-            ok = valid & ((gate_ok & np.where(parent_acc, bone_ok, step_ok)) | relock)
-            acc_t[idx] = ok
-            if online_bones and use_bones:
-                # a re-lock means the learnt bone length was wrong: learn it again
-                for k in np.flatnonzero(relock & ~(gate_ok & bone_ok & parent_acc)):
-                    hist[idx[k]] = []
-                    L_cur[idx[k]] = np.nan
-                for k in np.flatnonzero(ok & parent_acc & ~is_root):
-                    hist[idx[k]].append(float(blen[k]))
-        upd = acc_t
-        last[upd] = ys[t, upd]
-        last_t[upd] = tt
-        prev_acc = acc_t
-        valid_t = valid_all[t]
-        start = valid_t & ~acc_t & ~np.isfinite(rej_since)
-        rej_since[start] = tt
-        rej_since[acc_t] = np.nan
-        acc[t] = acc_t
-    return acc
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -388,9 +193,6 @@ def _cv_smooth(
     offline: bool,
 ) -> Array:
     """OU-velocity KF (+ RTS) per axis; ys (T, J, 3) with NaN missing; q, r (J,)."""
-    from tobitkf.core.kalman import kalman_filter, rts_smooth
-    from tobitkf.core.model import LinearGaussian
-
     out = np.full_like(ys, np.nan)
     A_seq, base_Q = _ou_matrices(steps, tau)
     # joints sharing (q, r) run in one vectorised pass
@@ -426,152 +228,6 @@ def _cv_smooth(
         res = kalman_filter(model, y, **kwargs)
         means = rts_smooth(model, res).means if offline else res.means
         out[:, idx, :] = means[..., 0]
-    return out
-
-
-def enforce_chain(
-    acc: NDArray[np.bool_],
-    ys: Array,
-    times: Array,
-    parents: Any,
-    v_max: Array,
-    margin: float,
-    *,
-    backward: bool = True,
-) -> NDArray[np.bool_]:
-    """Apply the chain rule (gate rule 3) to a combined accept mask, both ways in time.
-
-    Offline the forward and backward gates are combined by AND, joint by joint; a wrist
-    may then be accepted by both passes in frames where its elbow is rejected by one of
-    them, which leaves a bridged elbow next to a failed wrist (a worse limb than either
-    raw or fully bridged).  Here a joint whose parent is rejected (or missing) in frame
-    ``t`` stays accepted only if it was accepted in the neighbouring frame and did not
-    jump from it; the sweep runs forwards, then (unless ``backward=False``, the causal
-    form used online) backwards, from the root outwards.
-    """
-    out = acc.copy()
-    T = out.shape[0]
-    par = np.asarray(parents, dtype=int)
-    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
-    sweeps = [(range(1, T), -1), (range(T - 2, -1, -1), 1)]
-    for order, step in sweeps if backward else sweeps[:1]:
-        for t in order:
-            s = t + step
-            bound = v_max * abs(times[t] - times[s]) + margin
-            for idx in levels:
-                orphan = out[t, idx] & ~out[t, par[idx]]
-                if not orphan.any():
-                    continue
-                moved = np.linalg.norm(ys[t, idx] - ys[s, idx], axis=-1)
-                keep = out[s, idx] & (moved <= bound[idx])
-                out[t, idx] &= ~orphan | keep
-    return out
-
-
-def confirm_reacquisition(
-    acc: NDArray[np.bool_], missing: NDArray[np.bool_], times: Array, min_run: float
-) -> NDArray[np.bool_]:
-    """Causal counterpart of :func:`drop_short_runs` for the online filter.
-
-    After a rejection that lasted at least ``min_run`` seconds (a sustained failure, not
-    a one-frame spike), a joint's measurements are believed again only once they have
-    kept passing the gates for ``min_run`` seconds; until then they stay rejected.
-    Inside a long failure a wrong sample sometimes passes the gates for a frame or two
-    (its bone happens to fit); online we cannot look ahead, so we wait.
-    """
-    out = acc.copy()
-    T, J = acc.shape
-    if min_run <= 0 or T < 2:
-        return out
-    rej_begin = np.full(J, np.nan)  # start of the current rejection stretch
-    conf_begin = np.full(J, np.nan)  # start of the current confirmation, if any
-    for t in range(T):
-        valid = ~missing[t]
-        r = valid & ~acc[t]
-        a = valid & acc[t]
-        # a rejection starts a stretch, or continues it and cancels its confirmation
-        rej_begin[r & np.isnan(rej_begin)] = times[t]
-        conf_begin[r] = np.nan
-        # the first accepted sample after a stretch: a long stretch needs confirmation
-        first = a & np.isfinite(rej_begin) & np.isnan(conf_begin)
-        long = first & (times[t] - rej_begin >= min_run)
-        conf_begin[long] = times[t]
-        rej_begin[first & ~long] = np.nan
-        waiting = a & np.isfinite(conf_begin)
-        still = waiting & (times[t] - conf_begin < min_run)
-        out[t, still] = False
-        done = waiting & ~still
-        conf_begin[done] = np.nan
-        rej_begin[done] = np.nan
-    return out
-
-
-def carry_with_parent(ys: Array, acc: NDArray[np.bool_], parents: Any) -> tuple[Array, Array]:
-    """Pseudo-measurements that carry rejected joints along with their parents (causal).
-
-    A rejected joint is placed at its parent's position (measured, or itself carried)
-    plus the joint's offset from the parent the last time both were accepted: a hand
-    whose measurement is rejected moves on with its wrist instead of staying behind in
-    space.  The joint may have rotated about its parent since, so the pseudo-measurement
-    is only as certain as that offset is long.
-
-    Returns
-    -------
-    pseudo : (T, J, 3) positions, NaN where there is none (accepted or missing samples,
-        roots, no earlier offset, no parent position).
-    radius : (T, J) length of the offset used (the bone length), NaN where no pseudo.
-    """
-    T, J, _ = ys.shape
-    par = np.asarray(parents, dtype=int)
-    valid = np.isfinite(ys).all(axis=-1)
-    pseudo = np.full_like(ys, np.nan)
-    radius = np.full((T, J), np.nan)
-    anchor = np.where(acc[..., None], ys, np.nan)
-    off = np.full((J, 3), np.nan)
-    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
-    for t in range(T):
-        for idx in levels:
-            p = par[idx]
-            rej = valid[t, idx] & ~acc[t, idx]
-            cand = anchor[t, p] + off[idx]
-            put = rej & np.isfinite(cand).all(axis=-1)
-            if put.any():
-                pseudo[t, idx[put]] = cand[put]
-                anchor[t, idx[put]] = cand[put]
-                radius[t, idx[put]] = np.linalg.norm(off[idx[put]], axis=-1)
-            both = acc[t, idx] & acc[t, p]
-            off[idx[both]] = ys[t, idx[both]] - ys[t, p[both]]
-    return pseudo, radius
-
-
-def drop_short_runs(
-    acc: NDArray[np.bool_], rejected: NDArray[np.bool_], times: Array, min_run: float
-) -> NDArray[np.bool_]:
-    """Reject accepted runs shorter than ``min_run`` seconds lying between two rejections.
-
-    Offline only.  Inside a long tracking failure a wrong sample sometimes passes the
-    gates (its bone happens to have the right length); the RTS smoother would then bend
-    the whole bridge across the failure towards that one sample.  A re-acquisition is
-    believed only when it lasts ``min_run`` seconds.
-    """
-    out = acc.copy()
-    T, J = acc.shape
-    if T < 3 or min_run <= 0:
-        return out
-    for j in range(J):
-        a = acc[:, j]
-        edges = np.flatnonzero(np.diff(np.r_[0, a.astype(np.int8), 0]))
-        for s, e in zip(edges[::2], edges[1::2], strict=True):  # run [s, e)
-            if s == 0 or e >= T:
-                continue
-            # the neighbours of the run: last non-missing before, first after
-            before = np.flatnonzero(rejected[:s, j] | acc[:s, j])
-            after = np.flatnonzero(rejected[e:, j] | acc[e:, j])
-            if not (before.size and after.size):
-                continue
-            if rejected[before[-1], j] and rejected[e + after[0], j]:
-                if times[e - 1] - times[s] < min_run:
-                    out[s:e, j] = False
     return out
 
 
@@ -659,129 +315,25 @@ def _causal_filter(
     return out.reshape(T, J, 3)
 
 
-def _times(sequence: SkeletonSequence) -> tuple[Array, Array]:
-    from tobitkf.smoothing.api import frame_steps
-
-    steps, _, _ = frame_steps(sequence)
-    if sequence.timestamps is not None:
-        times = np.asarray(sequence.timestamps, dtype=float)
-    else:
-        times = np.concatenate([[0.0], np.cumsum(steps[1:])])
-    return times, steps
-
-
-# ----------------------------------------------------------------------------- public
-def robust_smooth(
-    sequence: SkeletonSequence,
-    *,
-    offline: bool = True,
-    v_max: Any = None,
-    margin: float | None = None,
-    bone_tol_abs: float | None = None,
-    bone_tol_rel: float | None = None,
-    speed_sd: Any = None,
-    tau: float | None = None,
-    noise_sd: Any = None,
-    inferred_noise_factor: float | None = None,
-    bones: bool | None = None,
-    two_pass: bool | None = None,
-    max_reject: float | None = None,
-    lookback: int | None = None,
-    min_run: float | None = None,
-    carry: bool | None = None,
-) -> SkeletonSequence:
-    """Reject physically impossible measurements, then smooth (module docstring).
-
-    Parameters
-    ----------
-    sequence : SkeletonSequence, positions (T, J, 3) in metres.
-    offline : True (default): bone lengths from the whole recording, forward + backward
-        gating, RTS smoother (interpolates across rejected stretches).  False: causal
-        (online) — running bone lengths, forward gating, Kalman filter output only.
-    v_max : speed bound, m/s: a number, (J,) values or a mapping per body region
-        (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 10.
-    margin : speed-gate noise allowance, m (default 0.05).
-    bone_tol_abs, bone_tol_rel : bone gate ``|length - L| <= abs + rel * L`` (default
-        0.03 m + 15 %).
-    speed_sd : stationary (rms) joint speed of the OU velocity model, m/s (number, (J,)
-        or per region; default hands 1.0, arms 0.6, torso 0.3, legs 0.6); the velocity
-        noise density is ``q = 2 speed_sd² / tau`` (``speed_sd²`` when ``tau = inf``).
-    tau : velocity correlation time, s (default 0.15; ``inf`` = constant velocity).
-    noise_sd : measurement noise standard deviation, m (default hands 15 mm, arms 10,
-        torso 7, legs 10).
-    inferred_noise_factor : variance multiplier for INFERRED joints (default 4).
-    bones : use the bone gate (default True).
-    two_pass : offline only: also gate backwards in time (default True).
-    max_reject : s; a joint rejected longer than this is re-acquired as soon as it moves
-        plausibly from frame to frame (default 2).
-    lookback : online only: accepted frames dropped from the state when a rejection
-        starts (default 2).
-    min_run : offline only: an accepted run between two rejections shorter than this
-        (s) is rejected too (default 0.1).
-    carry : rejected joints are carried along with their parent (pseudo-measurement at
-        the parent plus the last good offset, standard deviation = that bone's length),
-        instead of only being predicted by their own motion model (default True).
-
-    Returns
-    -------
-    SkeletonSequence
-        Positions replaced; ``metadata["diagnostics"]`` = ``rejected_fraction`` (J,),
-        ``filled_fraction`` (J,) (missing or rejected samples that got an estimate),
-        ``clipped_fraction`` (J,) zeros (no censoring here; kept for the smooth()
-        diagnostics layout), ``rejected`` (T, J) bool mask, ``bone_lengths`` (J,),
-        ``method`` (``"robust"`` / ``"robust_online"``) and ``params``.
-    """
-    if not isinstance(sequence, SkeletonSequence):
-        raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
-    topo = sequence.topology
-    given = {
-        "v_max": v_max,
-        "margin": margin,
-        "bone_tol_abs": bone_tol_abs,
-        "bone_tol_rel": bone_tol_rel,
-        "speed_sd": speed_sd,
-        "tau": tau,
-        "noise_sd": noise_sd,
-        "inferred_noise_factor": inferred_noise_factor,
-        "bones": bones,
-        "two_pass": two_pass,
-        "max_reject": max_reject,
-        "lookback": lookback,
-        "min_run": min_run,
-        "carry": carry,
-    }
-    # the registry's validators, so a direct call is checked as smooth() checks it (no
-    # silent bool("no") or int(1.5)); per-joint (J,) arrays are left to region_values
-    params: dict[str, Any] = {}
-    for name in ROBUST_DEFAULTS:
-        value = given[name]
-        if value is None:
-            params[name] = ROBUST_DEFAULTS[name]
-        elif name == "inferred_noise_factor":
-            v = _v_pos(name, value)
-            if not (1.0 <= v < np.inf):
-                raise ValueError(f"inferred_noise_factor must be >= 1 and finite, got {value!r}")
-            params[name] = v
-        elif ROBUST_VALIDATORS[name] is _v_region and np.ndim(value) > 0:
-            params[name] = value
-        else:
-            params[name] = ROBUST_VALIDATORS[name](name, value)
-    params["offline"] = bool(offline)
+def _robust_body(
+    ys: Array,
+    missing: NDArray[np.bool_],
+    states: Any,
+    times: Array,
+    steps: Array,
+    topo: Topology,
+    params: dict[str, Any],
+    factor: float,
+    offline: bool,
+) -> tuple[Array, dict[str, Any]]:
+    """Gate and smooth one body: ys (T, J, 3) NaN where missing; returns (est, diagnostics)."""
+    T, J = missing.shape
     vmax = region_values(topo, params["v_max"], "v_max")
     spd = region_values(topo, params["speed_sd"], "speed_sd")
     # stationary velocity variance of the OU model is q tau / 2
     qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
     sd = region_values(topo, params["noise_sd"], "noise_sd")
-
-    from tobitkf.smoothing.api import _inferred_r_scale, _measurements
-
-    T, J = sequence.n_frames, sequence.n_joints
-    states = sequence.tracking_state
-    ys, missing = _measurements(sequence.positions, states)
     parents = topo.parents
-    if T == 0:
-        return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
-    times, steps = _times(sequence)
     L = bone_lengths(ys, parents) if params["bones"] else None
     gate_kw = dict(
         margin=params["margin"],
@@ -807,7 +359,7 @@ def robust_smooth(
     rejected = ~missing & ~acc
     yk = ys.copy()
     yk[~acc] = np.nan
-    r_scale = _inferred_r_scale(states, ~missing, params["inferred_noise_factor"])
+    r_scale = inferred_r_scale(states, ~missing, factor)
     carried = np.zeros((T, J), dtype=bool)
     if params["carry"]:
         pseudo, radius = carry_with_parent(ys, acc, parents)
@@ -826,15 +378,7 @@ def robust_smooth(
         est = _cv_smooth(yk, steps, params["tau"], qa, sd**2, r_scale, True)
     else:
         est = _causal_filter(
-            yk,
-            acc,
-            steps,
-            params["tau"],
-            qa,
-            sd**2,
-            r_scale,
-            int(params["lookback"]),
-            carried,
+            yk, acc, steps, params["tau"], qa, sd**2, r_scale, int(params["lookback"]), carried
         )
     # no estimate before a joint's first valid measurement, none for joints never accepted
     valid = ~missing
@@ -843,20 +387,140 @@ def robust_smooth(
     est[before] = np.nan
     never = ~acc.any(axis=0)
     est[:, never] = ys[:, never]
-    filled = (missing | rejected) & np.isfinite(est).all(axis=-1)
-    used = dict(params)
-    used["v_max"] = vmax.tolist()
-    used["speed_sd"] = spd.tolist()
-    used["noise_sd"] = sd.tolist()
+    resolved = {"v_max": vmax.tolist(), "speed_sd": spd.tolist(), "noise_sd": sd.tolist()}
     diagnostics = {
         "rejected_fraction": rejected.sum(axis=0) / T,
-        "filled_fraction": filled.sum(axis=0) / T,
-        "clipped_fraction": np.zeros(J),
         "rejected": rejected,
         "bone_lengths": L if L is not None else np.full(J, np.nan),
+        "resolved": resolved,
+    }
+    return est, diagnostics
+
+
+def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
+    """Runner: every body of ``inp`` gated and smoothed on its own."""
+    B = inp.ys.shape[1]
+    est = np.full_like(inp.ys, np.nan)
+    diags = []
+    for b in range(B):
+        states = None if inp.tracking_state is None else inp.tracking_state[:, b]
+        est[:, b], d = _robust_body(
+            inp.ys[:, b],
+            inp.missing[:, b],
+            states,
+            inp.times,
+            inp.steps,
+            inp.topology,
+            params,
+            inp.inferred_noise_factor,
+            offline,
+        )
+        diags.append(d)
+    resolved = diags[0].pop("resolved") if diags else {}
+    for d in diags[1:]:
+        d.pop("resolved")
+    return SmoothOutput(est, diagnostics=tuple(diags), params=resolved)
+
+
+def robust_smooth(
+    sequence: SkeletonSequence,
+    *,
+    offline: bool = True,
+    inferred_noise_factor: float = DEFAULT_INFERRED_NOISE_FACTOR,
+    **params: Any,
+) -> SkeletonSequence:
+    """Reject physically impossible measurements, then smooth (module docstring).
+
+    ``smooth(sequence, "robust", **params)`` (offline) or ``"robust_online"`` (causal)
+    does the same through the registry; this is the direct form.
+
+    Parameters
+    ----------
+    sequence : SkeletonSequence, positions (T, J, 3) in metres.
+    offline : True (default): bone lengths from the whole recording, forward + backward
+        gating, RTS smoother (interpolates across rejected stretches).  False: causal
+        (online) — running bone lengths, forward gating, Kalman filter output only.
+    inferred_noise_factor : variance multiplier for INFERRED joints (default 4).
+    v_max : speed bound, m/s: a number, (J,) values or a mapping per body region
+        (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 10.
+    margin : speed-gate noise allowance, m (default 0.05).
+    bone_tol_abs, bone_tol_rel : bone gate ``|length - L| <= abs + rel * L`` (default
+        0.03 m + 15 %).
+    speed_sd : stationary (rms) joint speed of the OU velocity model, m/s (number, (J,)
+        or per region; default hands 1.0, arms 0.6, torso 0.3, legs 0.6); the velocity
+        noise density is ``q = 2 speed_sd² / tau`` (``speed_sd²`` when ``tau = inf``).
+    tau : velocity correlation time, s (default 0.15; ``inf`` = constant velocity).
+    noise_sd : measurement noise standard deviation, m (default hands 15 mm, arms 10,
+        torso 7, legs 10).
+    bones : use the bone gate (default True).
+    two_pass : offline only: also gate backwards in time (default True).
+    max_reject : s; a joint rejected longer than this is re-acquired as soon as it moves
+        plausibly from frame to frame (default 2).
+    lookback : online only: accepted frames dropped from the state when a rejection
+        starts (default 2).
+    min_run : an accepted run between two rejections shorter than this (s) is rejected
+        too offline, and must be confirmed for this long online (default 0.1).
+    carry : rejected joints are carried along with their parent (pseudo-measurement at
+        the parent plus the last good offset, standard deviation = that bone's length),
+        instead of only being predicted by their own motion model (default True).
+
+    Returns
+    -------
+    SkeletonSequence
+        Positions replaced; ``metadata["diagnostics"]`` = ``rejected_fraction`` (J,),
+        ``filled_fraction`` (J,) (missing or rejected samples that got an estimate),
+        ``clipped_fraction`` (J,) zeros (no censoring here), ``rejected`` (T, J) bool
+        mask, ``bone_lengths`` (J,), ``method`` (``"robust"`` / ``"robust_online"``) and
+        ``params``.
+    """
+    if not isinstance(sequence, SkeletonSequence):
+        raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
+    offline = as_bool("offline", offline)
+    factor = check_inferred_factor(inferred_noise_factor)
+    unknown = sorted(set(params) - set(ROBUST_DEFAULTS))
+    if unknown:
+        raise ValueError(
+            f"unknown parameters {unknown} for robust_smooth; valid: {sorted(ROBUST_DEFAULTS)}"
+        )
+    full = dict(ROBUST_DEFAULTS)
+    full.update({k: ROBUST_VALIDATORS[k](k, v) for k, v in params.items()})
+    T, J = sequence.n_frames, sequence.n_joints
+    if T == 0:
+        return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
+    states = sequence.tracking_state
+    ys, missing = measurements(sequence.positions, states)
+    steps = frame_steps(sequence)[0]
+    est, diag = _robust_body(
+        ys, missing, states, frame_times(sequence, steps), steps, sequence.topology, full,
+        factor, offline,
+    )  # fmt: skip
+    used = {**full, **diag.pop("resolved"), "inferred_noise_factor": factor, "offline": offline}
+    filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
+    diagnostics = {
+        **diag,
+        "filled_fraction": filled.sum(axis=0) / T,
+        "clipped_fraction": np.zeros(J),
         "method": "robust" if offline else "robust_online",
         "params": used,
     }
-    meta = dict(sequence.metadata)
-    meta["diagnostics"] = diagnostics
-    return sequence.replace(positions=est, metadata=meta)
+    return sequence.replace(
+        positions=est, metadata={**sequence.metadata, "diagnostics": diagnostics}
+    )
+
+
+def _register(name: str, offline: bool, description: str) -> None:
+    def run(inp: SmoothInput, **params: Any) -> SmoothOutput:
+        return _run(inp, offline, params)
+
+    register_method(
+        name,
+        run,
+        params=ROBUST_DEFAULTS,
+        validators=ROBUST_VALIDATORS,
+        description=description,
+        causal=not offline,
+    )
+
+
+_register("robust", True, "physical speed / bone-length gating, OU-velocity RTS smoother")
+_register("robust_online", False, "physical speed / bone-length gating, causal OU-velocity KF")

@@ -1,0 +1,285 @@
+"""The papers' Kalman-type methods: ``kf``, ``tkf``, ``tkfc``, ``atkf``, ``atkf2016``.
+
+Every method models each joint as an independent 3-D random walk (A = H = I),
+vectorised over joints and bodies; x0 is the joint's first valid measurement and P0 = R.
+``offline=True`` runs the RTS smoother after the filter.
+
+Time steps. The paper's constants refer to 30 fps. When the sequence has timestamps or a
+frame rate other than 30 Hz, step k uses ``Q_k = Q · dt_k / (1/30)`` (a random walk's
+variance grows linearly with time) and ``c_k = c · dt_k / (1/30)`` (c is a largest
+displacement per frame). ``dt_0`` (no previous frame) is the nominal step (1/fps, or the
+median step of the timestamps). Zero steps (duplicated timestamps) are raised to a tenth
+of the nominal step so no limit collapses to zero. Without timestamps or fps, 30 fps is
+assumed.
+
+Gaps. ``c`` bounds the displacement per 1/30 s, so the ATKF limits of a joint that
+reappears after missing frames widen with the time elapsed since its last measurement
+(``c · elapsed / (1/30)``); otherwise a joint that moved during an occlusion would crawl
+back at ``gain · c`` per frame.
+
+Up axis. The vertical entry of ``c`` goes on the topology's ``up_axis`` (y for Kinect
+camera space, z for most optical systems); ``up_axis=`` overrides it. An explicit
+``c=(cx, cy, cz)`` is used as given, in the sequence's axes. The Kinect device limits of
+``tkf`` / ``tkfc`` are defined in Kinect camera axes (x right, y up, z depth from the
+sensor): they only make sense for Kinect camera-space data; give ``lower=`` / ``upper=``
+for anything else.
+
+Tracking states. NOT_TRACKED joints and NaN positions are predicted, not updated.
+INFERRED joints get their measurement variance multiplied by ``inferred_noise_factor``.
+Frames before a joint's first valid measurement stay NaN; later gaps are filled by the
+filter's prediction (hold, for a random walk) or, offline, by the RTS interpolation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tobitkf.core.kalman import kalman_filter, rts_smooth
+from tobitkf.core.model import LinearGaussian
+from tobitkf.core.streaming import StreamingFilter
+from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
+from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing import paper
+from tobitkf.smoothing.params import limit_vec, optional, positive_float, positive_vec
+from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
+from tobitkf.smoothing.timebase import elapsed_since_valid, inferred_r_scale
+
+__all__ = ["atkf_c", "run_kalman"]
+
+Array = NDArray[np.float64]
+
+_KF_VALIDATORS = {"q": positive_vec, "r": positive_vec}
+_ATKF_VALIDATORS = {
+    **_KF_VALIDATORS,
+    "c": optional(positive_vec),
+    "c_horizontal": positive_float,
+    "c_vertical": positive_float,
+}
+_TKF_VALIDATORS = {**_KF_VALIDATORS, "lower": limit_vec, "upper": limit_vec}
+
+
+def _diag3(v: Any) -> Array:
+    return np.diag(np.broadcast_to(np.asarray(v, dtype=float), (3,)).copy())
+
+
+def atkf_c(params: Mapping[str, Any], up_axis: int) -> Array:
+    """The ATKF half-widths (3,) in the sequence's axes: ``c`` as given, else
+    ``c_horizontal`` on the two horizontal axes and ``c_vertical`` on ``up_axis``."""
+    if params.get("c") is not None:
+        return np.broadcast_to(np.asarray(params["c"], dtype=float), (3,)).copy()
+    c = np.full(3, float(params["c_horizontal"]))
+    c[up_axis] = float(params["c_vertical"])
+    return c
+
+
+def _check_limits(params: dict[str, Any]) -> None:
+    lo, hi = np.asarray(params["lower"]), np.asarray(params["upper"])
+    if np.any(lo >= hi):
+        raise ValueError(f"lower {params['lower']} must be below upper {params['upper']}")
+
+
+def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) -> SmoothOutput:
+    """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3)."""
+    ys, missing = inp.ys, inp.missing
+    T = ys.shape[0]
+    bshape = ys.shape[1:-1]
+    valid = ~missing
+    has_any = valid.any(axis=0)  # (*batch,)
+    first = np.argmax(valid, axis=0)  # (*batch,)
+    x0 = np.take_along_axis(ys, first[None, ..., None], axis=0)[0]
+    x0 = np.where(has_any[..., None], x0, 0.0)
+    Q = _diag3(params["q"])
+    R = _diag3(params["r"])
+    model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=Q, R=R, x0=x0, P0=R)
+    kwargs: dict[str, Any] = {}
+    ratio = inp.steps / paper.REFERENCE_DT  # (T,)
+    if not inp.is_reference:
+        kwargs["Q_seq"] = Q[None] * ratio[:, None, None]
+    r_scale = inferred_r_scale(inp.tracking_state, valid, inp.inferred_noise_factor)
+    if r_scale is not None:
+        kwargs["R_scale"] = r_scale
+    used: dict[str, Any] = {}
+    if kind == "atkf":
+        c = atkf_c(params, inp.up_axis)
+        used["c"] = tuple(float(v) for v in c)
+        elapsed = elapsed_since_valid(inp.steps, valid)  # (T, *batch)
+        if np.all(elapsed == paper.REFERENCE_DT):
+            result = adaptive_tobit_filter(model, ys, c, **kwargs)
+        else:
+            c_seq = c * (elapsed / paper.REFERENCE_DT)[..., None]  # (T, *batch, 3)
+            result = adaptive_tobit_filter(model, ys, None, c_seq=c_seq, **kwargs)
+    elif kind == "kf":
+        result = kalman_filter(model, ys, **kwargs)
+    else:
+        result = tobit_filter(
+            model,
+            ys,
+            np.asarray(params["lower"], dtype=float),
+            np.asarray(params["upper"], dtype=float),
+            variant=variant,
+            **kwargs,
+        )
+    means = rts_smooth(model, result).means if inp.offline else result.means
+    est = np.array(means, dtype=float)
+    # nothing observed yet: no estimate before a joint's first valid measurement
+    before = np.arange(T).reshape((T,) + (1,) * len(bshape)) < first[None]
+    before |= ~has_any[None]
+    est[before] = np.nan
+    clipped = np.asarray(result.clipped, dtype=bool).any(axis=-1) & valid
+    return SmoothOutput(est, clipped=clipped, params=used)
+
+
+class KalmanStepper:
+    """Live form of :func:`run_kalman` (causal): one :class:`StreamingFilter` step per frame,
+    with the same time scaling, adaptive-limit widening and INFERRED noise."""
+
+    def __init__(
+        self,
+        kind: str,
+        variant: str | None,
+        topology: Topology,
+        up_axis: int,
+        inferred_noise_factor: float,
+        **params: Any,
+    ) -> None:
+        self.kind, self.variant, self.params = kind, variant, params
+        self.factor = inferred_noise_factor
+        self._Q = _diag3(params["q"])
+        self._R = _diag3(params["r"])
+        self._c = atkf_c(params, up_axis) if kind == "atkf" else None
+        self._filter: StreamingFilter | None = None
+        self._started: NDArray[np.bool_] | None = None
+        self._last_valid_time: Array | None = None
+        self._time = 0.0
+        self.clipped: NDArray[np.bool_] | None = None
+
+    def _make_filter(self, ys: Array, valid: NDArray[np.bool_]) -> StreamingFilter:
+        x0 = np.where(valid[..., None], ys, 0.0)
+        model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=self._Q, R=self._R, x0=x0, P0=self._R)
+        if self.kind == "atkf":
+            return StreamingFilter(model, "atkf", c=self._c)
+        if self.kind == "kf":
+            return StreamingFilter(model, "kf")
+        return StreamingFilter(
+            model,
+            "tkf" if self.variant == "standard" else "tkfc",
+            lower=np.asarray(self.params["lower"], dtype=float),
+            upper=np.asarray(self.params["upper"], dtype=float),
+        )
+
+    def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float) -> Array:
+        valid = ~missing
+        self._time += dt
+        if self._filter is None:
+            self._filter = self._make_filter(ys, valid)
+            self._started = valid.copy()
+            self._last_valid_time = np.full(valid.shape, np.nan)
+        else:
+            new = valid & ~self._started
+            if new.any():
+                self._filter.seed(new, ys)
+                self._started |= new
+        kwargs: dict[str, Any] = {"Q": self._Q * (dt / paper.REFERENCE_DT)}
+        r_scale = inferred_r_scale(states, valid, self.factor)
+        if r_scale is not None:
+            kwargs["R_scale"] = r_scale
+        if self._c is not None:
+            last = self._last_valid_time
+            elapsed = np.where(np.isfinite(last), self._time - last, dt)
+            kwargs["c"] = self._c * (elapsed / paper.REFERENCE_DT)[..., None]
+        mean, _ = self._filter.step(ys, **kwargs)
+        last_out = self._filter.last
+        clipped = None if last_out is None else last_out.update.clipped
+        self.clipped = None if clipped is None else np.asarray(clipped).any(axis=-1) & valid
+        self._last_valid_time = np.where(valid, self._time, self._last_valid_time)
+        out = np.array(mean, dtype=float)
+        out[~self._started] = np.nan
+        return out
+
+
+def _register(
+    name: str,
+    kind: str,
+    defaults: dict[str, Any],
+    validators: dict[str, Any],
+    description: str,
+    variant: str | None = None,
+) -> None:
+    def run(inp: SmoothInput, **params: Any) -> SmoothOutput:
+        return run_kalman(inp, kind, variant, **params)
+
+    def live(topology: Topology, up_axis: int, inferred_noise_factor: float, **params: Any):
+        return KalmanStepper(kind, variant, topology, up_axis, inferred_noise_factor, **params)
+
+    register_method(
+        name,
+        run,
+        params=defaults,
+        validators=validators,
+        description=description,
+        causal=True,
+        offline_ok=True,
+        check=_check_limits if "lower" in defaults else None,
+        live=live,
+    )
+
+
+_ATKF_DEFAULTS = {
+    "q": paper.PAPER_Q,
+    "r": paper.PAPER_R,
+    "c": None,
+    "c_horizontal": paper.ATKF_C_HORIZONTAL,
+    "c_vertical": paper.ATKF_C_VERTICAL,
+}
+_TKF_DEFAULTS = {
+    "q": paper.PAPER_Q,
+    "r": paper.PAPER_R,
+    "lower": paper.KINECT_DEVICE_LOWER,
+    "upper": paper.KINECT_DEVICE_UPPER,
+}
+_register(
+    "atkf",
+    "atkf",
+    _ATKF_DEFAULTS,
+    _ATKF_VALIDATORS,
+    "adaptive Tobit KF (2020): limits = previous estimate ± c",
+)
+_register(
+    "atkf2016",
+    "atkf",
+    {
+        **_ATKF_DEFAULTS,
+        "q": paper.ATKF2016_Q,
+        "c_horizontal": paper.ATKF2016_C_HORIZONTAL,
+        "c_vertical": paper.ATKF2016_C_VERTICAL,
+    },
+    _ATKF_VALIDATORS,
+    "adaptive Tobit KF with the 2016 paper's limits and Q",
+)
+_register(
+    "tkf",
+    "tkf",
+    _TKF_DEFAULTS,
+    _TKF_VALIDATORS,
+    "standard Tobit KF (Allik 2016), Kinect device limits (camera axes)",
+    variant="standard",
+)
+_register(
+    "tkfc",
+    "tkf",
+    _TKF_DEFAULTS,
+    _TKF_VALIDATORS,
+    "corrected Tobit KF (2020), Kinect device limits (camera axes)",
+    variant="corrected",
+)
+_register(
+    "kf",
+    "kf",
+    {"q": paper.PAPER_Q, "r": paper.PAPER_R},
+    _KF_VALIDATORS,
+    "plain Kalman filter (random walk per joint)",
+)

@@ -1,0 +1,104 @@
+"""Time steps, missing samples and measurement-noise scaling: how every smoothing method
+reads a skeleton sequence's clock and tracking states, so that all treat them alike.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.smoothing.paper import REFERENCE_DT
+
+__all__ = [
+    "DEFAULT_INFERRED_NOISE_FACTOR",
+    "elapsed_since_valid",
+    "frame_steps",
+    "frame_times",
+    "inferred_r_scale",
+    "measurements",
+]
+
+Array = NDArray[np.float64]
+
+#: measurement-variance multiplier for INFERRED joints: twice the standard deviation, the
+#: same doubling the Kinect SDK's own joint filter applies to its radii for inferred joints
+DEFAULT_INFERRED_NOISE_FACTOR = 4.0
+
+
+def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
+    """Time step before each frame, ``(T,)`` seconds, the nominal step, and irregularity.
+
+    ``steps[0]`` is the nominal step: the median positive timestamp difference, else
+    1/fps, else 1/30 s. Zero differences (duplicated stamps) become a tenth of it.
+    ``is_reference`` is True when every step equals 1/30 s (no scaling needed).
+    """
+    T = sequence.n_frames
+    ts = sequence.timestamps
+    fps = sequence.fps if sequence.fps is not None else 30.0
+    nominal = 1.0 / float(fps)
+    steps = np.full(T, nominal)
+    if ts is not None and T > 1:
+        d = np.diff(np.asarray(ts, dtype=float))
+        positive = d[d > 0]
+        if positive.size:  # else: all stamps equal, fall back to the frame rate
+            nominal = float(np.median(positive))
+            steps = np.concatenate([[nominal], np.maximum(d, 0.1 * nominal)])
+    is_reference = bool(np.allclose(steps, REFERENCE_DT, rtol=1e-9, atol=0.0))
+    return steps, nominal, is_reference
+
+
+def frame_times(sequence: SkeletonSequence, steps: Array | None = None) -> Array:
+    """Time of each frame, ``(T,)`` seconds: the timestamps, else the cumulated steps."""
+    if sequence.timestamps is not None:
+        return np.asarray(sequence.timestamps, dtype=float)
+    if steps is None:
+        steps = frame_steps(sequence)[0]
+    return np.concatenate([[0.0], np.cumsum(steps[1:])])
+
+
+def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.bool_]]:
+    """Measurements (a float copy) with NaN and NOT_TRACKED joints set to NaN, and the
+    missing mask ``positions.shape[:-1]``. Every method, batch or live, reads its input
+    through this, so that all treat a sample as missing alike.
+    """
+    ys = np.array(positions, dtype=float)
+    missing = np.isnan(ys).any(axis=-1)
+    if states is not None:
+        missing |= np.asarray(states) == TrackingState.NOT_TRACKED
+    ys[missing] = np.nan
+    return ys, missing
+
+
+def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
+    """Measurement-variance multiplier ``(*valid.shape, 3)`` for valid INFERRED joints.
+
+    ``factor`` where a valid joint is INFERRED, 1 elsewhere; None when nothing is scaled
+    (no states, factor 1 or no valid inferred joint), so the filters skip the work.
+    """
+    if states is None or factor == 1.0:
+        return None
+    inferred = (np.asarray(states) == TrackingState.INFERRED) & valid
+    if not inferred.any():
+        return None
+    return np.repeat(np.where(inferred, factor, 1.0)[..., None], 3, axis=-1)
+
+
+def elapsed_since_valid(steps: Array, valid: NDArray[np.bool_]) -> Array:
+    """Time from each joint's last valid frame before k to frame k, ``(T, *batch)``.
+
+    ``steps[k]`` when frame k-1 was valid (or k is before the first valid frame); after a
+    gap it is the whole time since the last measurement.
+    """
+    T = steps.shape[0]
+    times = np.cumsum(steps)
+    shape = (T,) + (1,) * (valid.ndim - 1)
+    idx = np.where(valid, np.arange(T).reshape(shape), -1)
+    last = np.maximum.accumulate(idx, axis=0)  # last valid index <= k
+    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1), last[:-1]], axis=0)
+    t_k = np.broadcast_to(times.reshape(shape), valid.shape)
+    st_k = np.broadcast_to(steps.reshape(shape), valid.shape)
+    t_prev = times[np.maximum(prev, 0)]
+    return np.where(prev >= 0, t_k - t_prev, st_k)
