@@ -71,6 +71,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--small", action="store_true", help="quick run (T=1000, 20 x 25 joints)")
     ap.add_argument("--repeats", type=int, default=2, help="best of N timings (default 2)")
+    ap.add_argument("--markdown", action="store_true", help="print a Markdown table (README)")
     args = ap.parse_args()
     if args.small:
         T, recs, joints, fp_joints = 1000, 20, 25, 5
@@ -103,6 +104,48 @@ def main() -> None:
     )
     print(f"ratio KF   / filterpy: {rate_kf / rate_fp:8.0f}x   (target >= 500x)")
     print(f"ratio ATKF / filterpy: {rate_atkf / rate_fp:8.0f}x   (target >= 50x)")
+    if args.markdown:
+        print_markdown(
+            T,
+            recs,
+            joints,
+            [
+                ("tobitkf KF (`kalman_filter`)", rate_kf),
+                ("tobitkf ATKF (`adaptive_tobit_filter`)", rate_atkf),
+                ("filterpy `KalmanFilter`, one 3-D filter per joint", rate_fp),
+            ],
+            rate_fp,
+        )
+
+
+def machine() -> str:
+    """What the numbers were measured on: date, cores, processor, Python, numpy."""
+    import datetime
+    import os
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            names = [ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")]
+        cpu = names[0] if names else cpu
+    except OSError:
+        pass
+    return (
+        f"{datetime.date.today().isoformat()}, {os.cpu_count()} cores ({cpu}), "
+        f"Python {platform.python_version()}, numpy {np.__version__}"
+    )
+
+
+def print_markdown(T, recs, joints, rows, reference) -> None:
+    """The README's speed table (the text above is kept for the log)."""
+    print("\x1e")  # separator: docs_results keeps what follows the last one
+    print(f"{T} frames × {recs} recordings × {joints} joints (3-D), measured {machine()}:")
+    print()
+    print("| | joint-frames / s | vs filterpy |")
+    print("|---|---|---|")
+    for name, rate in rows:
+        print(f"| {name} | {rate:.2g} | {rate / reference:.0f}× |")
 
 
 if __name__ == "__main__":

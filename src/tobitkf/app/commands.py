@@ -326,6 +326,14 @@ def _method_list(text: str | None) -> list[str] | None:
     help="Motion-capture file, one per TRACK, in the same order.",
 )
 @click.option(
+    "--truth-replace",
+    nargs=2,
+    metavar="OLD NEW",
+    default=None,
+    help="Find each TRACK's motion-capture file by replacing OLD with NEW in its path "
+    "(e.g. --truth-replace /Kinect/ /Vicon/), instead of --truth.",
+)
+@click.option(
     "--methods",
     default=None,
     help="Comma-separated methods (default: raw,kf,atkf,atkf2016,sgf,kf+rts,"
@@ -345,6 +353,12 @@ def _method_list(text: str | None) -> list[str] | None:
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON.")
 @click.option(
+    "--markdown",
+    "as_markdown",
+    is_flag=True,
+    help="Print Markdown tables (pooled, per recording, warnings), as in the docs.",
+)
+@click.option(
     "-o",
     "--out",
     "outdir",
@@ -352,7 +366,9 @@ def _method_list(text: str | None) -> list[str] | None:
     default=None,
     help="Also write results.json (and per-recording tables) here.",
 )
-def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
+def evaluate(
+    tracks, truths, truth_replace, methods, pairs, fixed_delay, as_json, as_markdown, outdir
+):
     """Score smoothing methods on TRACK against motion capture (or without it).
 
     With --truth: per-method RMSE (pooled, per joint group, by raw glitch class), p95,
@@ -369,10 +385,24 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
     )
 
     method_specs = _method_list(methods) or default_methods()
+    if truth_replace:
+        if truths:
+            _fail("give --truth or --truth-replace, not both")
+        old, new = truth_replace
+        truths = tuple(p.replace(old, new) for p in tracks)
+        missing = [
+            t for t, p in zip(truths, tracks, strict=True) if t == p or not Path(t).is_file()
+        ]
+        if missing:
+            _fail(f"--truth-replace {old!r} {new!r}: no motion-capture file {missing[0]}")
     if truths and len(truths) != len(tracks):
         _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
+    if as_markdown and not truths:
+        _fail("--markdown prints the tables against ground truth: give --truth")
+    quiet = as_json or as_markdown
     results: dict[str, Any] = {}
     tables = []
+    warned: list[tuple[str, str]] = []
     for i, path in enumerate(tracks):
         track = _load_one(path, "track")
         try:
@@ -381,6 +411,7 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
                 gt = prepare_truth(track, mocap, pairs=pairs)
                 for warning in gt.notes.get("warnings", []):
                     err_console.print(f"[yellow]warning[/yellow] {path}: {warning}")
+                    warned.append((path, warning))
                 table = evaluate_methods(track, gt, method_specs, fixed_delay=fixed_delay)
                 tables.append(table)
             else:
@@ -388,13 +419,13 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
         except (ValueError, KeyError) as exc:
             _fail(f"{path}: {exc}")
         results[path] = table.to_dict()
-        if not as_json:
+        if not quiet:
             console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
             console.print(table.to_text(), highlight=False, soft_wrap=True)
     pooled = pool_scores(tables) if len(tables) > 1 else None
     if pooled is not None:
         results["pooled"] = pooled
-        if not as_json:
+        if not quiet:
             cols = [c for c in pooled[0] if c != "method"]
             scale = {"M": 1e3}  # M is in m²; shown in 1e-3 m²
             names = {"M": "M e-3"}
@@ -407,10 +438,14 @@ def evaluate(tracks, truths, methods, pairs, fixed_delay, as_json, outdir):
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         (out / "results.json").write_text(dumps(results))
-        if not as_json:
+        if not quiet:
             console.print(f"wrote {out / 'results.json'}")
     if as_json:
         click.echo(dumps(results))
+    elif as_markdown:
+        from tobitkf.evaluation.markdown import evaluation_markdown
+
+        click.echo(evaluation_markdown(tables, list(tracks), pooled, warned), nl=False)
 
 
 def _scaled(value: Any, factor: float) -> Any:
@@ -491,7 +526,8 @@ def report(track, truth, output, methods, pairs, no_gif):
 @click.option("--duration", default=10.0, show_default=True, help="Seconds of motion.")
 @click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
-def benchmark(seed, seeds, motion, source, duration, methods, as_json):
+@click.option("--markdown", "as_markdown", is_flag=True, help="Print a Markdown table.")
+def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
     from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
     from tobitkf.evaluation.evaluate import default_methods
@@ -510,10 +546,15 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json):
     if as_json:
         click.echo(dumps([t.to_dict() for t in tables]))
         return
+    spread = seed_spread(tables)
+    if as_markdown:
+        from tobitkf.evaluation.markdown import benchmark_markdown
+
+        click.echo(benchmark_markdown(spread, list(range(seed, seed + seeds))), nl=False)
+        return
     if seeds == 1:
         console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
         return
-    spread = seed_spread(tables)
     keys = [k for k in spread[0] if k != "method"]
     rows = [
         [r["method"], *[f"{100 * r[k][0]:.2f} ± {100 * r[k][1]:.2f}" for k in keys]] for r in spread

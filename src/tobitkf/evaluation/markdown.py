@@ -1,0 +1,123 @@
+"""Results as Markdown tables: what ``tobitkf evaluate --markdown`` and ``tobitkf
+benchmark --markdown`` print, and what ``make docs-results`` puts into the README and the
+docs (so no result there is ever typed by hand)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["benchmark_markdown", "evaluation_markdown"]
+
+_GROUPS = ("hands", "arms", "torso", "legs")
+_CLASSES = (("fine", "fine"), ("short_glitch", "short"), ("sustained", "sustained"))
+
+
+def _num(v: Any, digits: int = 2) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return f"{v:.{digits}f}"
+
+
+def _change(v: float, raw: float) -> str:
+    if not (math.isfinite(v) and math.isfinite(raw) and raw > 0):
+        return "–"
+    return f"{100 * (v / raw - 1):+.0f} %"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+        *("| " + " | ".join(r) + " |" for r in rows),
+    ]
+
+
+def evaluation_markdown(
+    tables: Sequence[Any],
+    labels: Sequence[str],
+    pooled: Sequence[dict[str, Any]] | None = None,
+    warnings: Sequence[tuple[str, str]] = (),
+) -> str:
+    """Markdown of an evaluation against ground truth.
+
+    Parameters
+    ----------
+    tables : one :class:`~tobitkf.evaluation.evaluate.EvaluationTable` per recording.
+    labels : a short name per recording (file names).
+    pooled : :func:`~tobitkf.evaluation.evaluate.pool_scores` of the tables (several
+        recordings), or None.
+    warnings : ``(label, text)`` of the time alignment, printed under the tables.
+
+    Returns
+    -------
+    The pooled table (RMSE in cm, change against raw, per joint group and per raw glitch
+    class, max, frames with a joint more than 10 cm off), then RMSE per recording, then
+    the warnings.
+    """
+    if pooled is None:
+        t = tables[0]
+        pooled = []
+        for s in t.scores:
+            row = {"method": s.method, "rmse_cm": 100 * s.rmse, "max_cm": 100 * s.max,
+                   "frames_over": s.frames_over, "n_samples": s.counts.get("all", 0)}  # fmt: skip
+            for g in _GROUPS:
+                row[f"{g}_cm"] = 100 * s.rmse_groups.get(g, float("nan"))
+            for c, _ in _CLASSES:
+                row[f"{c}_cm"] = 100 * s.rmse_by_class.get(c, float("nan"))
+            pooled.append(row)
+    raw = next((r["rmse_cm"] for r in pooled if r["method"] == "raw"), float("nan"))
+    header = ["method", "RMSE", "vs raw", *_GROUPS, *(n for _, n in _CLASSES), "max",
+              "frames > 10 cm"]  # fmt: skip
+    rows = [
+        [
+            r["method"],
+            _num(r["rmse_cm"]),
+            _change(r["rmse_cm"], raw) if r["method"] != "raw" else "",
+            *(_num(r.get(f"{g}_cm")) for g in _GROUPS),
+            *(_num(r.get(f"{c}_cm")) for c, _ in _CLASSES),
+            _num(r.get("max_cm"), 1),
+            str(r.get("frames_over", "–")),
+        ]
+        for r in pooled
+    ]
+    n = sum(int(r.get("n_samples", 0)) for r in pooled[:1])
+    what = f"{len(tables)} recording{'s' if len(tables) > 1 else ''}, {n:,} samples"
+    out = [f"RMSE against motion capture, cm ({what}; pooled over recordings):", ""]
+    out += _table(header, rows)
+    if len(tables) > 1:
+        methods = [s.method for s in tables[0].scores]
+        out += ["", "RMSE per recording, cm:", ""]
+        out += _table(
+            ["recording", *methods],
+            [
+                [Path(lab).name, *(_num(100 * t.score(m).rmse) for m in methods)]
+                for lab, t in zip(labels, tables, strict=True)
+            ],
+        )
+    if warnings:
+        out += ["", "Warnings of the time alignment (their numbers deserve less trust):", ""]
+        out += [f"- {Path(lab).name}: {text}" for lab, text in warnings]
+    return "\n".join(out) + "\n"
+
+
+def benchmark_markdown(spread: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
+    """Markdown of :func:`~tobitkf.evaluation.benchmark.seed_spread`: RMSE in cm, mean ±
+    standard deviation over the seeds, overall and by glitch label."""
+    keys = [k for k in spread[0] if k != "method"]
+    raw = next((r["rmse"][0] for r in spread if r["method"] == "raw"), float("nan"))
+    rows = [
+        [
+            r["method"],
+            f"{_num(100 * r['rmse'][0])} ± {_num(100 * r['rmse'][1])}",
+            _change(r["rmse"][0], raw) if r["method"] != "raw" else "",
+            *(_num(100 * r[k][0]) for k in keys if k != "rmse"),
+        ]
+        for r in spread
+    ]
+    seed_text = f"seeds {seeds[0]}–{seeds[-1]}" if len(seeds) > 1 else f"seed {seeds[0]}"
+    out = [f"RMSE against the known truth, cm (mean ± sd over {seed_text}; by label: mean):", ""]
+    out += _table(["method", "RMSE", "vs raw", *(k for k in keys if k != "rmse")], rows)
+    return "\n".join(out) + "\n"

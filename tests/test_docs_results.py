@@ -1,0 +1,73 @@
+"""Results in README.md and docs/ cannot go stale: every results table sits in a block
+that names the command printing it, and the blocks say what the commands print now."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import data_file
+
+ROOT = Path(__file__).resolve().parents[1]
+# files whose every results table must be generated (more join as they are converted)
+STRICT = ("README.md", "docs/evaluation.md")
+
+
+def _tool():
+    if "docs_results" not in sys.modules:
+        path = ROOT / "tools" / "docs_results.py"
+        spec = importlib.util.spec_from_file_location("docs_results", path)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["docs_results"] = mod  # dataclasses look their module up there
+        spec.loader.exec_module(mod)
+    return sys.modules["docs_results"]
+
+
+def _outside_blocks(text: str) -> str:
+    return _tool().BLOCK.sub("", text)
+
+
+def test_blocks_are_well_formed():
+    tool = _tool()
+    for path in tool.documents():
+        text = path.read_text(encoding="utf-8")
+        assert text.count("<!-- results") == text.count("<!-- /results -->"), path
+        for b in tool.blocks(path):
+            assert b.body.startswith(f"Printed by `{b.command}`"), (path, b.command)
+
+
+@pytest.mark.parametrize("name", STRICT)
+def test_no_results_table_is_typed_by_hand(name):
+    rest = _outside_blocks((ROOT / name).read_text(encoding="utf-8"))
+    rows = [line for line in rest.splitlines() if line.startswith("|")]
+    typed = [r for r in rows if re.search(r"\d\.\d", r)]
+    assert not typed, f"{name}: results typed outside a results block: {typed[:3]}"
+
+
+def test_the_checker_finds_a_changed_number(tmp_path, monkeypatch):
+    tool = _tool()
+    doc = tmp_path / "doc.md"
+    cmd = "printf '| a | 1.25 |\\n'"
+    doc.write_text(
+        f"x\n<!-- results: {cmd} -->\n{tool.render(cmd, '| a | 1.26 |')}<!-- /results -->\n"
+    )
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+    assert tool.update(doc, only=None, bench=False, check=True) == [f"doc.md: {cmd}"]
+    assert tool.update(doc, only=None, bench=False, check=False)
+    assert tool.update(doc, only=None, bench=False, check=True) == []
+    assert "| a | 1.25 |" in doc.read_text()
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_every_results_block_matches_what_its_command_prints():
+    data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt")  # skips (or fails in CI) without data
+    tool = _tool()
+    stale = []
+    for path in tool.documents():
+        stale += tool.update(path, only=None, bench=False, check=True)
+    assert not stale, "stale results (run `make docs-results`):\n" + "\n".join(stale)
