@@ -1,36 +1,100 @@
-"""Shared helpers of the text readers: reading (gzip-aware), decoding, numeric blocks.
+"""Shared helpers of the readers: bounded reading (gzip-aware), decoding, the one number
+syntax, numeric blocks, and the limits that hold against hostile files.
 
 Every failure becomes a :class:`~tobitkf.io.errors.ReadError` naming the file and line.
+
+Limits (documented in ``docs/data.md``, "Limits and hostile input"):
+
+* :data:`MAX_INPUT_BYTES`: the most a reader takes in, after decompression (a text file,
+  a gunzipped text file, the arrays of an NPZ archive); gzip data are decompressed in a
+  stream and refused as soon as they pass it.
+* :func:`check_output_size`: what a reader allocates from counts the file declares is
+  bounded by ``max(MIN_OUTPUT_BYTES, OUTPUT_BYTES_PER_INPUT_BYTE * file size)``.
+* :data:`NUMBER`: plain ASCII decimal numbers only (no ``1_000``, no non-ASCII digits, no
+  hex, no ``inf``; ``nan`` only where a format documents it).
+* :data:`MAX_ABS_POSITION_M`: plausible coordinates, in metres after unit conversion.
+* :data:`MIN_RATE_HZ`, :data:`MAX_RATE_HZ`: plausible frame rates.
 """
 
 from __future__ import annotations
 
 import gzip
 import os
+import re
 import zlib
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io.errors import ReadError
+from tobitkf.io.errors import OptionError, ReadError
 
 GZIP_MAGIC = b"\x1f\x8b"
 
+#: most bytes a reader takes in after decompression (text, gunzipped text, NPZ arrays)
+MAX_INPUT_BYTES = 256 * 2**20
+#: a reader may allocate max(MIN_OUTPUT_BYTES, OUTPUT_BYTES_PER_INPUT_BYTE x input bytes)
+MIN_OUTPUT_BYTES = 64 * 2**20
+OUTPUT_BYTES_PER_INPUT_BYTE = 32
+#: plausible coordinates: |x| <= MAX_ABS_POSITION_M metres (after unit conversion)
+MAX_ABS_POSITION_M = 1e4
+#: plausible frame rates (Hz), bounds included
+MIN_RATE_HZ = 1e-3
+MAX_RATE_HZ = 1e5
+#: what a reader does with an implausible position: raise, or mark the sample missing
+IMPLAUSIBLE = ("error", "missing")
+
+_NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+#: the one accepted number syntax: optional sign, ASCII digits, optional fraction and exponent
+NUMBER = re.compile(_NUM)
+INTEGER = re.compile(r"[+-]?[0-9]+")
+_CHUNK = 2**20
+
+
+def size_text(n: int) -> str:
+    """``n`` bytes in readable units (``"256 MiB"``)."""
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} B"
+
+
+def _too_large(path: str | os.PathLike[str], what: str) -> ReadError:
+    return ReadError(
+        path,
+        None,
+        f"{what} is larger than the limit of {size_text(MAX_INPUT_BYTES)} "
+        "(tobitkf.io._text.MAX_INPUT_BYTES)",
+    )
+
 
 def read_bytes(path: str | os.PathLike[str]) -> bytes:
-    """Whole file content, gunzipped when it starts with the gzip magic number."""
-    p = Path(path)
+    """Whole file content, gunzipped (in a stream) when it starts with the gzip magic
+    number; refused past :data:`MAX_INPUT_BYTES`."""
+    limit = MAX_INPUT_BYTES
     try:
-        data = p.read_bytes()
+        with open(path, "rb") as fh:
+            if fh.read(2) != GZIP_MAGIC:
+                if os.fstat(fh.fileno()).st_size > limit:
+                    raise _too_large(path, "the file")
+                fh.seek(0)
+                data = fh.read(limit + 1)
+                if len(data) > limit:
+                    raise _too_large(path, "the file")
+                return data
+            fh.seek(0)
+            chunks: list[bytes] = []
+            total = 0
+            with gzip.GzipFile(fileobj=fh) as gz:
+                while chunk := gz.read(min(_CHUNK, limit + 1 - total)):
+                    total += len(chunk)
+                    if total > limit:
+                        raise _too_large(path, "the decompressed content")
+                    chunks.append(chunk)
     except IsADirectoryError:
         raise ReadError(path, None, "expected a file, found a directory") from None
-    if data[:2] == GZIP_MAGIC:
-        try:
-            data = gzip.decompress(data)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise ReadError(path, None, f"corrupt or truncated gzip data ({exc})") from None
-    return data
+    except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
+        raise ReadError(path, None, f"corrupt or truncated gzip data ({exc})") from None
+    return b"".join(chunks)
 
 
 def decode(path: str | os.PathLike[str], data: bytes) -> str:
@@ -67,6 +131,128 @@ def read_head(path: str | os.PathLike[str], size: int = 65536) -> str:
     return head.decode("utf-8", errors="replace")
 
 
+def check_output_size(
+    path: str | os.PathLike[str], nbytes: int, input_bytes: int, what: str
+) -> None:
+    """Refuse a file whose declared counts would make the reader allocate more than
+    ``max(MIN_OUTPUT_BYTES, OUTPUT_BYTES_PER_INPUT_BYTE * input_bytes)``.
+
+    ``nbytes`` is the reader's estimate for ``what`` (e.g. "20000 frames x 100 bodies").
+    """
+    limit = max(MIN_OUTPUT_BYTES, OUTPUT_BYTES_PER_INPUT_BYTE * input_bytes)
+    if nbytes > limit:
+        raise ReadError(
+            path,
+            None,
+            f"{what} would need about {size_text(nbytes)} of memory for a file of "
+            f"{size_text(input_bytes)}; the limit is {size_text(limit)} "
+            f"(max of {size_text(MIN_OUTPUT_BYTES)} and {OUTPUT_BYTES_PER_INPUT_BYTE} x the "
+            "file size)",
+        )
+
+
+def text_size(lines: Sequence[str]) -> int:
+    """Characters of the text that ``lines`` came from (line endings counted as one)."""
+    return sum(map(len, lines)) + len(lines)
+
+
+def _shown(text: str) -> str:
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def is_number(text: str) -> bool:
+    """True when ``text`` (surrounding spaces and tabs allowed) is a plain decimal number."""
+    return NUMBER.fullmatch(text.strip(" \t")) is not None
+
+
+def parse_number(path: str | os.PathLike[str], line: int | None, text: str, what: str) -> float:
+    """A finite float written as a plain ASCII decimal number (:data:`NUMBER`)."""
+    s = text.strip(" \t")
+    if NUMBER.fullmatch(s) is None:
+        raise ReadError(path, line, f"expected {what} (a decimal number), found {_shown(text)!r}")
+    value = float(s)
+    if not np.isfinite(value):
+        raise ReadError(path, line, f"expected a finite number for {what}, found {_shown(s)!r}")
+    return value
+
+
+def parse_int(
+    path: str | os.PathLike[str],
+    line: int | None,
+    text: str,
+    what: str,
+    minimum: int | None = None,
+) -> int:
+    """An integer written with ASCII digits (optional sign), at least ``minimum``."""
+    s = text.strip(" \t")
+    if INTEGER.fullmatch(s) is None:
+        raise ReadError(path, line, f"expected {what} (an integer), found {_shown(text)!r}")
+    value = int(s)
+    if minimum is not None and value < minimum:
+        raise ReadError(path, line, f"expected {what} >= {minimum}, found {value}")
+    return value
+
+
+def check_rate(
+    path: str | os.PathLike[str], line: int | None, fps: float, what: str, shown: str
+) -> float:
+    """``fps`` when it is a plausible rate (:data:`MIN_RATE_HZ` to :data:`MAX_RATE_HZ`),
+    else a :class:`ReadError` showing ``what`` as written (``shown``)."""
+    if not (np.isfinite(fps) and MIN_RATE_HZ <= fps <= MAX_RATE_HZ):
+        raise ReadError(
+            path,
+            line,
+            f"implausible {what} {_shown(shown)!r}: expected a frame rate from {MIN_RATE_HZ:g} "
+            f"to {MAX_RATE_HZ:g} Hz",
+        )
+    return float(fps)
+
+
+def check_implausible_option(implausible: str) -> None:
+    """Validate a reader's ``implausible`` option (:data:`IMPLAUSIBLE`)."""
+    if implausible not in IMPLAUSIBLE:
+        raise OptionError(f"implausible must be one of {IMPLAUSIBLE}, found {implausible!r}")
+
+
+def check_positions(
+    path: str | os.PathLike[str],
+    positions: np.ndarray,
+    line_numbers: Sequence[int] | None,
+    implausible: str = "error",
+    *,
+    names: Sequence[str] | None = None,
+    state: np.ndarray | None = None,
+) -> None:
+    """Apply the plausibility bound :data:`MAX_ABS_POSITION_M` to positions (T, J, 3) in
+    metres.
+
+    With ``implausible="error"`` the first coordinate out of bounds raises a
+    :class:`ReadError` naming the line of its frame (``line_numbers[t]``, if known), the
+    joint and the value; with ``"missing"`` such joints become NaN (and NOT_TRACKED = 0
+    in ``state``), in place.
+    """
+    check_implausible_option(implausible)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(positions) <= MAX_ABS_POSITION_M) & ~np.isnan(positions)
+    if not bad.any():
+        return
+    joint_bad = bad.any(axis=-1)
+    if implausible == "missing":
+        positions[joint_bad] = np.nan
+        if state is not None:
+            state[joint_bad] = 0
+        return
+    t, j, a = (int(i) for i in np.argwhere(bad)[0])
+    joint = names[j] if names is not None else f"{j + 1}"
+    raise ReadError(
+        path,
+        None if line_numbers is None else line_numbers[t],
+        f"implausible position {float(positions[t, j, a])!r} m ({'xyz'[a]} of joint "
+        f"{joint}, frame {t + 1}): expected |value| <= {MAX_ABS_POSITION_M:g} m; pass "
+        "implausible='missing' to read such samples as missing",
+    )
+
+
 def nonempty(lines: Sequence[str], start: int = 0) -> tuple[list[str], list[int]]:
     """Non-blank lines from index ``start`` and their 1-based line numbers."""
     rows: list[str] = []
@@ -79,6 +265,24 @@ def nonempty(lines: Sequence[str], start: int = 0) -> tuple[list[str], list[int]
     return rows, numbers
 
 
+_ROW_PATTERNS: dict[tuple[str | None, bool, bool], re.Pattern[str]] = {}
+
+
+def _row_pattern(sep: str | None, allow_empty: bool, allow_nan: bool) -> re.Pattern[str]:
+    """A compiled pattern matching a whole row of :data:`NUMBER` fields (cached)."""
+    key = (sep, allow_empty, allow_nan)
+    if key not in _ROW_PATTERNS:
+        value = f"(?:{_NUM}|[+-]?[nN][aA][nN])" if allow_nan else _NUM
+        if sep is None:
+            row = f"[ \\t]*{value}(?:[ \\t]+{value})*[ \\t]*"
+        else:
+            blank = "[ ]" if sep == "\t" else "[ \\t]"
+            field = f"{blank}*(?:{value}){'?' if allow_empty else ''}{blank}*"
+            row = f"{field}(?:{re.escape(sep)}{field})*"
+        _ROW_PATTERNS[key] = re.compile(row)
+    return _ROW_PATTERNS[key]
+
+
 def parse_rows(
     path: str | os.PathLike[str],
     rows: Sequence[str],
@@ -88,9 +292,11 @@ def parse_rows(
     ncols: int | None = None,
     what: str = "values",
     allow_empty: bool = False,
-    allow_inf: bool = False,
+    allow_nan: bool = False,
 ) -> np.ndarray:
     """Parse rows of numbers into a float array of shape (N, ncols).
+
+    Every field must be a plain decimal number (:data:`NUMBER`) with a finite value.
 
     Parameters
     ----------
@@ -99,15 +305,15 @@ def parse_rows(
     line_numbers : sequence of int
         1-based file line number of each row (for error messages).
     sep : str or None
-        Field separator; ``None`` splits on runs of whitespace.
+        Field separator; ``None`` splits on runs of spaces and tabs.
     ncols : int, optional
         Required number of values per row; by default the first row's count.
     what : str
         Description of a row's expected content, used in messages.
     allow_empty : bool
         Empty fields become NaN (otherwise they are an error).
-    allow_inf : bool
-        Accept ``inf`` values (otherwise an error).
+    allow_nan : bool
+        A ``nan`` field (any case) becomes NaN (otherwise it is an error).
     """
     if not rows:
         raise ReadError(path, None, f"no data rows: expected {what}")
@@ -128,11 +334,16 @@ def parse_rows(
         else:
             msg = f"expected {expected} values ({what}), found {int(counts[k])}"
         raise ReadError(path, line_numbers[k], msg)
+    # Only the characters of NUMBER (and nan) pass; on those, numpy's and Python's float
+    # parsers accept exactly the NUMBER grammar, so the (slower) row pattern only has to
+    # find the culprit when something fails.
+    if not _plain_characters(rows, sep, allow_nan):
+        _raise_first_bad_row(path, rows, tokens, line_numbers, sep, allow_empty, allow_nan)
     arr = None
     if not allow_empty:  # fast path: numpy's C parser on the whole block
         try:
             fast = np.loadtxt(rows, dtype=float, delimiter=sep, comments=None, ndmin=2)
-        except (ValueError, OverflowError, TypeError):
+        except ValueError:
             fast = None
         if fast is not None and fast.shape == (len(rows), expected):
             arr = fast.ravel()
@@ -142,10 +353,9 @@ def parse_rows(
             flat = [t if t.strip() else "nan" for t in flat]
         try:
             arr = np.array(flat, dtype=float)
-        except (ValueError, OverflowError):
-            _locate_bad_token(path, tokens, line_numbers, allow_empty)
-            raise  # unreachable: _locate_bad_token always raises
-    if not allow_inf and np.isinf(arr).any():
+        except ValueError:
+            _raise_first_bad_row(path, rows, tokens, line_numbers, sep, allow_empty, allow_nan)
+    if np.isinf(arr).any():
         k = int(np.flatnonzero(np.isinf(arr))[0])
         row, col = divmod(k, expected)
         raise ReadError(
@@ -156,24 +366,57 @@ def parse_rows(
     return arr.reshape(len(rows), expected)
 
 
-def _locate_bad_token(
+_NUMBER_CHARACTERS = b"0123456789+-.eE \t"
+
+
+def _plain_characters(rows: Sequence[str], sep: str | None, allow_nan: bool) -> bool:
+    """True when ``rows`` hold only the characters of numbers, blanks and ``sep``."""
+    try:
+        data = "".join(rows).encode("ascii")
+    except UnicodeEncodeError:
+        return False
+    allowed = _NUMBER_CHARACTERS + (sep or "").encode("ascii") + (b"nNaA" if allow_nan else b"")
+    return not data.translate(None, allowed)
+
+
+def _raise_first_bad_row(
     path: str | os.PathLike[str],
+    rows: Sequence[str],
     tokens: Sequence[Sequence[str]],
     line_numbers: Sequence[int],
+    sep: str | None,
     allow_empty: bool,
+    allow_nan: bool,
 ) -> None:
-    for toks, no in zip(tokens, line_numbers, strict=True):
-        for j, t in enumerate(toks):
-            if allow_empty and not t.strip():
-                continue
-            try:
-                np.array([t], dtype=float)
-            except (ValueError, OverflowError):
-                shown = t if len(t) <= 40 else t[:37] + "..."
-                raise ReadError(
-                    path, no, f"expected a number in field {j + 1}, found {shown!r}"
-                ) from None
-    raise ReadError(path, None, "could not parse the numeric data")
+    match = _row_pattern(sep, allow_empty, allow_nan).fullmatch
+    for k, row in enumerate(rows):
+        if match(row) is None:
+            _raise_bad_field(path, tokens[k], line_numbers[k], allow_empty, allow_nan)
+    raise ReadError(path, None, "could not parse the numeric data")  # pragma: no cover
+
+
+def _raise_bad_field(
+    path: str | os.PathLike[str],
+    tokens: Sequence[str],
+    line: int,
+    allow_empty: bool,
+    allow_nan: bool,
+) -> None:
+    """Raise the :class:`ReadError` for the first field of a row that is not a number."""
+    for j, t in enumerate(tokens):
+        s = t.strip(" \t")
+        if (allow_empty and not s) or (allow_nan and s.lstrip("+-").lower() == "nan"):
+            continue
+        if NUMBER.fullmatch(s) is None:
+            raise ReadError(
+                path,
+                line,
+                f"expected a finite number in field {j + 1}, found {_shown(t)!r} (plain "
+                f"ASCII decimal numbers{', or nan,' if allow_nan else ''} only)",
+            )
+    bad = next((c for c in "".join(tokens) if not (c.isascii() and c.isprintable())), None)
+    found = f"the character U+{ord(bad):04X}" if bad is not None else "a malformed separator"
+    raise ReadError(path, line, f"expected decimal numbers and separators, found {found}")
 
 
 def check_times(
@@ -218,6 +461,15 @@ def zeros_to_nan(positions: np.ndarray, state: np.ndarray | None = None) -> np.n
         if state is not None:
             state[zero] = 0
     return zero
+
+
+def missing_state(positions: np.ndarray) -> np.ndarray | None:
+    """Tracking state (T, J) for a format without one: NOT_TRACKED (0) where a joint is
+    missing, TRACKED (2) elsewhere; ``None`` when nothing is missing."""
+    missing = np.isnan(positions).any(axis=-1)
+    if not missing.any():
+        return None
+    return np.where(missing, 0, 2).astype(np.int8)
 
 
 def fmt_float(x: float) -> str:

@@ -23,7 +23,17 @@ from pathlib import Path
 import numpy as np
 
 from tobitkf.io._kinematics import axis_rotation, forward_kinematics
-from tobitkf.io._text import nonempty, parse_rows, read_lines
+from tobitkf.io._text import (
+    check_output_size,
+    check_positions,
+    check_rate,
+    nonempty,
+    parse_int,
+    parse_number,
+    parse_rows,
+    read_lines,
+    text_size,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -117,24 +127,18 @@ def parse_bvh_hierarchy(path, lines: list[str], stop: int) -> list[BvhJoint]:
             need(4, "three OFFSET values")
             if not stack:
                 raise ReadError(path, no, "OFFSET outside of a joint block")
-            try:
-                off = np.array([float(toks[i + k][0]) for k in (1, 2, 3)])
-            except ValueError:
-                raise ReadError(path, no, "expected three numbers after OFFSET") from None
-            if not np.all(np.isfinite(off)):
-                raise ReadError(path, no, "expected finite OFFSET values")
-            joints[stack[-1]].offset = off
+            joints[stack[-1]].offset = np.array(
+                [
+                    parse_number(path, no, toks[i + k][0], "three numbers after OFFSET")
+                    for k in (1, 2, 3)
+                ]
+            )
             i += 4
         elif key == "CHANNELS":
             need(2, "a channel count")
             if not stack or joints[stack[-1]].end_site:
                 raise ReadError(path, no, "CHANNELS outside of a joint block")
-            try:
-                count = int(toks[i + 1][0])
-            except ValueError:
-                raise ReadError(
-                    path, no, f"expected a channel count, found {toks[i + 1][0]!r}"
-                ) from None
+            count = parse_int(path, no, toks[i + 1][0], "a channel count")
             if not 0 <= count <= 6:
                 raise ReadError(path, no, f"expected 0 to 6 channels, found {count}")
             need(2 + count, f"{count} channel names")
@@ -178,7 +182,10 @@ def _header_value(path, lines: list[str], k: int, key: str) -> str:
 
 
 def read_bvh(
-    path: str | os.PathLike[str], scale: float = 1.0, end_sites: bool = False
+    path: str | os.PathLike[str],
+    scale: float = 1.0,
+    end_sites: bool = False,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read a BVH file and compute global joint positions.
 
@@ -188,6 +195,9 @@ def read_bvh(
         Multiplies the file's units to get metres (1.0 for metre files, 0.01 for cm).
     end_sites : bool
         Also return the End Site points (named ``<parent>_End``).
+    implausible : {"error", "missing"}
+        What to do with an offset, root position or joint position beyond the
+        plausibility bound (after ``scale``; see ``_text.check_positions``).
 
     Returns
     -------
@@ -209,26 +219,15 @@ def read_bvh(
     frames_text = _header_value(path, lines, k, "Frames:")
     while not lines[k].strip():
         k += 1
-    try:
-        n_frames = int(frames_text)
-    except ValueError:
-        raise ReadError(
-            path, k + 1, f"expected an integer frame count, found {frames_text!r}"
-        ) from None
-    if n_frames < 0:
-        raise ReadError(path, k + 1, f"expected a frame count >= 0, found {n_frames}")
+    n_frames = parse_int(path, k + 1, frames_text, "an integer frame count (Frames:)", 0)
     k += 1
     dt_text = _header_value(path, lines, k, "Frame Time:")
     while not lines[k].strip():
         k += 1
-    try:
-        dt = float(dt_text)
-    except ValueError:
-        raise ReadError(
-            path, k + 1, f"expected a frame time in seconds, found {dt_text!r}"
-        ) from None
-    if not np.isfinite(dt) or dt <= 0:
+    dt = parse_number(path, k + 1, dt_text, "a frame time in seconds")
+    if dt <= 0:
         raise ReadError(path, k + 1, f"expected a positive frame time, found {dt_text!r}")
+    check_rate(path, k + 1, 1.0 / dt, "Frame Time (s)", dt_text)
     n_channels = sum(len(j.channels) for j in joints)
     rows, numbers = nonempty(lines, k + 1)
     if len(rows) < n_frames:
@@ -243,11 +242,13 @@ def read_bvh(
         raise ReadError(path, k + 1, "expected at least one frame, found Frames: 0")
     if n_channels == 0:
         raise ReadError(path, motion, "expected at least one channel in the hierarchy")
+    T = n_frames
+    J = len(joints)
+    # local and global rotations and positions of every joint in every frame
+    check_output_size(path, T * J * 27 * 8, text_size(lines), f"{T} frames x {J} joints")
     data = parse_rows(
         path, rows, numbers, sep=None, ncols=n_channels, what=f"{n_channels} channel values"
     )
-    T = n_frames
-    J = len(joints)
     # local rotation (channels multiplied in the order listed) and offset of each joint
     rot_l = np.broadcast_to(np.eye(3), (T, J, 3, 3)).copy()
     pos_l = np.broadcast_to(np.array([jt.offset for jt in joints], dtype=float), (T, J, 3)).copy()
@@ -260,6 +261,10 @@ def read_bvh(
                 pos_l[:, j, axis] = values
             else:
                 rot_l[:, j] = rot_l[:, j] @ axis_rotation(axis, values)
+    # forward kinematics is linear in the offsets, so it can run in metres; offsets and
+    # root positions are bounded first (sums of huge values would overflow to inf - inf)
+    pos_l *= scale
+    check_positions(path, pos_l, numbers, implausible, names=[jt.name for jt in joints])
     _, pos_g = forward_kinematics(rot_l, pos_l, [jt.parent for jt in joints])
     keep = [j for j, jt in enumerate(joints) if end_sites or not jt.end_site]
     names = [joints[j].name for j in keep]
@@ -271,8 +276,10 @@ def read_bvh(
     fps = 1.0 / dt
     if abs(fps - round(fps)) <= 1e-4 * fps:
         fps = float(round(fps))
+    positions = np.ascontiguousarray(pos_g[:, keep])
+    check_positions(path, positions, numbers, implausible, names=names)
     seq = SkeletonSequence(
-        positions=pos_g[:, keep] * scale,
+        positions=positions,
         topology=Topology.from_names(names, parents, up_axis=1, name="bvh"),
         fps=fps,
         metadata={

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._text import check_positions, check_rate
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -91,7 +92,10 @@ def _unique(labels: list[str]) -> list[str]:
 
 
 def read_c3d(
-    path: str | os.PathLike[str], points: str = "positions", units: str | None = None
+    path: str | os.PathLike[str],
+    points: str = "positions",
+    units: str | None = None,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read the POINT data of a C3D file.
 
@@ -101,6 +105,9 @@ def read_c3d(
         Which POINT entries to return (see module docstring).
     units : str, optional
         Override ``POINT:UNITS`` (``"mm"``, ``"cm"``, ``"m"``, ``"dm"``, ``"in"``).
+    implausible : {"error", "missing"}
+        What to do with a returned position beyond the plausibility bound
+        (``_text.check_positions``).
 
     Returns
     -------
@@ -143,8 +150,7 @@ def read_c3d(
         raise ReadError(
             path, None, f"unknown POINT:UNITS {unit!r}; expected one of {sorted(_UNITS)}"
         )
-    if not np.isfinite(rate) or rate <= 0:
-        raise ReadError(path, None, f"expected a positive POINT:RATE, found {rate}")
+    check_rate(path, None, rate, "POINT:RATE", repr(rate))
     if len(labels) < data.shape[1]:
         labels = labels + [""] * (data.shape[1] - len(labels))
     labels = labels[: data.shape[1]]
@@ -163,8 +169,13 @@ def read_c3d(
     if not keep:
         raise ReadError(path, None, f"no POINT entries of the kind {points!r}")
     names = _unique([labels[i] for i in keep])
+    positions = np.ascontiguousarray(positions[:, keep])
+    real = [k for k, i in enumerate(keep) if kinds[i] != "model_output"]  # not positions
+    view = positions[:, real]
+    check_positions(path, view, None, implausible, names=[names[k] for k in real])
+    positions[:, real] = view
     seq = SkeletonSequence(
-        positions=np.ascontiguousarray(positions[:, keep]),
+        positions=positions,
         topology=Topology.from_names(names, up_axis=2, name="c3d"),
         fps=rate,
         metadata={

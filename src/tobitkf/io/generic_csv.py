@@ -12,9 +12,13 @@ Layout::
   every joint ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (case-insensitive suffixes, in
   this order, joints in file order) and optionally ``<joint>_state`` (0 not tracked,
   1 inferred, 2 tracked).
-* values: metres; an empty field or ``nan`` is a missing value.
+* values: metres, plain decimal numbers; an empty field or ``nan`` is a missing value.
 * separator: comma (``,``); a file whose header has tabs or semicolons and no comma uses
-  that separator instead.
+  that separator instead (text inside double quotes does not count).
+* header fields may be double-quoted (RFC 4180: ``"Head,L_x"``, ``""`` for a quote inside);
+  the writer quotes a name holding a separator, a quote or a leading ``#``, and refuses
+  names it cannot write so that they read back the same (empty, surrounding white space,
+  control characters or lone surrogates).
 
 The topology is the ``# topology:`` built-in when its joints match the header, else the
 built-in whose joints equal the header's, else a custom one from the names.
@@ -22,13 +26,26 @@ built-in whose joints equal the header's, else a custom one from the names.
 
 from __future__ import annotations
 
+import csv
 import os
+import re
+import unicodedata
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import check_times, fmt_float, nonempty, parse_rows, read_lines
+from tobitkf.io._text import (
+    INTEGER,
+    check_positions,
+    check_rate,
+    check_times,
+    fmt_float,
+    nonempty,
+    parse_number,
+    parse_rows,
+    read_lines,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -38,6 +55,22 @@ __all__ = ["read_csv", "sniff_csv", "write_csv"]
 
 _TIME = ("time", "timestamp", "t")
 _AXES = ("_x", "_y", "_z")
+_SEPARATORS = (",", "\t", ";")
+_QUOTED = re.compile(r'"(?:[^"]|"")*"')
+
+
+def _separator(header: str) -> str:
+    """The header's separator: comma, else tab, else semicolon, outside quoted fields."""
+    bare = _QUOTED.sub("", header)
+    return next((c for c in _SEPARATORS if c in bare), ",")
+
+
+def _split_header(path, header: str, sep: str, line_no: int) -> list[str]:
+    """Header fields, double quotes resolved (RFC 4180)."""
+    try:
+        return next(csv.reader([header], delimiter=sep, skipinitialspace=True, strict=True))
+    except csv.Error as exc:
+        raise ReadError(path, line_no, f"malformed quoted header field ({exc})") from None
 
 
 def _parse_header(path, fields: list[str], line_no: int):
@@ -119,8 +152,11 @@ def _body_id(text: str) -> int | float:
         return int(v) if v.is_integer() else v
 
 
-def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
+def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[SkeletonSequence]:
     """Read a generic skeleton CSV (see the module docstring for the layout).
+
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a position beyond the
+    plausibility bound (``_text.check_positions``).
 
     Returns
     -------
@@ -128,6 +164,7 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     """
     lines = read_lines(path)
     comments: dict[str, str] = {}
+    comment_line: dict[str, int] = {}
     start = None
     for i, line in enumerate(lines):
         s = line.strip()
@@ -137,17 +174,16 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
             key, sep_, value = s[1:].partition(":")
             if sep_:
                 comments[key.strip().lower()] = value.strip()
+                comment_line[key.strip().lower()] = i + 1
             continue
         start = i
         break
     if start is None:
         raise ReadError(path, None, "empty file: expected a header line with <joint>_x columns")
     header = lines[start]
-    sep = ","
-    if "," not in header:
-        sep = "\t" if "\t" in header else (";" if ";" in header else ",")
+    sep = _separator(header)
     ncols, time_col, body_col, joints, xyz, state_cols = _parse_header(
-        path, header.split(sep), start + 1
+        path, _split_header(path, header, sep, start + 1), start + 1
     )
     rows, numbers = nonempty(lines, start + 1)
     rows = [r for r in rows if not r.lstrip().startswith("#")]
@@ -164,25 +200,15 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         ncols=ncols,
         what="one value per header column",
         allow_empty=True,
+        allow_nan=True,
     )
     fps = None
     if "fps" in comments:
-        try:
-            fps = float(comments["fps"])
-        except ValueError:
-            raise ReadError(
-                path, None, f"expected a number after '# fps:', found {comments['fps']!r}"
-            ) from None
-        if not np.isfinite(fps) or fps <= 0:
-            fps = None
+        text, no = comments["fps"], comment_line["fps"]
+        fps = check_rate(path, no, parse_number(path, no, text, "'# fps:'"), "fps", text)
     up_axis = None
-    if "up_axis" in comments:
-        try:
-            up_axis = int(comments["up_axis"])
-        except ValueError:
-            up_axis = None
-        if up_axis not in (0, 1, 2):
-            up_axis = None
+    if comments.get("up_axis") in ("0", "1", "2"):
+        up_axis = int(comments["up_axis"])
     topo = _topology(joints, comments.get("topology"), up_axis)
     if body_col is not None:
         ids = data[:, body_col]
@@ -191,16 +217,15 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
             raise ReadError(path, numbers[k], "expected a body id, found an empty field")
         # from the text, not the float: 64-bit Kinect body ids (NTU: 72057594037931101)
         # do not fit a double, and neighbouring ids would merge into one body
-        body_ids = [_body_id(r.split(sep)[body_col]) for r in rows]
-        order = list(dict.fromkeys(body_ids))  # first appearance
-        groups = [np.array([b == o for b in body_ids]) for o in order]
+        groups: dict[int | float | None, list[int]] = {}  # in order of first appearance
+        for k, r in enumerate(rows):
+            groups.setdefault(_body_id(r.split(sep)[body_col]), []).append(k)
     else:
-        order = [None]
-        groups = [np.ones(len(rows), dtype=bool)]
+        groups = {None: list(range(len(rows)))}
     out = []
-    for g, group_id in zip(groups, order, strict=True):
-        d = data[g]
-        nos = [n for n, keep in zip(numbers, g, strict=True) if keep]
+    for group_id, members in groups.items():
+        d = data[members]
+        nos = [numbers[k] for k in members]
         idx = np.array(xyz, dtype=int)
         positions = d[:, idx]  # (T, J, 3); parse_rows has rejected inf
         state = None
@@ -216,6 +241,7 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
                         path, nos[k], f"expected a state 0, 1 or 2 for {joints[j]}, found {col[k]}"
                     )
                 state[:, j] = col
+        check_positions(path, positions, nos, implausible, names=joints, state=state)
         timestamps = None
         if time_col is not None:
             timestamps = d[:, time_col]
@@ -223,7 +249,7 @@ def read_csv(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         body_id = group_id
         if body_col is None and "body_id" in comments:
             body_id = comments["body_id"]
-            if body_id.lstrip("-").isdigit():
+            if INTEGER.fullmatch(body_id):
                 body_id = int(body_id)
         out.append(
             SkeletonSequence(
@@ -252,7 +278,11 @@ def write_csv(
     seqs = list(sequences)
     if not seqs:
         raise ValueError("write_csv needs at least one sequence")
+    if sep not in _SEPARATORS:
+        raise ValueError(f"sep must be one of {_SEPARATORS}, found {sep!r}")
     names = seqs[0].joint_names
+    for n in names:
+        _check_writable(n, "joint name")
     for s in seqs[1:]:
         if s.joint_names != names:
             raise ValueError("all sequences written to one CSV must have the same joints")
@@ -273,16 +303,16 @@ def write_csv(
     if multi:
         header.append("body")
     for n in names:
-        header += [f"{n}_x", f"{n}_y", f"{n}_z"]
+        header += [_quoted(f"{n}{a}") for a in _AXES]
         if with_state:
-            header.append(f"{n}_state")
-    lines = [f"# topology: {seqs[0].topology.name}"]
+            header.append(_quoted(f"{n}_state"))
+    lines = [f"# topology: {_check_writable(seqs[0].topology.name, 'topology name')}"]
     fps = seqs[0].fps
     if fps is not None:
         lines.append(f"# fps: {fmt_float(fps)}")
     lines.append(f"# up_axis: {seqs[0].topology.up_axis}")
     if not multi and seqs[0].body_id is not None:
-        lines.append(f"# body_id: {seqs[0].body_id}")
+        lines.append(f"# body_id: {_writable_body_id(seqs[0].body_id)}")
     lines.append(sep.join(header))
     for k, s in enumerate(seqs):
         times = s.times() if with_time else None
@@ -302,14 +332,60 @@ def write_csv(
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
+def _check_writable(text: str, what: str) -> str:
+    """``text`` if it reads back the same from a header field or ``# key:`` line, else a
+    ValueError saying why the CSV format cannot hold it."""
+    bad = next(  # a tab is quoted; other control characters break lines or the encoding
+        (c for c in text if c != "\t" and unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp")),
+        None,
+    )
+    if bad is not None:
+        raise ValueError(
+            f"cannot write the {what} {text!r} to CSV: it holds the control character "
+            f"U+{ord(bad):04X} (one line per header); rename it or use format='npz'"
+        )
+    if not text.strip() or text != text.strip():
+        raise ValueError(
+            f"cannot write the {what} {text!r} to CSV: names are read with surrounding "
+            "white space removed and must not be empty; rename it or use format='npz'"
+        )
+    return text
+
+
+def _writable_body_id(body_id: object) -> str:
+    """Text of a single body's id for ``# body_id:``, which reads back as int or str."""
+    if isinstance(body_id, (int, np.integer)) and not isinstance(body_id, bool):
+        return str(int(body_id))
+    if isinstance(body_id, str) and not INTEGER.fullmatch(body_id):
+        return _check_writable(body_id, "body id")
+    raise ValueError(
+        f"cannot write the body id {body_id!r} to CSV (it would read back as "
+        f"{'an int' if isinstance(body_id, str) else 'a str'}); use an int, a non-numeric "
+        "str or format='npz'"
+    )
+
+
+def _quoted(field: str) -> str:
+    """A header field, double-quoted (RFC 4180) when it holds a separator, a quote or
+    starts with the comment mark."""
+    if field.startswith("#") or any(c in field for c in '",;\t'):
+        return '"' + field.replace('"', '""') + '"'
+    return field
+
+
 def sniff_csv(path: Path, head: str) -> int:
-    """Score: a header line with ``<joint>_x,<joint>_y,<joint>_z`` columns."""
+    """Score: a header line with ``<joint>_x,<joint>_y,<joint>_z`` columns (more sure
+    after the ``# topology:`` line that :func:`write_csv` writes first)."""
+    written = False
     for line in head.split("\n")[:50]:
         s = line.strip()
+        written = written or s.startswith("# topology:")
         if not s or s.startswith("#"):
             continue
         low = s.lower()
         if "_x" in low and "_y" in low and "_z" in low and ("," in s or ";" in s or "\t" in s):
+            if written:
+                return 90
             if low.split("\t")[0].split(",")[0].strip() in ("timestamp",) and "\t" in s:
                 return 0  # krajjat TSV
             return 40

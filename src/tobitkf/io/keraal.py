@@ -20,10 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import (
+    check_positions,
+    missing_state,
+    nonempty,
+    parse_rows,
+    read_lines,
+    zeros_to_nan,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import get_topology
 
 __all__ = ["read_keraal_kinect", "read_keraal_vicon", "sniff_keraal_kinect", "sniff_keraal_vicon"]
@@ -43,9 +50,12 @@ def _read_groups(path: str | os.PathLike[str], n_groups: int, what: str) -> tupl
 
 
 def read_keraal_kinect(
-    path: str | os.PathLike[str], fps: float = KINECT_FPS
+    path: str | os.PathLike[str], fps: float = KINECT_FPS, implausible: str = "error"
 ) -> list[SkeletonSequence]:
     """Read a KERAAL ``G*-Kinect-*.txt`` file.
+
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a position beyond the
+    plausibility bound (``_text.check_positions``).
 
     Returns
     -------
@@ -54,17 +64,16 @@ def read_keraal_kinect(
     Tracking state is None unless some joint is reported at the origin (then those
     samples are NOT_TRACKED and the rest TRACKED).
     """
-    data, _ = _read_groups(path, KINECT_JOINTS, "25 Kinect joints x (x, y, z, w, x, y, z)")
+    data, numbers = _read_groups(path, KINECT_JOINTS, "25 Kinect joints x (x, y, z, w, x, y, z)")
     positions = np.ascontiguousarray(data[:, :, :3])
     orientations = np.ascontiguousarray(data[:, :, 3:])
-    zero = zeros_to_nan(positions)
-    state = None
-    if zero.any():
-        state = np.where(zero, TrackingState.NOT_TRACKED, TrackingState.TRACKED).astype(np.int8)
+    topo = get_topology("kinect_v2")
+    check_positions(path, positions, numbers, implausible, names=topo.joints)
+    zeros_to_nan(positions)
     seq = SkeletonSequence(
         positions=positions,
-        topology=get_topology("kinect_v2"),
-        tracking_state=state,
+        topology=topo,
+        tracking_state=missing_state(positions),
         fps=fps,
         metadata={
             "source": str(path),
@@ -77,9 +86,9 @@ def read_keraal_kinect(
 
 
 def read_keraal_vicon(
-    path: str | os.PathLike[str], fps: float = VICON_FPS
+    path: str | os.PathLike[str], fps: float = VICON_FPS, implausible: str = "error"
 ) -> list[SkeletonSequence]:
-    """Read a KERAAL ``G*-Vicon-*.txt`` file.
+    """Read a KERAAL ``G*-Vicon-*.txt`` file (``implausible`` as for the Kinect file).
 
     Returns
     -------
@@ -87,11 +96,13 @@ def read_keraal_vicon(
     ``keraal_vicon_17`` (z up), fps 60, ``metadata["target_quaternions_raw"]`` (T, 17, 4)
     exactly as in the file (documented order x, y, z, w; unverified).
     """
-    data, _ = _read_groups(path, VICON_TARGETS, "17 Vicon targets x (x, y, z, q1..q4)")
+    data, numbers = _read_groups(path, VICON_TARGETS, "17 Vicon targets x (x, y, z, q1..q4)")
     positions = np.ascontiguousarray(data[:, :, :3]) / 1000.0
+    topo = get_topology("keraal_vicon_17")
+    check_positions(path, positions, numbers, implausible, names=topo.joints)
     seq = SkeletonSequence(
         positions=positions,
-        topology=get_topology("keraal_vicon_17"),
+        topology=topo,
         fps=fps,
         metadata={
             "source": str(path),

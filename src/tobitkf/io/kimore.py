@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import check_positions, nonempty, parse_rows, read_lines, zeros_to_nan
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -32,8 +32,13 @@ def _strip(row: str) -> str:
     return row[:-1] if row.endswith(",") else row
 
 
-def read_kimore(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSequence]:
+def read_kimore(
+    path: str | os.PathLike[str], fps: float = FPS, implausible: str = "error"
+) -> list[SkeletonSequence]:
     """Read a KIMORE ``JointPosition*.csv`` file.
+
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a position beyond the
+    plausibility bound (``_text.check_positions``).
 
     Returns
     -------
@@ -60,10 +65,12 @@ def read_kimore(path: str | os.PathLike[str], fps: float = FPS) -> list[Skeleton
             f"found {raw_state[t, j]!r}",
         )
     state = raw_state.astype(np.int8)
+    topo = get_topology("kinect_v2")
+    check_positions(path, positions, numbers, implausible, names=topo.joints, state=state)
     zeros_to_nan(positions, state)
     seq = SkeletonSequence(
         positions=positions,
-        topology=get_topology("kinect_v2"),
+        topology=topo,
         tracking_state=state,
         timestamps=None,
         fps=fps,

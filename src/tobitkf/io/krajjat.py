@@ -17,10 +17,19 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import (
+    check_positions,
+    check_rate,
+    check_times,
+    missing_state,
+    nonempty,
+    parse_rows,
+    read_lines,
+    zeros_to_nan,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import KINECT_V2_JOINTS, Topology, get_topology
 
 __all__ = ["read_krajjat", "sniff_krajjat"]
@@ -71,8 +80,13 @@ def _topology_for(names: list[str]) -> Topology:
     return Topology.from_names(names, up_axis=1, name="kinect_tsv")
 
 
-def read_krajjat(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
+def read_krajjat(
+    path: str | os.PathLike[str], implausible: str = "error"
+) -> list[SkeletonSequence]:
     """Read a krajjat Kinect TSV file.
+
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a position beyond the
+    plausibility bound (``_text.check_positions``).
 
     Returns
     -------
@@ -102,14 +116,14 @@ def read_krajjat(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     times = data[:, 0].copy()
     check_times(path, times, numbers, "timestamp")
     positions = np.ascontiguousarray(data[:, 1:].reshape(-1, len(names), 3))
-    zero = zeros_to_nan(positions)
-    state = None
-    if zero.any():
-        state = np.where(zero, TrackingState.NOT_TRACKED, TrackingState.TRACKED).astype(np.int8)
+    check_positions(path, positions, numbers, implausible, names=names)
+    zeros_to_nan(positions)
+    state = missing_state(positions)
     fps = None
     if len(times) > 1:
         med = float(np.median(np.diff(times)))
-        fps = 1.0 / med if med > 0 else None
+        if med > 0:
+            fps = check_rate(path, None, 1.0 / med, "median time step (s)", repr(med))
     seq = SkeletonSequence(
         positions=positions,
         topology=_topology_for(names),

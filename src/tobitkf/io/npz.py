@@ -9,19 +9,30 @@ Layout (all entries plain arrays; read with ``allow_pickle=False``):
   ``b{b}/header`` = a JSON string with fps, body_id, topology name, up axis and the
   metadata; arrays inside the metadata (at any depth of dicts and lists) are stored as
   separate entries ``b{b}/meta/<n>`` and referenced from the JSON.
+
+The reader trusts nothing in the archive: the members may hold at most
+``_text.MAX_INPUT_BYTES`` together, each array's declared shape and dtype must match the
+bytes its member holds before anything is allocated, object arrays are refused, and every
+failure (corrupt deflate data, deep JSON, bad shapes) is a :class:`ReadError`.
 """
 
 from __future__ import annotations
 
 import json
+import lzma
+import math
 import os
+import struct
+import tokenize
 import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, check_rate, size_text
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -30,6 +41,26 @@ from tobitkf.skeleton.topology import Topology
 __all__ = ["read_npz", "sniff_npz", "write_npz"]
 
 FORMAT_VERSION = 1
+#: what a corrupt or hostile zip member can raise while it is opened, decompressed or parsed
+_ARCHIVE_ERRORS = (
+    ValueError,
+    OSError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    lzma.LZMAError,
+    NotImplementedError,  # unsupported compression method
+    RuntimeError,  # encrypted member; RecursionError
+    struct.error,
+    OverflowError,
+    TypeError,  # an unusable dtype
+    SyntaxError,
+    tokenize.TokenError,  # NumPy's parser of a malformed .npy header
+)
+_HEADER_READERS = {
+    (1, 0): np.lib.format.read_array_header_1_0,
+    (2, 0): np.lib.format.read_array_header_2_0,
+}
 
 
 def _encode(obj: Any, arrays: dict[str, np.ndarray], prefix: str) -> Any:
@@ -73,8 +104,19 @@ def _decode(obj: Any, archive: Any) -> Any:
 
 
 def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
-    """Write sequences to a compressed ``.npz`` archive (see module docstring)."""
+    """Write sequences to a compressed ``.npz`` archive (see module docstring).
+
+    Raises ValueError for a joint name ending in a NUL character (NumPy string arrays
+    drop trailing NULs, so it would not read back the same).
+    """
     seqs = list(sequences)
+    for s in seqs:
+        bad = [j for j in s.topology.joints if j.endswith("\x00")]
+        if bad:
+            raise ValueError(
+                f"cannot write the joint name {bad[0]!r} to NPZ: NumPy string arrays drop "
+                "trailing NUL characters"
+            )
     arrays: dict[str, np.ndarray] = {
         "format_version": np.array(FORMAT_VERSION),
         "n_bodies": np.array(len(seqs)),
@@ -107,19 +149,64 @@ def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
         np.savez_compressed(fh, **arrays)
 
 
-def read_npz(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
-    """Read an archive written by :func:`write_npz`."""
+def _read_member(path, zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
+    """One ``.npy`` member, its declared size checked against the member's size first."""
+    name = info.filename
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version not in _HEADER_READERS:
+            raise ReadError(path, None, f"member {name}: unsupported .npy version {version}")
+        shape, fortran, dtype = _HEADER_READERS[version](fh)
+        if dtype.hasobject:
+            raise ReadError(path, None, f"member {name}: object arrays are not read")
+        nbytes = math.prod(shape) * dtype.itemsize
+        held = info.file_size - fh.tell()
+        if nbytes != held:
+            raise ReadError(
+                path,
+                None,
+                f"member {name} declares shape {shape} of {dtype} ({size_text(nbytes)}) "
+                f"but holds {size_text(max(held, 0))}",
+            )
+        raw = fh.read(nbytes)
+    if len(raw) != nbytes:
+        raise ReadError(path, None, f"member {name} is truncated")
+    if nbytes == 0:
+        return np.zeros(shape, dtype=dtype)
+    return np.frombuffer(raw, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()
+
+
+def _read_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` archive by name, within :data:`MAX_INPUT_BYTES`."""
     try:
-        archive = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ReadError(path, None, f"expected a NumPy .npz archive ({exc})") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise ReadError(path, None, "expected a .npz archive, found a single .npy array")
-    with archive:
-        try:
-            data = {k: archive[k] for k in archive.files}
-        except (ValueError, OSError, zipfile.BadZipFile, EOFError, KeyError) as exc:
-            raise ReadError(path, None, f"corrupt .npz archive ({exc})") from None
+        with zipfile.ZipFile(path) as zf:
+            infos = [i for i in zf.infolist() if i.filename.endswith(".npy")]
+            total = sum(i.file_size for i in infos)
+            if total > MAX_INPUT_BYTES:
+                raise ReadError(
+                    path,
+                    None,
+                    f"the archive's arrays hold {size_text(total)}, more than the limit of "
+                    f"{size_text(MAX_INPUT_BYTES)} (tobitkf.io._text.MAX_INPUT_BYTES)",
+                )
+            return {i.filename[:-4]: _read_member(path, zf, i) for i in infos}
+    except ReadError:
+        raise
+    except FileNotFoundError:
+        raise
+    except _ARCHIVE_ERRORS as exc:
+        raise ReadError(
+            path, None, f"expected a NumPy .npz archive ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def read_npz(path: str | os.PathLike[str], implausible: str = "error") -> list[SkeletonSequence]:
+    """Read an archive written by :func:`write_npz`.
+
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a position beyond the
+    plausibility bound (``_text.check_positions``).
+    """
+    data = _read_arrays(path)
     if "n_bodies" not in data or "format_version" not in data:
         raise ReadError(path, None, "expected a tobitkf .npz archive (n_bodies, format_version)")
     out = []
@@ -137,18 +224,32 @@ def read_npz(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
                 ),
                 up_axis=int(header["up_axis"]),
             )
+            positions = np.array(data[f"{p}/positions"], dtype=float)
+            if positions.shape[1:] != (len(topo.joints), 3):
+                raise ValueError(
+                    f"positions of shape {positions.shape} for {len(topo.joints)} joints"
+                )
+            state = data.get(f"{p}/tracking_state")
+            if state is not None:
+                state = np.array(state)
+            check_positions(path, positions, None, implausible, names=topo.joints, state=state)
+            fps = header["fps"]
+            if fps is not None:
+                fps = check_rate(path, None, float(fps), "fps", repr(fps))
             out.append(
                 SkeletonSequence(
-                    positions=data[f"{p}/positions"],
+                    positions=positions,
                     topology=topo,
-                    tracking_state=data.get(f"{p}/tracking_state"),
+                    tracking_state=state,
                     timestamps=data.get(f"{p}/timestamps"),
-                    fps=header["fps"],
+                    fps=fps,
                     body_id=_decode(header["body_id"], data),
                     metadata=_decode(header["metadata"], data),
                 )
             )
-    except (KeyError, ValueError, TypeError, json.JSONDecodeError) as exc:
+    except ReadError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError, RecursionError) as exc:
         raise ReadError(path, None, f"inconsistent tobitkf .npz archive ({exc})") from None
     return out
 

@@ -33,7 +33,18 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import fmt_float, nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import (
+    check_output_size,
+    check_positions,
+    fmt_float,
+    nonempty,
+    parse_int,
+    parse_number,
+    parse_rows,
+    read_lines,
+    text_size,
+    zeros_to_nan,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
@@ -93,36 +104,21 @@ class _Cursor:
             raise ReadError(
                 self.path, no, f"expected {what} (one integer), found {len(fields)} values"
             )
-        try:
-            value = int(fields[0])
-        except ValueError:
-            raise ReadError(
-                self.path, no, f"expected {what} (an integer), found {fields[0]!r}"
-            ) from None
-        if value < minimum:
-            raise ReadError(self.path, no, f"expected {what} >= {minimum}, found {value}")
-        return value
+        return parse_int(self.path, no, fields[0], what, minimum)
+
+    def remaining(self) -> int:
+        return len(self.rows) - self.pos
 
 
-def _parse_int(path, no: int, text: str, name: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise ReadError(path, no, f"expected an integer {name}, found {text!r}") from None
-
-
-def _parse_float(path, no: int, text: str, name: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise ReadError(path, no, f"expected a number {name}, found {text!r}") from None
-    if not np.isfinite(value):
-        raise ReadError(path, no, f"expected a finite number {name}, found {text!r}")
-    return value
-
-
-def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSequence]:
+def read_ntu(
+    path: str | os.PathLike[str], fps: float = FPS, implausible: str = "error"
+) -> list[SkeletonSequence]:
     """Read an NTU RGB+D ``.skeleton`` file: one sequence per body ID.
+
+    Parameters
+    ----------
+    implausible : {"error", "missing"}
+        What to do with a position beyond the plausibility bound (``_text.check_positions``).
 
     Returns
     -------
@@ -134,6 +130,12 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
     if not cur.rows:
         raise ReadError(path, None, "empty file: expected the number of frames")
     n_frames = cur.take_int("the number of frames")
+    if n_frames > cur.remaining():  # every frame takes at least its body-count line
+        raise ReadError(
+            path,
+            cur.numbers[0],
+            f"the file declares {n_frames} frames but has only {cur.remaining()} more lines",
+        )
     bodies: dict[int, list[tuple[int, int, list, int]]] = {}
     block_rows: list[str] = []  # joint lines of every body, parsed in one go below
     block_numbers: list[int] = []
@@ -150,12 +152,12 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
                     no,
                     f"expected 10 body values (bodyID ... trackingState), found {len(fields)}",
                 )
-            body_id = _parse_int(path, no, fields[0], "bodyID")
+            body_id = parse_int(path, no, fields[0], "bodyID")
             if body_id in seen:
                 raise ReadError(path, no, f"bodyID {body_id} appears twice in frame {f + 1}")
             seen.add(body_id)
             values = [
-                _parse_int(path, no, t, name) if typ is int else _parse_float(path, no, t, name)
+                (parse_int if typ is int else parse_number)(path, no, t, name)
                 for t, (name, typ) in zip(fields[1:], BODY_FIELDS, strict=True)
             ]
             n_joints = cur.take_int(f"the number of joints of body {b + 1} in frame {f + 1}")
@@ -192,6 +194,14 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
                 block_numbers[k],
                 f"expected a joint tracking state 0, 1 or 2, found {state[k]!r}",
             )
+    # each body ID gets arrays over all frames: refuse many short-lived IDs over many
+    # declared frames (a small file that would need gigabytes)
+    check_output_size(
+        path,
+        len(bodies) * n_frames * N_JOINTS * 12 * 8,
+        text_size(lines),
+        f"{n_frames} frames x {len(bodies)} body IDs",
+    )
     topo = get_topology("kinect_v2")
     out = []
     for body_id, entries in bodies.items():
@@ -219,6 +229,10 @@ def read_ntu(path: str | os.PathLike[str], fps: float = FPS) -> list[SkeletonSeq
             for (name, _), v in zip(BODY_FIELDS, values, strict=True):
                 body_meta[name][f] = v
         state = raw_state.copy()
+        frame_lines = np.zeros(F, dtype=np.int64)  # first joint line of the body per frame
+        for f, _, _, k in entries:
+            frame_lines[f] = block_numbers[k * N_JOINTS]
+        check_positions(path, positions, frame_lines, implausible, names=topo.joints, state=state)
         zeros_to_nan(positions, state)
         state[~present] = TrackingState.NOT_TRACKED
         out.append(
@@ -267,10 +281,19 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
     if not seqs:
         raise ValueError("write_ntu needs at least one sequence")
     F = seqs[0].n_frames
+    kinect = get_topology("kinect_v2").joints
     for s in seqs:
         if s.n_joints != N_JOINTS:
             raise ValueError(
                 f"NTU files hold 25 Kinect V2 joints; sequence has {s.n_joints} ({s.topology.name})"
+            )
+        if s.topology.joints != kinect:
+            # the file has no joint names: they are read back as the Kinect V2 ones
+            other = next(a for a, b in zip(s.topology.joints, kinect, strict=True) if a != b)
+            raise ValueError(
+                "NTU files hold the 25 Kinect V2 joints in SDK order and no joint names; "
+                f"the sequence has the joint {other!r} ({s.topology.name}); use format='csv' "
+                "or 'npz'"
             )
         if s.n_frames != F:
             raise ValueError(

@@ -1,8 +1,9 @@
 """Qualisys Track Manager (QTM) 3-D TSV export (data README §4).
 
-Header: ``KEY<TAB>values`` lines (``NO_OF_FRAMES``, ``NO_OF_MARKERS``, ``FREQUENCY``,
-``MARKER_NAMES`` ...), optionally a column-name line (``Frame  Time  <Marker> X ...``),
-then one line per frame: either ``frame time x y z ...`` or only the 3 × markers values.
+Header: ``KEY<TAB>values`` lines with upper-case keys (``NO_OF_FRAMES``, ``NO_OF_MARKERS``,
+``FREQUENCY``, ``MARKER_NAMES`` ...), optionally a column-name line
+(``Frame  Time  <Marker> X ...``), then one line per frame: either ``frame time x y z ...``
+or only the 3 × markers values.
 Positions are millimetres (converted to metres), z up. Empty fields and markers at exactly
 (0, 0, 0) (QTM's gap value) become NaN. ``NO_OF_FRAMES`` may exceed the rows present (a
 cut export); the rows present are read.
@@ -11,11 +12,22 @@ cut export); the rows present are read.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._text import check_times, nonempty, parse_rows, read_lines, zeros_to_nan
+from tobitkf.io._text import (
+    check_positions,
+    check_rate,
+    check_times,
+    nonempty,
+    parse_int,
+    parse_number,
+    parse_rows,
+    read_lines,
+    zeros_to_nan,
+)
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -24,32 +36,21 @@ from tobitkf.skeleton.topology import Topology
 __all__ = ["read_qualisys", "sniff_qualisys"]
 
 _UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+_HEADER_KEY = re.compile(r"[A-Z][A-Z0-9_]*")  # QTM keys: NO_OF_FRAMES, MARKER_NAMES, ...
 
 
-def _int_or_none(values: list[str] | None) -> int | None:
-    if not values:
-        return None
-    try:
-        return int(values[0])
-    except ValueError:
-        return None
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[SkeletonSequence]:
+def read_qualisys(
+    path: str | os.PathLike[str], units: str = "mm", implausible: str = "error"
+) -> list[SkeletonSequence]:
     """Read a QTM TSV file.
 
     Parameters
     ----------
     units : {"mm", "cm", "m"}
         Units of the file (QTM exports millimetres).
+    implausible : {"error", "missing"}
+        What to do with a position beyond the plausibility bound, in metres
+        (``_text.check_positions``).
 
     Returns
     -------
@@ -62,6 +63,7 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
     if not any(line.strip() for line in lines):
         raise ReadError(path, None, "empty file: expected a QTM TSV header")
     header: dict[str, list[str]] = {}
+    header_line: dict[str, int] = {}
     i = 0
     while i < len(lines):
         line = lines[i]
@@ -70,12 +72,13 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
             continue
         fields = line.rstrip("\t").split("\t")
         key = fields[0].strip()
-        if _is_number(key):
-            break
         if key.lower() == "frame":  # column-name line
             i += 1
             break
+        if not _HEADER_KEY.fullmatch(key):  # the first frame (a bad number is its error)
+            break
         header[key.upper()] = [f.strip() for f in fields[1:]]
+        header_line[key.upper()] = i + 1
         i += 1
     names = header.get("MARKER_NAMES")
     if not names:
@@ -83,24 +86,22 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
     if len(set(names)) != len(names) or any(not n for n in names):
         raise ReadError(path, None, f"marker names must be unique and non-empty, found {names}")
     n_markers = len(names)
-    declared = _int_or_none(header.get("NO_OF_MARKERS"))
+    counts = {
+        key: parse_int(path, header_line[key], (header[key] or [""])[0], key, 0)
+        for key in ("NO_OF_FRAMES", "NO_OF_MARKERS")
+        if key in header
+    }
+    declared = counts.get("NO_OF_MARKERS")
     if declared is not None and declared != n_markers:
         raise ReadError(
             path,
-            None,
+            header_line["NO_OF_MARKERS"],
             f"NO_OF_MARKERS says {declared} but MARKER_NAMES lists {n_markers} names",
         )
     fps = None
-    freq = header.get("FREQUENCY")
-    if freq:
-        try:
-            fps = float(freq[0])
-        except ValueError:
-            raise ReadError(
-                path, None, f"expected a number for FREQUENCY, found {freq[0]!r}"
-            ) from None
-        if not np.isfinite(fps) or fps <= 0:
-            raise ReadError(path, None, f"expected a positive FREQUENCY, found {freq[0]!r}")
+    if "FREQUENCY" in header:
+        line, text = header_line["FREQUENCY"], (header["FREQUENCY"] or [""])[0]
+        fps = check_rate(path, line, parse_number(path, line, text, "FREQUENCY"), "FREQUENCY", text)
     rows, numbers = nonempty(lines, i)
     if not rows:
         raise ReadError(path, None, "no frames after the header")
@@ -123,6 +124,7 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
         check_times(path, timestamps, numbers, "Time value")
         data = data[:, 2:]
     positions = np.ascontiguousarray(data.reshape(-1, n_markers, 3)) * _UNIT_SCALE[units]
+    check_positions(path, positions, numbers, implausible, names=names)
     zeros_to_nan(positions)
     seq = SkeletonSequence(
         positions=positions,
@@ -134,7 +136,7 @@ def read_qualisys(path: str | os.PathLike[str], units: str = "mm") -> list[Skele
             "format": "qualisys",
             "units_in_file": units,
             "header": {k: v for k, v in header.items() if k != "MARKER_NAMES"},
-            "declared_frames": _int_or_none(header.get("NO_OF_FRAMES")),
+            "declared_frames": counts.get("NO_OF_FRAMES"),
         },
     )
     return [seq]

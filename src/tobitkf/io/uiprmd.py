@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from tobitkf.io._kinematics import axis_rotation, forward_kinematics
-from tobitkf.io._text import nonempty, parse_rows, read_lines
+from tobitkf.io._text import check_positions, nonempty, parse_rows, read_lines
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -44,12 +44,15 @@ KINECT_FPS = 30.0
 VICON_FPS = 100.0
 
 
-def _read_block(path: str | os.PathLike[str], ncols: int, what: str) -> np.ndarray:
+def _read_block(
+    path: str | os.PathLike[str], ncols: int, what: str
+) -> tuple[np.ndarray, list[int]]:
+    """The (T, ncols) values of a file and the line number of each frame."""
     rows, numbers = nonempty(read_lines(path))
     if not rows:
         raise ReadError(path, None, f"empty file: expected lines of {ncols} comma-separated values")
     rows = [r.strip().rstrip(",") for r in rows]
-    return parse_rows(path, rows, numbers, sep=",", ncols=ncols, what=what)
+    return parse_rows(path, rows, numbers, sep=",", ncols=ncols, what=what), numbers
 
 
 def angles_path_for(positions_path: str | os.PathLike[str]) -> Path:
@@ -123,6 +126,7 @@ def read_uiprmd_kinect(
     path: str | os.PathLike[str],
     angles_path: str | os.PathLike[str] | None = None,
     fps: float = KINECT_FPS,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read a UI-PRMD Kinect positions file and rebuild absolute joint positions.
 
@@ -130,6 +134,9 @@ def read_uiprmd_kinect(
     ----------
     path : positions file (66 columns, cm)
     angles_path : angles file; by default located with :func:`angles_path_for`.
+    implausible : {"error", "missing"}
+        What to do with a position (file offset or rebuilt joint) beyond the plausibility
+        bound (``_text.check_positions``).
 
     Returns
     -------
@@ -146,7 +153,7 @@ def read_uiprmd_kinect(
                 f"this is a UI-PRMD angles file; its positions file was expected at {ppath} "
                 "(not found)",
             )
-        seqs = read_uiprmd_kinect(ppath, path, fps=fps)
+        seqs = read_uiprmd_kinect(ppath, path, fps=fps, implausible=implausible)
         seqs[0].metadata["opened_as"] = str(path)
         return seqs
     apath = Path(angles_path) if angles_path is not None else angles_path_for(path)
@@ -158,18 +165,23 @@ def read_uiprmd_kinect(
             f"{apath} (not found)",
         )
     what = "22 joints x 3"
-    rel = _read_block(path, KINECT_JOINTS * 3, what).reshape(-1, KINECT_JOINTS, 3)
-    ang = _read_block(apath, KINECT_JOINTS * 3, what).reshape(-1, KINECT_JOINTS, 3)
+    rel, numbers = _read_block(path, KINECT_JOINTS * 3, what)
+    rel = rel.reshape(-1, KINECT_JOINTS, 3) / 100.0
+    ang = _read_block(apath, KINECT_JOINTS * 3, what)[0].reshape(-1, KINECT_JOINTS, 3)
     if rel.shape[0] != ang.shape[0]:
         raise ReadError(
             apath,
             None,
             f"expected {rel.shape[0]} frames (as in {Path(path).name}), found {ang.shape[0]}",
         )
-    positions = reconstruct_uiprmd(rel, ang) / 100.0
+    topo = get_topology("ui_prmd")
+    # offsets bounded before the sums of forward kinematics (which could reach inf - inf)
+    check_positions(path, rel, numbers, implausible, names=topo.joints)
+    positions = reconstruct_uiprmd(rel, ang)
+    check_positions(path, positions, numbers, implausible, names=topo.joints)
     seq = SkeletonSequence(
         positions=positions,
-        topology=get_topology("ui_prmd"),
+        topology=topo,
         fps=fps,
         metadata={
             "source": str(path),
@@ -183,13 +195,17 @@ def read_uiprmd_kinect(
 
 
 def read_uiprmd_vicon(
-    path: str | os.PathLike[str], fps: float = VICON_FPS
+    path: str | os.PathLike[str], fps: float = VICON_FPS, implausible: str = "error"
 ) -> list[SkeletonSequence]:
-    """Read a UI-PRMD Vicon positions file (39 Plug-in Gait markers, mm → m, 100 Hz)."""
-    data = _read_block(path, VICON_MARKERS * 3, "39 Plug-in Gait markers x 3")
+    """Read a UI-PRMD Vicon positions file (39 Plug-in Gait markers, mm → m, 100 Hz);
+    ``implausible`` as for :func:`read_uiprmd_kinect`."""
+    data, numbers = _read_block(path, VICON_MARKERS * 3, "39 Plug-in Gait markers x 3")
+    positions = data.reshape(-1, VICON_MARKERS, 3) / 1000.0
+    topo = get_topology("plug_in_gait_39")
+    check_positions(path, positions, numbers, implausible, names=topo.joints)
     seq = SkeletonSequence(
-        positions=data.reshape(-1, VICON_MARKERS, 3) / 1000.0,
-        topology=get_topology("plug_in_gait_39"),
+        positions=positions,
+        topology=topo,
         fps=fps,
         metadata={"source": str(path), "format": "uiprmd_vicon", "units_in_file": "mm"},
     )
