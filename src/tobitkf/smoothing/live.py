@@ -7,15 +7,23 @@ seen so far and returning the last frame, which is exact by causality but costs 
 proportional to the stream's length. Fed the frames of a recording one by one, it
 returns what ``smooth(recording, method)`` returns (tested), without looking ahead.
 
+Bodies may come and go: give a frame as a mapping ``{body_id: (J, 3) positions}``. A new
+id starts a new filter; an id missing from a frame is predicted (its prediction is
+returned) for ``max_missing`` seconds, then dropped. Each body's numbers are exactly those
+of a LiveSmoother fed that body alone.
+
 Example
 -------
 >>> live = LiveSmoother("kinect_v2", method="atkf", fps=30)        # doctest: +SKIP
 >>> for frame, states, t in sensor:                                # doctest: +SKIP
 ...     clean = live.update(frame, tracking_state=states, timestamp=t)
+>>> people = live.update({7: frame_a, 9: frame_b}, timestamp=t)    # doctest: +SKIP
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -69,6 +77,15 @@ class _HistoryStepper:
         return np.asarray(run_method(self.spec, inp, self.params).positions[-1], dtype=float)
 
 
+@dataclass
+class _Body:
+    """One body of a stream keyed by id: its own stepper and when it was last seen."""
+
+    stepper: Any
+    last_seen: float
+    frames: int = 0
+
+
 class LiveSmoother:
     """Smooth a live skeleton stream frame by frame.
 
@@ -85,6 +102,9 @@ class LiveSmoother:
         Overrides the topology's up axis.
     inferred_noise_factor : float
         Measurement-noise variance multiplier for INFERRED joints (as in ``smooth``).
+    max_missing : float
+        Seconds a body keyed by id is predicted after its last frame before it is dropped
+        (default 1).
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
@@ -97,6 +117,7 @@ class LiveSmoother:
         fps: float = 30.0,
         up_axis: int | None = None,
         inferred_noise_factor: float | None = None,
+        max_missing: float = 1.0,
         **params: Any,
     ) -> None:
         self.spec = get_method(method)
@@ -123,6 +144,13 @@ class LiveSmoother:
             else check_inferred_factor(inferred_noise_factor)
         )
         self.fps = float(fps)
+        try:
+            ok = float(max_missing) >= 0 and np.isfinite(float(max_missing))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"max_missing must be a number of seconds >= 0, got {max_missing!r}")
+        self.max_missing = float(max_missing)
         self.reset()
 
     def reset(self) -> None:
@@ -131,6 +159,8 @@ class LiveSmoother:
         self._shape: tuple[int, ...] | None = None
         self._single = False
         self._last_timestamp: float | None = None
+        self._bodies: dict[Any, _Body] | None = None  # streams keyed by body id
+        self._clock = 0.0
         self.n_frames = 0
 
     @property
@@ -138,6 +168,11 @@ class LiveSmoother:
         """Which joints' last measurements were clipped (censoring methods), else None."""
         clipped = getattr(self._stepper, "clipped", None)
         return clipped[0] if clipped is not None and self._single else clipped
+
+    @property
+    def bodies(self) -> list[Any]:
+        """Ids of the bodies being tracked (seen within ``max_missing``), in arrival order."""
+        return list(self._bodies or ())
 
     def _new_stepper(self) -> LiveStepper | _HistoryStepper:
         args = (self.topology, self.up_axis, self.inferred_noise_factor)
@@ -178,10 +213,10 @@ class LiveSmoother:
 
     def update(
         self,
-        positions: ArrayLike,
-        tracking_state: ArrayLike | None = None,
+        positions: ArrayLike | Mapping[Any, ArrayLike],
+        tracking_state: ArrayLike | Mapping[Any, ArrayLike] | None = None,
         timestamp: float | None = None,
-    ) -> Array:
+    ) -> Any:
         """Filter one frame.
 
         Parameters
@@ -199,7 +234,91 @@ class LiveSmoother:
             Smoothed positions; NaN for a joint not measured yet.
 
         A frame that is refused (``ValueError``) leaves the stream unchanged.
+
+        With ``positions`` a mapping ``{body_id: (J, 3)}`` (and ``tracking_state`` a
+        mapping of the same ids, or None), returns ``{body_id: (J, 3)}`` for every body
+        tracked: those in the frame and those still predicted (missing for at most
+        ``max_missing`` seconds). A stream is either keyed by id or not, from its first
+        frame on.
         """
+        if isinstance(positions, Mapping):
+            return self._update_bodies(positions, tracking_state, timestamp)
+        if self._bodies is not None:
+            raise ValueError("this stream is keyed by body id: pass {body_id: positions}")
+        pos, states = self._check_frame(positions, tracking_state)
+        shape = pos.shape
+        if self._shape is not None and shape[:-1] != self._shape:
+            raise ValueError(
+                f"positions: batch shape {shape[:-1]} differs from the stream's {self._shape}"
+            )
+        dt, stamp = self._step_seconds(timestamp)
+        # everything checked: from here on the frame is part of the stream
+        if self._stepper is None:
+            self._stepper = self._new_stepper()
+            self._shape = shape[:-1]
+        self._single = pos.ndim == 2
+        out = self._step(self._stepper, pos, states, dt)
+        self._last_timestamp = stamp
+        self.n_frames += 1
+        return out
+
+    def _step(self, stepper: Any, pos: Array, states: Any, dt: float) -> Array:
+        single = pos.ndim == 2
+        batch_pos = pos[None] if single else pos
+        batch_states = None if states is None else (states[None] if single else states)
+        ys, missing = measurements(batch_pos, batch_states)
+        if isinstance(stepper, _HistoryStepper):
+            out = stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
+        else:
+            out = stepper.step(ys, missing, batch_states, dt)
+        return out[0] if single else out
+
+    def _update_bodies(
+        self, frames: Mapping[Any, ArrayLike], states: Any, timestamp: float | None
+    ) -> dict[Any, Array]:
+        if self._stepper is not None:
+            raise ValueError("this stream is not keyed by body id: pass an array of positions")
+        if states is not None and not isinstance(states, Mapping):
+            raise ValueError("tracking_state: expected a mapping {body_id: states} like positions")
+        checked = {}
+        for body, frame in frames.items():
+            st = None if states is None else states.get(body)
+            try:
+                pos, st = self._check_frame(frame, st)
+            except ValueError as exc:
+                raise ValueError(f"body {body!r}: {exc}") from None
+            if pos.ndim != 2:
+                raise ValueError(f"body {body!r}: expected positions of shape (J, 3)")
+            checked[body] = (pos, st)
+        unknown = [] if states is None else [b for b in states if b not in frames]
+        if unknown:
+            raise ValueError(f"tracking_state for bodies not in the frame: {unknown}")
+        dt, stamp = self._step_seconds(timestamp)
+        # everything checked: from here on the frame is part of the stream
+        if self._bodies is None:
+            self._bodies = {}
+        self._clock += dt
+        nan_frame = np.full((self.topology.n_joints, 3), np.nan)
+        out: dict[Any, Array] = {}
+        for body, (pos, st) in checked.items():
+            entry = self._bodies.get(body)
+            if entry is None:  # a new id starts a new filter
+                entry = self._bodies[body] = _Body(self._new_stepper(), self._clock)
+            step = dt if entry.frames else 1.0 / self.fps
+            out[body] = self._step(entry.stepper, pos, st, step)
+            entry.last_seen, entry.frames = self._clock, entry.frames + 1
+        for body in [b for b in self._bodies if b not in checked]:
+            entry = self._bodies[body]
+            if self._clock - entry.last_seen > self.max_missing:
+                del self._bodies[body]  # gone: dropped
+                continue
+            out[body] = self._step(entry.stepper, nan_frame, None, dt)
+            entry.frames += 1
+        self._last_timestamp = stamp
+        self.n_frames += 1
+        return out
+
+    def _check_frame(self, positions: ArrayLike, tracking_state: Any) -> tuple[Array, Any]:
         try:
             pos = np.asarray(positions, dtype=float)
         except (TypeError, ValueError):
@@ -214,25 +333,4 @@ class LiveSmoother:
             )
         if np.isinf(pos).any():
             raise ValueError("positions: infinite values (use NaN for a missing joint)")
-        if self._shape is not None and shape[:-1] != self._shape:
-            raise ValueError(
-                f"positions: batch shape {shape[:-1]} differs from the stream's {self._shape}"
-            )
-        states = self._check_states(tracking_state, shape[:-1])
-        dt, stamp = self._step_seconds(timestamp)
-        # everything checked: from here on the frame is part of the stream
-        single = pos.ndim == 2
-        batch_pos = pos[None] if single else pos
-        batch_states = None if states is None else (states[None] if single else states)
-        ys, missing = measurements(batch_pos, batch_states)
-        if self._stepper is None:
-            self._stepper = self._new_stepper()
-            self._shape = shape[:-1]
-        if isinstance(self._stepper, _HistoryStepper):
-            out = self._stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
-        else:
-            out = self._stepper.step(ys, missing, batch_states, dt)
-        self._last_timestamp = stamp
-        self._single = single
-        self.n_frames += 1
-        return out[0] if single else out
+        return pos, self._check_states(tracking_state, shape[:-1])

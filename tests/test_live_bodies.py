@@ -1,0 +1,85 @@
+"""LiveSmoother with bodies keyed by id: they come, go, are predicted for max_missing
+seconds and dropped; each body's numbers are those of a LiveSmoother fed it alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tobitkf as tk
+
+FPS = 30.0
+
+
+def _body(seed: int, T: int = 120) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    J = tk.get_topology("kinect_v2").n_joints
+    t = np.arange(T) / FPS
+    pos = rng.uniform(-0.5, 0.5, (J, 3)) + 0.2 * np.sin(2 * t + seed)[:, None, None] + [0, 0, 2.5]
+    pos = pos + rng.normal(scale=0.01, size=pos.shape)
+    pos[rng.random((T, J)) < 0.03] += 0.4  # spikes
+    return pos
+
+
+@pytest.mark.parametrize("method", ["atkf", "kf", "one_euro"])
+def test_each_body_equals_a_smoother_fed_it_alone(method):
+    a, b = _body(1), _body(2)
+    present_b = np.zeros(len(a), bool)
+    present_b[10:40] = True  # appears at 10, leaves at 40 ...
+    present_b[50:90] = True  # ... back after 10 frames (< max_missing): same filter
+    live = tk.LiveSmoother("kinect_v2", method, fps=FPS, max_missing=1.0)
+    got_a, got_b = [], {}
+    for k in range(len(a)):
+        frame = {"a": a[k]} | ({"b": b[k]} if present_b[k] else {})
+        out = live.update(frame, timestamp=k / FPS)
+        got_a.append(out["a"])
+        if present_b[k]:
+            got_b[k] = out["b"]
+        elif k >= 10:
+            assert "b" in out  # predicted while missing, for at most max_missing
+    alone_a = tk.LiveSmoother("kinect_v2", method, fps=FPS)
+    ref_a = [alone_a.update(a[k], timestamp=k / FPS) for k in range(len(a))]
+    np.testing.assert_allclose(np.stack(got_a), np.stack(ref_a), rtol=0, atol=1e-9)
+    alone_b = tk.LiveSmoother("kinect_v2", method, fps=FPS)
+    for k in sorted(got_b):
+        ref = alone_b.update(b[k], timestamp=k / FPS)
+        np.testing.assert_allclose(got_b[k], ref, rtol=0, atol=1e-9, equal_nan=True)
+
+
+def test_a_body_missing_longer_than_max_missing_is_dropped_and_restarts_fresh():
+    a = _body(3)
+    live = tk.LiveSmoother("kinect_v2", "atkf", fps=FPS, max_missing=0.5)  # 15 frames
+    for k in range(20):
+        live.update({7: a[k]}, timestamp=k / FPS)
+    seen = []
+    for k in range(20, 40):  # body 7 gone
+        seen.append(7 in live.update({}, timestamp=k / FPS))
+        assert live.bodies == ([7] if seen[-1] else [])
+    # predicted while the gap is at most 0.5 s (frames 20..34), dropped after
+    assert seen == [k - 19 <= 15 for k in range(20, 40)]
+    fresh = tk.LiveSmoother("kinect_v2", "atkf", fps=FPS)
+    for k in range(40, 60):  # comes back: a new filter, as if never seen
+        got = live.update({7: a[k]}, timestamp=k / FPS)[7]
+        ref = fresh.update(a[k], timestamp=k / FPS)
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_keyed_stream_errors_leave_it_unchanged():
+    a = _body(4)
+    live = tk.LiveSmoother("kinect_v2", "kf", fps=FPS)
+    first = live.update({1: a[0]}, timestamp=0.0)[1]
+    with pytest.raises(ValueError, match="body 2: positions: infinite"):
+        live.update({1: a[1], 2: np.full_like(a[1], np.inf)}, timestamp=1 / FPS)
+    with pytest.raises(ValueError, match="keyed by body id"):
+        live.update(a[1])
+    with pytest.raises(ValueError, match="not in the frame"):
+        live.update({1: a[1]}, tracking_state={3: np.full(25, 2)}, timestamp=1 / FPS)
+    assert live.bodies == [1] and live.n_frames == 1
+    again = tk.LiveSmoother("kinect_v2", "kf", fps=FPS)
+    np.testing.assert_array_equal(again.update({1: a[0]}, timestamp=0.0)[1], first)
+    with pytest.raises(ValueError, match="max_missing"):
+        tk.LiveSmoother("kinect_v2", "kf", max_missing=-1)
+    plain = tk.LiveSmoother("kinect_v2", "kf")
+    plain.update(a[0])
+    with pytest.raises(ValueError, match="not keyed by body id"):
+        plain.update({1: a[1]})
