@@ -161,23 +161,30 @@ def savgol(
         raise ValueError(f"polyorder ({polyorder}) must be less than window ({window})")
     T = arr.shape[0]
     flat = arr.reshape(T, -1)
-    out = np.full_like(flat, np.nan)
     finite = np.isfinite(flat)
+    if T > 2 and finite.all():  # no gap anywhere: one scipy call, no copies
+        w = min(window, T if T % 2 == 1 else T - 1)
+        return savgol_filter(arr, w, min(polyorder, w - 1), axis=0, mode="interp").reshape(shape)
+    out = np.full_like(flat, np.nan)
     idx = np.arange(T)
-    # group columns by their finite span so that complete columns go through one call
-    groups: dict[tuple[int, int], list[int]] = {}
-    for col in range(flat.shape[1]):
-        valid = np.flatnonzero(finite[:, col])
-        if valid.size == 0:
-            continue
-        groups.setdefault((int(valid[0]), int(valid[-1])), []).append(col)
-    for (first, last), cols in groups.items():
-        seg = flat[first : last + 1, cols].copy()
+    # group columns by their finite span so that columns sharing it go through one call
+    has = finite.any(axis=0)
+    firsts = np.argmax(finite, axis=0)
+    lasts = T - 1 - np.argmax(finite[::-1], axis=0)
+    spans, inverse = np.unique(np.stack([firsts, lasts], axis=1)[has], axis=0, return_inverse=True)
+    columns = np.flatnonzero(has)
+    for g, (first, last) in enumerate(spans):
+        # every column in one span (the usual case): slices, no fancy-index copies
+        cols = slice(None) if len(spans) == 1 and has.all() else columns[inverse.ravel() == g]
+        seg = flat[first : last + 1, cols]
         seg_finite = finite[first : last + 1, cols]
-        seg_idx = idx[first : last + 1]
-        for c in np.flatnonzero(~seg_finite.all(axis=0)):
-            ok = seg_finite[:, c]
-            seg[~ok, c] = np.interp(seg_idx[~ok], seg_idx[ok], seg[ok, c])
+        gaps = np.flatnonzero(~seg_finite.all(axis=0))
+        if gaps.size:
+            seg = seg.copy()
+            seg_idx = idx[first : last + 1]
+            for c in gaps:
+                ok = seg_finite[:, c]
+                seg[~ok, c] = np.interp(seg_idx[~ok], seg_idx[ok], seg[ok, c])
         n = last - first + 1
         w = min(window, n if n % 2 == 1 else n - 1)
         order = min(polyorder, w - 1)

@@ -107,10 +107,13 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
         c = atkf_c(params, inp.up_axis)
         used["c"] = tuple(float(v) for v in c)
         elapsed = elapsed_since_valid(inp.steps, valid)  # (T, *batch)
-        if np.all(elapsed == paper.REFERENCE_DT):
+        per_frame = inp.steps.reshape((T,) + (1,) * len(bshape))
+        if inp.is_reference and np.all(elapsed == per_frame):
             result = adaptive_tobit_filter(model, ys, c, **kwargs)
         else:
-            c_seq = c * (elapsed / paper.REFERENCE_DT)[..., None]  # (T, *batch, 3)
+            if np.all(elapsed == per_frame):  # no gap: one step per frame, (T, 1.., 3)
+                elapsed = per_frame
+            c_seq = c * (elapsed / paper.REFERENCE_DT)[..., None]
             result = adaptive_tobit_filter(model, ys, None, c_seq=c_seq, **kwargs)
     elif kind == "kf":
         result = kalman_filter(model, ys, **kwargs)
