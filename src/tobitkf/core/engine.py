@@ -631,10 +631,14 @@ class _Store:
 # --------------------------------------------------------------------------------------
 # the batch run loop
 # --------------------------------------------------------------------------------------
-def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterResult:
+def run_filter(
+    model: LinearGaussian, method: Method, inp: RunInputs, *, keep_probabilities: bool = True
+) -> FilterResult:
     """Run ``method`` over all frames of validated inputs; returns a FilterResult.
 
     Every frame goes through :func:`filter_step`, exactly as in the streaming filter.
+    ``keep_probabilities=False`` leaves the censoring probabilities out of the result
+    (NaN views): three arrays the size of ``ys`` less.
     """
     T, batch, diagonal = inp.T, inp.batch, inp.diagonal
     n, p = model.n, model.p
@@ -645,9 +649,11 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
     pcovs = _Store(T, cov_full)
     loglik = np.empty((T, *batch))
     censoring = method.name != "kf"
+    keep = censoring and keep_probabilities
     if censoring:
-        p_lo, p_un, p_up = _Store(T, full), _Store(T, full), _Store(T, full)
         clipped = _Store(T, full, bool)
+    if keep:
+        p_lo, p_un, p_up = _Store(T, full), _Store(T, full), _Store(T, full)
     constant_model = inp.A_seq is None and inp.Q_seq is None and inp.R_seq is None
     constant_model = constant_model and inp.R_scale is None
     sm = make_step_model(model, diagonal) if constant_model else None
@@ -694,22 +700,25 @@ def run_filter(model: LinearGaussian, method: Method, inp: RunInputs) -> FilterR
         covs.put(t, P)
         loglik[t] = u.loglik
         if censoring:
+            clipped.put(t, False if u.p_uncensored is None else u.clipped)
+        if keep:
             if u.p_uncensored is None:
                 p_lo.put(t, 0.0)
                 p_un.put(t, 1.0)
                 p_up.put(t, 0.0)
-                clipped.put(t, False)
             else:
                 p_lo.put(t, u.p_lower)
                 p_un.put(t, u.p_uncensored)
                 p_up.put(t, u.p_upper)
-                clipped.put(t, u.clipped)
         if method.adaptive and not deferred:
             lo_out.put(t, st.lower)
             up_out.put(t, st.upper)
     if censoring:
-        p_lower, p_uncensored, p_upper = p_lo.get(), p_un.get(), p_up.get()
         clipped_arr = clipped.get()
+        if keep:
+            p_lower, p_uncensored, p_upper = p_lo.get(), p_un.get(), p_up.get()
+        else:
+            p_lower = p_uncensored = p_upper = np.broadcast_to(np.nan, (T, *full))
     else:
         p_lower = np.broadcast_to(0.0, (T, *full))
         p_uncensored = np.broadcast_to(1.0, (T, *full))

@@ -348,6 +348,7 @@ def tobit_filter(
     R_seq: ArrayLike | None = None,
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
+    keep_probabilities: bool = True,
 ) -> FilterResult:
     """Tobit Kalman filter with fixed censoring limits (Algorithm 1, 2020 paper).
 
@@ -365,6 +366,9 @@ def tobit_filter(
         Time-varying limits (instead of ``lower`` / ``upper``).
     A_seq, Q_seq, R_seq, R_scale, diagonal
         As in :func:`tobitkf.core.kalman.kalman_filter`.
+    keep_probabilities : bool
+        False: the censoring probabilities ``p_lower``, ``p_uncensored``, ``p_upper``
+        are not kept (read-only NaN views), which saves three arrays the size of ``ys``.
 
     Returns
     -------
@@ -387,7 +391,9 @@ def tobit_filter(
         upper_seq=upper_seq,
         diagonal=diagonal,
     )
-    return run_filter(model, TKFC if variant == "corrected" else TKF, inp)
+    return run_filter(
+        model, TKFC if variant == "corrected" else TKF, inp, keep_probabilities=keep_probabilities
+    )
 
 
 def adaptive_tobit_filter(
@@ -401,6 +407,7 @@ def adaptive_tobit_filter(
     R_seq: ArrayLike | None = None,
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
+    keep_probabilities: bool = True,
 ) -> FilterResult:
     """Adaptive Tobit Kalman filter ATKF (2020 paper, Algorithm 2, eq. 31-34).
 
@@ -420,6 +427,8 @@ def adaptive_tobit_filter(
         Time-varying half-widths (instead of ``c``), e.g. scaled by the frame interval.
     A_seq, Q_seq, R_seq, R_scale, diagonal
         As in :func:`tobitkf.core.kalman.kalman_filter`.
+    keep_probabilities : bool
+        As in :func:`tobit_filter`.
 
     Returns
     -------
@@ -440,4 +449,4 @@ def adaptive_tobit_filter(
         c_seq=c_seq,
         diagonal=diagonal,
     )
-    return run_filter(model, ATKF, inp)
+    return run_filter(model, ATKF, inp, keep_probabilities=keep_probabilities)

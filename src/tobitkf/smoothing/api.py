@@ -215,6 +215,12 @@ def smooth(
     return out
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
 def _smooth_group(
     seqs: list[SkeletonSequence],
     spec: MethodSpec,
@@ -226,11 +232,17 @@ def _smooth_group(
     """Smooth bodies sharing frames, topology and time base, stacked on a body axis."""
     ref = seqs[0]
     steps, _, is_reference = frame_steps(ref)
-    positions = np.stack([s.positions for s in seqs], axis=1)  # (T, B, J, 3)
+    # (T, B, J, 3); one body is a view, not a copy
+    positions = (
+        seqs[0].positions[:, None]
+        if len(seqs) == 1
+        else np.stack([s.positions for s in seqs], axis=1)
+    )
     states = None
     if ref.tracking_state is not None:
         states = np.stack([s.tracking_state for s in seqs], axis=1)
     ys, missing = measurements(positions, states)
+    positions, ys = _read_only(positions), _read_only(ys)  # a method must not write into them
     inp = SmoothInput(
         positions=positions,
         ys=ys,

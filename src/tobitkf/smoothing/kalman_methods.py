@@ -109,12 +109,14 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
         elapsed = elapsed_since_valid(inp.steps, valid)  # (T, *batch)
         per_frame = inp.steps.reshape((T,) + (1,) * len(bshape))
         if inp.is_reference and np.all(elapsed == per_frame):
-            result = adaptive_tobit_filter(model, ys, c, **kwargs)
+            result = adaptive_tobit_filter(model, ys, c, keep_probabilities=False, **kwargs)
         else:
             if np.all(elapsed == per_frame):  # no gap: one step per frame, (T, 1.., 3)
                 elapsed = per_frame
             c_seq = c * (elapsed / paper.REFERENCE_DT)[..., None]
-            result = adaptive_tobit_filter(model, ys, None, c_seq=c_seq, **kwargs)
+            result = adaptive_tobit_filter(
+                model, ys, None, c_seq=c_seq, keep_probabilities=False, **kwargs
+            )
     elif kind == "kf":
         result = kalman_filter(model, ys, **kwargs)
     else:
@@ -124,6 +126,7 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
             np.asarray(params["lower"], dtype=float),
             np.asarray(params["upper"], dtype=float),
             variant=variant,
+            keep_probabilities=False,
             **kwargs,
         )
     means = rts_smooth(model, result).means if inp.offline else result.means

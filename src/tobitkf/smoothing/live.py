@@ -59,7 +59,9 @@ class _HistoryStepper:
 
     def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
              positions: Array | None = None) -> Array:  # fmt: skip
-        self._frames.append((ys if positions is None else positions, ys, missing, states, dt))
+        # copies: a caller may reuse its frame buffer for the next frame
+        pos = ys if positions is None else positions
+        self._frames.append((pos.copy(), ys.copy(), missing.copy(), states, dt))
         pos, y, miss, st, steps = zip(*self._frames, strict=True)
         step_arr = np.asarray(steps, dtype=float)
         inp = SmoothInput(

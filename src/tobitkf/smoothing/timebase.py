@@ -60,15 +60,22 @@ def frame_times(sequence: SkeletonSequence, steps: Array | None = None) -> Array
 
 
 def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.bool_]]:
-    """Measurements (a float copy) with NaN and NOT_TRACKED joints set to NaN, and the
-    missing mask ``positions.shape[:-1]``. Every method, batch or live, reads its input
-    through this, so that all treat a sample as missing alike.
+    """Measurements with NaN and NOT_TRACKED joints set to NaN, and the missing mask
+    ``positions.shape[:-1]``. Every method, batch or live, reads its input through this,
+    so that all treat a sample as missing alike. ``positions`` itself is returned (not a
+    copy) when nothing has to change: callers must not write into the result.
     """
-    ys = np.array(positions, dtype=float)
+    ys = np.asarray(positions, dtype=float)
     missing = np.isnan(ys).any(axis=-1)
     if states is not None:
-        missing |= np.asarray(states) == TrackingState.NOT_TRACKED
-    ys[missing] = np.nan
+        not_tracked = np.asarray(states) == TrackingState.NOT_TRACKED
+        if not_tracked.any():
+            missing |= not_tracked
+            ys = ys.copy()
+            ys[missing] = np.nan
+    if np.isnan(ys).sum() != 3 * missing.sum():  # a partly-NaN sample: all its axes NaN
+        ys = ys.copy()
+        ys[missing] = np.nan
     return ys, missing
 
 
