@@ -45,7 +45,8 @@ def test_smooth_folder_writes_outputs_atomically_and_reports_bad_files(tmp_path)
     assert res.exit_code == 1, res.output  # one bad file -> non-zero status
     assert "broken.csv" in res.output
     produced = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
-    assert produced == ["a.atkf.csv", "sub/b.atkf.csv"]  # no temporary files left behind
+    # each output with its sidecar, no temporary files left behind
+    assert produced == ["a.atkf.csv", "a.atkf.json", "sub/b.atkf.csv", "sub/b.atkf.json"]
     # the spike is removed: the output's largest hand jump is far below the input's 0.6 m
     hand = get_topology("kinect_v2").index("HandRight")
     smoothed = load(out / "a.atkf.csv")[0].positions[:, hand]

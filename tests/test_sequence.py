@@ -55,6 +55,12 @@ def test_timestamps_take_precedence():
         ({"fps": 0.0}, "fps"),
         ({"fps": -30}, "fps"),
         ({"fps": float("nan")}, "fps"),
+        ({"std": np.zeros((4, 24))}, "std must have shape"),
+        ({"std": np.full((4, 25), -0.1)}, "std values"),
+        ({"std": np.full((4, 25), np.inf)}, "std values"),
+        ({"sample_state": np.full((4, 25), 5)}, "0 to 4"),
+        ({"sample_state": np.full((4, 25), 1.5)}, "0 to 4"),
+        ({"sample_state": np.zeros((3, 25))}, "sample_state must have shape"),
     ],
 )
 def test_validation(kwargs, match):
@@ -73,6 +79,21 @@ def test_frozen_and_replace_revalidates():
     np.testing.assert_array_equal(r.positions, s.positions)
     with pytest.raises(ValueError):
         s.replace(fps=-1)
+
+
+def test_std_and_sample_state_kept_by_replace_and_sliced_by_select_joints():
+    std = np.tile(np.arange(25.0) / 100, (5, 1))
+    sample = np.tile(np.arange(25) % 5, (5, 1))
+    s = _seq(std=std, sample_state=sample)
+    assert s.sample_state.dtype == np.int8
+    r = s.replace(fps=10.0)
+    np.testing.assert_array_equal(r.std, std)
+    np.testing.assert_array_equal(r.sample_state, sample)
+    sub = s.select_joints(["HandRight", "SpineBase"])
+    j = V2.index("HandRight")
+    np.testing.assert_array_equal(sub.std[:, 0], std[:, j])
+    np.testing.assert_array_equal(sub.sample_state[:, 0], sample[:, j])
+    np.testing.assert_array_equal(sub.std[:, 1], std[:, 0])
 
 
 def test_state_cast_to_int8():

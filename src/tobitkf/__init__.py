@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-__version__ = "0.1.0"
+from tobitkf.core.version import __version__
 
 # public name -> module that defines it
 _EXPORTS: dict[str, str] = {
@@ -45,6 +45,7 @@ _EXPORTS: dict[str, str] = {
     "available_topologies": "tobitkf.skeleton.topology",
     "SkeletonSequence": "tobitkf.skeleton.sequence",
     "TrackingState": "tobitkf.skeleton.sequence",
+    "SampleState": "tobitkf.skeleton.sequence",
     # smoothing and its registry
     "smooth": "tobitkf.smoothing.api",
     "DEFAULT_METHOD": "tobitkf.smoothing.api",

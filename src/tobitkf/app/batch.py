@@ -2,7 +2,9 @@
 
 This is the library side of ``tobitkf smooth``: it never overwrites an input, writes
 each output atomically (a temporary file in the output folder, then ``os.replace``),
-and reports a bad file with its reason instead of stopping the whole run.
+and reports a bad file with its reason instead of stopping the whole run. A format's
+side outputs (the CSV's JSON sidecar) are part of the output: planned, checked against
+the inputs and written atomically with it.
 """
 
 from __future__ import annotations
@@ -155,7 +157,7 @@ def plan_jobs(
                 except Exception:  # the reader will report the real problem later
                     in_fmt = None
             fmt = default_output_format(in_fmt)
-        from tobitkf.io import output_extension
+        from tobitkf.io import output_extension, output_files
 
         ext = output_extension(fmt)  # ValueError naming the writable formats
         try:
@@ -163,20 +165,19 @@ def plan_jobs(
         except ValueError:
             rel = Path()
         out = outdir / rel / f"{strip_extension(src.name)}.{method}{ext}"
-        key = out.resolve()
-        if key in inputs:
-            refused.append(
-                FileSummary(str(src), None, False, f"output {out} would overwrite an input")
-            )
+        files = output_files(out, fmt)  # the output and its side files (CSV sidecar)
+        reason = None
+        for f in files:
+            if f.resolve() in inputs:
+                reason = f"output {f} would overwrite an input"
+            elif f.resolve() in taken:
+                reason = f"output {f} is already the output of {taken[f.resolve()]}"
+            if reason:
+                break
+        if reason:
+            refused.append(FileSummary(str(src), None, False, reason))
             continue
-        if key in taken:
-            refused.append(
-                FileSummary(
-                    str(src), None, False, f"output {out} is already the output of {taken[key]}"
-                )
-            )
-            continue
-        taken[key] = src
+        taken.update({f.resolve(): src for f in files})
         jobs.append(Job(src, out, fmt))
     return jobs, refused
 
@@ -184,21 +185,28 @@ def plan_jobs(
 def atomic_save(sequences: Sequence[Any], path: Path, output_format: str) -> None:
     """Write ``sequences`` to ``path`` through a temporary file and a rename.
 
-    An interrupted run leaves at most a hidden temporary file, never a half-written output.
+    The format's side outputs (the CSV's sidecar) are written beside the temporary file
+    and renamed first, so the output appears complete. An interrupted run leaves at most
+    hidden temporary files, never a half-written output.
     """
-    from tobitkf.io import save
+    from tobitkf.io import output_files, save
 
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(
         dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}"
     )
     os.close(fd)
+    temps = output_files(tmp, output_format)
     try:
         save(list(sequences), tmp, format=output_format)
-        os.replace(tmp, path)
+        # side files first, the output last: whoever sees the output sees its sidecar
+        for src, dst in reversed(list(zip(temps, output_files(path, output_format)))):
+            if src.exists():
+                os.replace(src, dst)
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        for f in temps:
+            if f.exists():
+                f.unlink()
         raise
 
 
@@ -222,6 +230,8 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         if not sequences:
             raise ValueError("the file holds no skeleton")
         smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
+            s.metadata["provenance"]["source"] = {"path": str(job.source), "format": in_fmt}
         atomic_save(smoothed, job.output, job.output_format)
     except Exception as exc:  # reported per file; the run goes on
         return FileSummary(

@@ -257,6 +257,8 @@ def corrupt(
         timestamps=ts,
         fps=fps,
         metadata={**clean.metadata, "corruption": model.to_dict(), "corruption_seed": seed},
+        std=None,  # a smoothed track's uncertainty no longer describes the corrupted one
+        sample_state=None,
     )
     return CorruptedTrack(seq, truth[kept], labels[kept], kept, model, seed)
 

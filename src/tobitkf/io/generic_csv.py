@@ -1,17 +1,19 @@
 """Generic skeleton CSV: one row per frame, documented and round-trippable.
 
-Layout::
+Layout (a plain table: ``pandas.read_csv(path)`` loads it with no options)::
 
-    # topology: kinect_v2          optional comment lines "# key: value" (topology, fps,
-    # fps: 30.0                    body_id, up_axis); other comment lines are ignored
-    time,SpineBase_x,SpineBase_y,SpineBase_z,SpineBase_state,...
-    0.0,0.1,0.2,2.5,2,...
+    time,SpineBase_x,SpineBase_y,SpineBase_z,SpineBase_state,SpineBase_sd,SpineBase_sample,...
+    0.0,0.1,0.2,2.5,2,0.004,0,...
 
-* header (first non-comment line): an optional ``time`` or ``timestamp`` column (seconds),
-  an optional ``body`` column (several bodies: rows are grouped by its value), then for
-  every joint ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (case-insensitive suffixes, in
-  this order, joints in file order) and optionally ``<joint>_state`` (0 not tracked,
-  1 inferred, 2 tracked).
+* header (first line): an optional ``time`` or ``timestamp`` column (seconds), an optional
+  ``body`` column (several bodies: rows are grouped by its value), then for every joint
+  ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (case-insensitive suffixes, in this order,
+  joints in file order) and, after them in any order, optionally ``<joint>_state``
+  (tracking state: 0 not tracked, 1 inferred, 2 tracked), ``<joint>_sd`` (posterior
+  standard deviation, metres) and ``<joint>_sample`` (sample state, ``SampleState``:
+  0 measured, 1 rejected and filled, 2 missing and filled, 3 extrapolated, 4 no estimate).
+  A leading index column as ``DataFrame.to_csv`` writes it (header field empty or
+  ``Unnamed: 0``) is skipped.
 * values: metres, plain decimal numbers; an empty field or ``nan`` is a missing value.
 * separator: comma (``,``); a file whose header has tabs or semicolons and no comma uses
   that separator instead (text inside double quotes does not count).
@@ -20,41 +22,77 @@ Layout::
   names it cannot write so that they read back the same (empty, surrounding white space,
   control characters or lone surrogates).
 
-The topology is the ``# topology:`` built-in when its joints match the header, else the
-built-in whose joints equal the header's, else a custom one from the names.
+Sidecar. What a table cannot hold goes into a JSON file beside it, named like the CSV
+with its last extension replaced by ``.json`` (``a.robust.csv`` -> ``a.robust.json``,
+:func:`sidecar_path`): topology, up axis, fps, body ids, the column meanings and the
+provenance (tobitkf version, method, complete parameters, source). The reader uses it
+when it exists and is a tobitkf sidecar (``"format": "tobitkf.csv-sidecar"``).
+
+Old layout. Files written before the sidecar begin with comment lines ``# key: value``
+(topology, fps, body_id, up_axis); they are still read (a comment line anywhere is
+skipped), the sidecar's values taking precedence where both exist.
+
+The topology is the named built-in when its joints match the header, else the built-in
+whose joints equal the header's, else a custom one from the names.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import os
 import re
 import unicodedata
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from tobitkf.core.jsonable import to_jsonable
+from tobitkf.core.version import __version__
 from tobitkf.io._text import (
     INTEGER,
     check_positions,
     check_rate,
     check_times,
+    decode,
     fmt_float,
     nonempty,
     parse_number,
     parse_rows,
+    read_bytes,
     read_lines,
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
 
-__all__ = ["read_csv", "sniff_csv", "write_csv"]
+__all__ = ["SIDECAR_FORMAT", "read_csv", "sidecar_path", "sniff_csv", "write_csv"]
 
 _TIME = ("time", "timestamp", "t")
 _AXES = ("_x", "_y", "_z")
+#: per-joint columns after x, y, z: suffix -> what they hold
+_EXTRA = ("_state", "_sd", "_sample")
+_INDEX = ("", "unnamed: 0")  # DataFrame.to_csv's index column
+#: the ``format`` entry that marks a JSON file as a tobitkf CSV sidecar
+SIDECAR_FORMAT = "tobitkf.csv-sidecar"
+SIDECAR_VERSION = 1
+_COLUMNS = {
+    "time": "seconds",
+    "body": "body id (several bodies: rows grouped by it)",
+    "<joint>_x, <joint>_y, <joint>_z": "position, metres; empty or nan = missing",
+    "<joint>_state": "tracking state: 0 not tracked, 1 inferred (filled or guessed), 2 tracked",
+    "<joint>_sd": "posterior standard deviation of the position, metres (rms over the axes)",
+    "<joint>_sample": {
+        str(int(SampleState.MEASURED)): "measured: a measurement was used",
+        str(int(SampleState.REJECTED)): "rejected: judged impossible, position filled in",
+        str(int(SampleState.MISSING)): "missing: no measurement, interpolated",
+        str(int(SampleState.EXTRAPOLATED)): "extrapolated: no measurement, predicted",
+        str(int(SampleState.NONE)): "none: no estimate (position empty)",
+    },
+}
 _SEPARATORS = (",", "\t", ";")
 _QUOTED = re.compile(r'"(?:[^"]|"")*"')
 
@@ -80,11 +118,14 @@ def _parse_header(path, fields: list[str], line_no: int):
     time_col = body_col = None
     joints: list[str] = []
     xyz: list[tuple[int, int, int]] = []
-    state_cols: dict[int, int] = {}
+    extra: dict[str, dict[int, int]] = {suffix: {} for suffix in _EXTRA}
     k = 0
     while k < len(cols):
         c = cols[k]
         low = c.lower()
+        if k == 0 and low in _INDEX:
+            k += 1  # a pandas index column: skipped
+            continue
         if low in _TIME and time_col is None and not joints:
             time_col = k
             k += 1
@@ -110,19 +151,23 @@ def _parse_header(path, fields: list[str], line_no: int):
             xyz.append((k, k + 1, k + 2))
             k += 3
             continue
-        if low.endswith("_state") and joints and c[:-6] == joints[-1]:
-            state_cols[len(joints) - 1] = k
+        suffix = next(
+            (x for x in _EXTRA if joints and low.endswith(x) and c[: -len(x)] == joints[-1]),
+            None,
+        )
+        if suffix is not None and len(joints) - 1 not in extra[suffix]:
+            extra[suffix][len(joints) - 1] = k
             k += 1
             continue
         raise ReadError(
             path,
             line_no,
             f"unexpected column {c!r} (position {k + 1}); expected time, body, "
-            "<joint>_x/_y/_z or <joint>_state",
+            "<joint>_x/_y/_z, <joint>_state, <joint>_sd or <joint>_sample",
         )
     if not joints:
         raise ReadError(path, line_no, "expected <joint>_x, <joint>_y, <joint>_z columns")
-    return len(cols), time_col, body_col, joints, xyz, state_cols
+    return len(cols), time_col, body_col, joints, xyz, extra
 
 
 def _topology(names: list[str], hint: str | None, up_axis: int | None) -> Topology:
@@ -163,6 +208,7 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     list of SkeletonSequence (one per ``body`` value, or one), positions (T, J, 3).
     """
     lines = read_lines(path)
+    side = _read_sidecar(path)
     comments: dict[str, str] = {}
     comment_line: dict[str, int] = {}
     start = None
@@ -182,7 +228,7 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         raise ReadError(path, None, "empty file: expected a header line with <joint>_x columns")
     header = lines[start]
     sep = _separator(header)
-    ncols, time_col, body_col, joints, xyz, state_cols = _parse_header(
+    ncols, time_col, body_col, joints, xyz, extra = _parse_header(
         path, _split_header(path, header, sep, start + 1), start + 1
     )
     rows, numbers = nonempty(lines, start + 1)
@@ -203,13 +249,15 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         allow_nan=True,
     )
     fps = None
-    if "fps" in comments:
+    if "fps" in side:
+        fps = side["fps"]
+    elif "fps" in comments:
         text, no = comments["fps"], comment_line["fps"]
         fps = check_rate(path, no, parse_number(path, no, text, "'# fps:'"), "fps", text)
-    up_axis = None
-    if comments.get("up_axis") in ("0", "1", "2"):
+    up_axis = side.get("up_axis")
+    if up_axis is None and comments.get("up_axis") in ("0", "1", "2"):
         up_axis = int(comments["up_axis"])
-    topo = _topology(joints, comments.get("topology"), up_axis)
+    topo = _topology(joints, side.get("topology", comments.get("topology")), up_axis)
     if body_col is not None:
         ids = data[:, body_col]
         if np.isnan(ids).any():
@@ -229,9 +277,9 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         idx = np.array(xyz, dtype=int)
         positions = d[:, idx]  # (T, J, 3); parse_rows has rejected inf
         state = None
-        if state_cols:
+        if extra["_state"]:
             state = np.full((len(d), len(joints)), 2, dtype=np.int8)
-            for j, c in state_cols.items():
+            for j, c in extra["_state"].items():
                 col = d[:, c]
                 col = np.where(np.isnan(col), 0, col)
                 bad = ~np.isin(col, (0, 1, 2))
@@ -241,16 +289,25 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                         path, nos[k], f"expected a state 0, 1 or 2 for {joints[j]}, found {col[k]}"
                     )
                 state[:, j] = col
+        std = _std_columns(path, d, nos, extra["_sd"], joints)
+        sample = _sample_columns(path, d, nos, extra["_sample"], joints)
         check_positions(path, positions, nos, implausible, names=joints, state=state)
         timestamps = None
         if time_col is not None:
             timestamps = d[:, time_col]
             check_times(path, timestamps, nos)
         body_id = group_id
-        if body_col is None and "body_id" in comments:
+        entry = side.get("bodies", {}).get(group_id, {})
+        if body_col is None and "body_id" in entry:
+            body_id = entry["body_id"]
+        elif body_col is None and "body_id" in comments:
             body_id = comments["body_id"]
             if INTEGER.fullmatch(body_id):
                 body_id = int(body_id)
+        metadata: dict[str, Any] = {"source": str(path), "format": "csv"}
+        provenance = entry.get("provenance", side.get("provenance"))
+        if provenance is not None:
+            metadata["provenance"] = provenance
         out.append(
             SkeletonSequence(
                 positions=positions,
@@ -259,21 +316,137 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                 timestamps=timestamps,
                 fps=fps,
                 body_id=body_id,
-                metadata={"source": str(path), "format": "csv"},
+                metadata=metadata,
+                std=std,
+                sample_state=sample,
             )
         )
     return out
 
 
+def _std_columns(path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]):
+    """(T, J) standard deviations from the ``_sd`` columns (NaN where none); None when the
+    file has none or this body's are all empty (a body written without them)."""
+    if not cols:
+        return None
+    std = np.full((len(d), len(joints)), np.nan)
+    for j, c in cols.items():
+        std[:, j] = d[:, c]
+    if np.isnan(std).all():
+        return None
+    bad = std < 0
+    if bad.any():
+        k, j = (int(v[0]) for v in np.nonzero(bad))
+        raise ReadError(
+            path, nos[k], f"expected a standard deviation >= 0 for {joints[j]}, found {std[k, j]}"
+        )
+    return std
+
+
+def _sample_columns(path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]):
+    """(T, J) sample states from the ``_sample`` columns; None when the file has none or
+    this body's are all empty. A joint without a column has no estimate (NONE)."""
+    if not cols:
+        return None
+    values = np.stack([d[:, c] for c in cols.values()], axis=1)
+    if np.isnan(values).all():
+        return None
+    codes = [int(v) for v in SampleState]
+    sample = np.full((len(d), len(joints)), int(SampleState.NONE), dtype=np.int8)
+    for j, c in cols.items():
+        col = d[:, c]
+        bad = ~np.isin(col, codes)  # NaN too: a body has states for all its samples or none
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ReadError(
+                path,
+                nos[k],
+                f"expected a sample state {', '.join(map(str, codes))} for {joints[j]}, "
+                f"found {col[k]}",
+            )
+        sample[:, j] = col
+    return sample
+
+
+def sidecar_path(path: str | os.PathLike[str]) -> Path:
+    """The JSON sidecar of a CSV: its last extension replaced by ``.json``
+    (``a.robust.csv`` -> ``a.robust.json``)."""
+    return Path(path).with_suffix(".json")
+
+
+#: the sidecar is small; anything larger is not one of ours
+_MAX_SIDECAR_BYTES = 16 * 2**20
+
+
+def _read_sidecar(path) -> dict[str, Any]:
+    """The sidecar's values, checked: ``topology``, ``up_axis``, ``fps``, ``provenance``
+    and ``bodies`` (value of the body column, None for a single body -> its ``body_id``
+    and ``provenance``); {} when there is no sidecar or the JSON file is not one."""
+    side = sidecar_path(path)
+    if side == Path(path) or not side.is_file():
+        return {}
+    if side.stat().st_size > _MAX_SIDECAR_BYTES:
+        return {}
+    try:
+        doc = json.loads(decode(side, read_bytes(side)))
+    except (ValueError, RecursionError):
+        return {}  # not JSON: not a sidecar of ours
+    if not isinstance(doc, dict) or doc.get("format") != SIDECAR_FORMAT:
+        return {}
+
+    def bad(what: str) -> ReadError:
+        return ReadError(side, None, f"tobitkf CSV sidecar: {what}")
+
+    out: dict[str, Any] = {}
+    if isinstance(doc.get("topology"), str):
+        out["topology"] = doc["topology"]
+    if doc.get("up_axis") is not None:
+        if doc["up_axis"] not in (0, 1, 2) or isinstance(doc["up_axis"], bool):
+            raise bad(f"expected up_axis 0, 1 or 2, found {doc['up_axis']!r}")
+        out["up_axis"] = int(doc["up_axis"])
+    if doc.get("fps") is not None:
+        fps = doc["fps"]
+        if isinstance(fps, bool) or not isinstance(fps, (int, float)):
+            raise bad(f"expected a number for fps, found {fps!r}")
+        out["fps"] = check_rate(side, None, float(fps), "fps", repr(fps))
+    if isinstance(doc.get("provenance"), dict):
+        out["provenance"] = doc["provenance"]
+    bodies: dict[Any, dict[str, Any]] = {}
+    entries = doc.get("bodies", [])
+    if not isinstance(entries, list):
+        raise bad("expected a list of bodies")
+    for e in entries:
+        if not isinstance(e, dict):
+            raise bad(f"expected a body entry (an object), found {e!r}")
+        body_id = e.get("body_id")
+        if body_id is not None and (
+            isinstance(body_id, bool) or not isinstance(body_id, (int, str))
+        ):
+            raise bad(f"expected an int or str body id, found {body_id!r}")
+        entry = {k: e[k] for k in ("body_id", "provenance") if k in e}
+        bodies[e.get("body")] = entry
+    out["bodies"] = bodies
+    return out
+
+
 def write_csv(
-    sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str], *, sep: str = ","
+    sequences: Sequence[SkeletonSequence],
+    path: str | os.PathLike[str],
+    *,
+    sep: str = ",",
+    sidecar: bool = True,
 ) -> None:
-    """Write sequences as a generic CSV (exact round trip through :func:`read_csv`).
+    """Write sequences as a generic CSV plus its JSON sidecar (exact round trip through
+    :func:`read_csv`).
 
     All sequences must share the same joints. Columns: ``time`` (when any sequence has
     timestamps), ``body`` (when more than one sequence: the body ids when they are
-    distinct integers, else 0, 1, ...), then per joint
-    ``_x, _y, _z`` and ``_state`` (when tracking states are present).
+    distinct integers, else 0, 1, ...), then per joint ``_x, _y, _z``, ``_state`` (when
+    tracking states are present), ``_sd`` (when a posterior standard deviation is) and
+    ``_sample`` (when sample states are); a body without sd or sample states leaves those
+    fields empty. The sidecar (:func:`sidecar_path`) holds topology, up axis, fps, body
+    ids and provenance; ``sidecar=False`` writes the table alone. An existing JSON file
+    at the sidecar's path that is not a tobitkf sidecar is never overwritten (ValueError).
     """
     seqs = list(sequences)
     if not seqs:
@@ -296,7 +469,22 @@ def write_csv(
     ):
         ids = list(range(len(seqs)))
     with_state = any(s.tracking_state is not None for s in seqs)
+    with_std = any(s.std is not None for s in seqs)
+    with_sample = any(s.sample_state is not None for s in seqs)
     with_time = any(s.timestamps is not None for s in seqs)
+    if not multi and seqs[0].body_id is not None:
+        _writable_body_id(seqs[0].body_id)
+    side = sidecar_path(path)
+    doc = None
+    if sidecar:
+        if side == Path(path):
+            raise ValueError(f"cannot write a CSV named {Path(path).name!r}: its sidecar is itself")
+        if side.exists() and not _is_sidecar(side):
+            raise ValueError(
+                f"will not overwrite {side}: it is not a tobitkf CSV sidecar (move it, or "
+                "pass sidecar=False)"
+            )
+        doc = _sidecar(seqs, ids if multi else None)
     header = []
     if with_time:
         header.append("time")
@@ -304,16 +492,14 @@ def write_csv(
         header.append("body")
     for n in names:
         header += [_quoted(f"{n}{a}") for a in _AXES]
-        if with_state:
-            header.append(_quoted(f"{n}_state"))
-    lines = [f"# topology: {_check_writable(seqs[0].topology.name, 'topology name')}"]
-    fps = seqs[0].fps
-    if fps is not None:
-        lines.append(f"# fps: {fmt_float(fps)}")
-    lines.append(f"# up_axis: {seqs[0].topology.up_axis}")
-    if not multi and seqs[0].body_id is not None:
-        lines.append(f"# body_id: {_writable_body_id(seqs[0].body_id)}")
-    lines.append(sep.join(header))
+        for suffix, present in (
+            ("_state", with_state),
+            ("_sd", with_std),
+            ("_sample", with_sample),
+        ):
+            if present:
+                header.append(_quoted(f"{n}{suffix}"))
+    lines = [sep.join(header)]
     for k, s in enumerate(seqs):
         times = s.times() if with_time else None
         body = int(ids[k])
@@ -328,8 +514,55 @@ def write_csv(
                 if with_state:
                     st = 2 if s.tracking_state is None else int(s.tracking_state[t, j])
                     vals.append(str(st))
+                if with_std:
+                    vals.append("" if s.std is None else fmt_float(s.std[t, j]))
+                if with_sample:
+                    vals.append("" if s.sample_state is None else str(int(s.sample_state[t, j])))
             lines.append(sep.join(vals))
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    if doc is not None:
+        side.write_text(doc, encoding="utf-8")
+
+
+def _is_sidecar(path: Path) -> bool:
+    """True when ``path`` is a JSON file marked as a tobitkf CSV sidecar."""
+    try:
+        if path.stat().st_size > _MAX_SIDECAR_BYTES:
+            return False
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(doc, dict) and doc.get("format") == SIDECAR_FORMAT
+
+
+def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
+    """The sidecar's JSON text (see the module docstring); ``ids``: the body column's
+    values, None for a single body (no body column)."""
+    first = seqs[0]
+    provs = [s.metadata.get("provenance") for s in seqs]
+    texts = [json.dumps(to_jsonable(p), sort_keys=True) for p in provs]
+    shared = provs[0] if len(set(texts)) == 1 else None
+    bodies = []
+    for k, s in enumerate(seqs):
+        # one body: its id lives here; several: the body column holds the ids
+        entry: dict[str, Any] = (
+            {"body": None, "body_id": s.body_id} if ids is None else {"body": int(ids[k])}
+        )
+        if shared is None and provs[k] is not None:
+            entry["provenance"] = provs[k]
+        bodies.append(entry)
+    doc = {
+        "format": SIDECAR_FORMAT,
+        "format_version": SIDECAR_VERSION,
+        "written_by": f"tobitkf {__version__}",
+        "topology": first.topology.name,
+        "up_axis": first.topology.up_axis,
+        "fps": first.fps,
+        "bodies": bodies,
+        "columns": _COLUMNS,
+        "provenance": shared,
+    }
+    return json.dumps(to_jsonable(doc), indent=2) + "\n"  # ASCII: any name survives
 
 
 def _check_writable(text: str, what: str) -> str:
@@ -375,8 +608,9 @@ def _quoted(field: str) -> str:
 
 def sniff_csv(path: Path, head: str) -> int:
     """Score: a header line with ``<joint>_x,<joint>_y,<joint>_z`` columns (more sure
-    after the ``# topology:`` line that :func:`write_csv` writes first)."""
-    written = False
+    with the sidecar :func:`write_csv` writes beside it, or, in the old layout, after its
+    ``# topology:`` line)."""
+    written = sidecar_path(path) != path and sidecar_path(path).is_file()
     for line in head.split("\n")[:50]:
         s = line.strip()
         written = written or s.startswith("# topology:")
@@ -396,4 +630,5 @@ def sniff_csv(path: Path, head: str) -> int:
 register_format(
     "csv", read_csv, write_csv, (".csv",), sniff_csv,
     description="generic skeleton CSV", aliases=("generic_csv",),
+    side_outputs=lambda p: [sidecar_path(p)],
 )  # fmt: skip

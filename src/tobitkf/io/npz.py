@@ -4,11 +4,14 @@ Layout (all entries plain arrays; read with ``allow_pickle=False``):
 
 * ``format_version`` = 1, ``n_bodies`` = B;
 * per body ``b``: ``b{b}/positions`` (T, J, 3), optional ``b{b}/tracking_state`` (T, J),
-  optional ``b{b}/timestamps`` (T,), ``b{b}/topology_joints`` (J,) str,
+  optional ``b{b}/timestamps`` (T,), optional ``b{b}/std`` (T, J) float and
+  ``b{b}/sample_state`` (T, J) int8 (smoothed output), ``b{b}/topology_joints`` (J,) str,
   ``b{b}/topology_parents`` (J,), ``b{b}/topology_symmetry`` (S, 2), and
   ``b{b}/header`` = a JSON string with fps, body_id, topology name, up axis and the
   metadata; arrays inside the metadata (at any depth of dicts and lists) are stored as
-  separate entries ``b{b}/meta/<n>`` and referenced from the JSON.
+  separate entries ``b{b}/meta/<n>`` and referenced from the JSON. A smoothed sequence's
+  provenance (tobitkf version, method, complete parameters, source) is
+  ``metadata["provenance"]``, so it sits in the header.
 
 The reader trusts nothing in the archive: the members may hold at most
 ``_text.MAX_INPUT_BYTES`` together, each array's declared shape and dtype must match the
@@ -128,6 +131,10 @@ def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             arrays[f"{p}/tracking_state"] = s.tracking_state
         if s.timestamps is not None:
             arrays[f"{p}/timestamps"] = s.timestamps
+        if s.std is not None:
+            arrays[f"{p}/std"] = s.std
+        if s.sample_state is not None:
+            arrays[f"{p}/sample_state"] = s.sample_state
         topo = s.topology
         arrays[f"{p}/topology_joints"] = np.array(topo.joints, dtype=str)
         arrays[f"{p}/topology_parents"] = np.array(topo.parents, dtype=np.int64)
@@ -245,6 +252,8 @@ def read_npz(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                     fps=fps,
                     body_id=_decode(header["body_id"], data),
                     metadata=_decode(header["metadata"], data),
+                    std=data.get(f"{p}/std"),
+                    sample_state=data.get(f"{p}/sample_state"),
                 )
             )
     except ReadError:

@@ -47,7 +47,7 @@ from tobitkf.io._text import (
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
 
 __all__ = ["BODY_FIELDS", "read_ntu", "sniff_ntu", "write_ntu"]
@@ -276,6 +276,10 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
     joint tracking state from ``tracking_state`` (TRACKED if absent). A NaN joint is
     written as ``0 0 0`` with state NOT_TRACKED; a body whose frame is entirely NaN (or
     marked absent in ``metadata["ntu_present"]``) is left out of that frame.
+
+    A smoothed sequence (``sample_state`` set) has its filled joints (rejected, missing or
+    extrapolated, :class:`~tobitkf.skeleton.sequence.SampleState`) written as INFERRED,
+    not as the state read from the input, and joints without an estimate as NOT_TRACKED.
     """
     seqs = list(sequences)
     if not seqs:
@@ -335,6 +339,13 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             else:
                 raw_state = np.full((F, N_JOINTS), int(TrackingState.TRACKED), dtype=np.int8)
             raw_state = np.where(np.isnan(s.positions).any(axis=-1), 0, raw_state)
+        if s.sample_state is not None:
+            raw_state = np.where(
+                SampleState.filled(s.sample_state), int(TrackingState.INFERRED), raw_state
+            )
+            raw_state = np.where(
+                s.sample_state == SampleState.NONE, int(TrackingState.NOT_TRACKED), raw_state
+            )
         prepared.append((s, present, order, body_id, body_cols, depth, color, orient, raw_state))
 
     def _num(x: float) -> str:

@@ -26,6 +26,7 @@ __all__ = [
     "is_companion_file",
     "load",
     "output_extension",
+    "output_files",
     "register_format",
     "save",
     "unregister_format",
@@ -48,6 +49,7 @@ class FormatSpec:
     sniff: Sniffer | None
     description: str = ""
     companion: Callable[[Path], bool] | None = None
+    side_outputs: Callable[[Path], list[Path]] | None = None
 
 
 _FORMATS: dict[str, FormatSpec] = {}
@@ -64,6 +66,7 @@ def register_format(
     description: str = "",
     aliases: Iterable[str] = (),
     companion: Callable[[Path], bool] | None = None,
+    side_outputs: Callable[[Path], list[Path]] | None = None,
 ) -> FormatSpec:
     """Register (or replace) a file format.
 
@@ -82,6 +85,9 @@ def register_format(
     companion : callable ``(path) -> bool``, optional
         True for a file that is the second half of a recording read through another
         file (batch tools skip it, see :func:`is_companion_file`).
+    side_outputs : callable ``(path) -> list of Path``, optional
+        The files the writer writes beside ``path`` (the CSV's JSON sidecar); batch tools
+        treat them as part of the output (:func:`output_files`).
     """
     spec = FormatSpec(
         name=name,
@@ -91,6 +97,7 @@ def register_format(
         sniff=sniff,
         description=description,
         companion=companion,
+        side_outputs=side_outputs,
     )
     _FORMATS[name] = spec
     for a in aliases:
@@ -128,6 +135,14 @@ def output_extension(name: str) -> str:
     if spec.writer is None or not spec.extensions:
         raise ValueError(f"format {name!r} cannot be written; writable: {writable_formats()}")
     return spec.extensions[0]
+
+
+def output_files(path: str | os.PathLike[str], name: str) -> list[Path]:
+    """Every file that writing format ``name`` to ``path`` produces: ``path`` first, then
+    the format's side outputs (e.g. ``a.csv`` -> ``a.csv``, ``a.json``)."""
+    spec = get_format(name)
+    p = Path(path)
+    return [p, *(Path(x) for x in (spec.side_outputs(p) if spec.side_outputs else ()))]
 
 
 def formats() -> dict[str, FormatSpec]:

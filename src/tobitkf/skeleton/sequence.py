@@ -2,7 +2,9 @@
 
 Arrays are time-first: ``positions`` is ``(T, J, 3)`` in metres with NaN marking a missing
 sample, ``tracking_state`` is ``(T, J)`` (:class:`TrackingState` codes) and ``timestamps``
-is ``(T,)`` seconds.
+is ``(T,)`` seconds. A smoothed sequence also carries ``std`` ``(T, J)`` (posterior
+standard deviation, metres) and ``sample_state`` ``(T, J)`` (:class:`SampleState` codes:
+how each estimate came about).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from tobitkf.skeleton.topology import Topology, get_topology
 
-__all__ = ["SkeletonSequence", "TrackingState"]
+__all__ = ["SampleState", "SkeletonSequence", "TrackingState"]
 
 
 class TrackingState(IntEnum):
@@ -26,6 +28,33 @@ class TrackingState(IntEnum):
     NOT_TRACKED = 0
     INFERRED = 1
     TRACKED = 2
+
+
+class SampleState(IntEnum):
+    """How a smoothed sample came about (``SkeletonSequence.sample_state``).
+
+    A measurement is *used* when it was present (not NaN, not NOT_TRACKED) and the method
+    did not reject it.
+    """
+
+    #: a measurement was used
+    MEASURED = 0
+    #: a measurement was judged impossible (rejected) and the position filled in; this
+    #: wins over MISSING / EXTRAPOLATED, whichever way the fill was made
+    REJECTED = 1
+    #: no measurement; filled by interpolation between used measurements (offline)
+    MISSING = 2
+    #: no measurement; filled by prediction only: every fill of a causal method, and
+    #: offline a fill before the first or after the last used measurement of the joint
+    EXTRAPOLATED = 3
+    #: no estimate: the position is NaN
+    NONE = 4
+
+    @classmethod
+    def filled(cls, states: np.ndarray) -> np.ndarray:
+        """Boolean mask of filled samples (REJECTED, MISSING or EXTRAPOLATED)."""
+        s = np.asarray(states)
+        return (s >= cls.REJECTED) & (s <= cls.EXTRAPOLATED)
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,7 +78,15 @@ class SkeletonSequence:
     body_id : int, str or None
         Identifier of the body (e.g. the Kinect body ID).
     metadata : dict
-        Source path, format and extra per-frame fields (e.g. ``orientations`` (T, J, 4)).
+        Source path, format and extra per-frame fields (e.g. ``orientations`` (T, J, 4));
+        a smoothed sequence adds ``diagnostics`` and ``provenance`` (tobitkf version,
+        method, complete parameters, source).
+    std : ndarray, shape (T, J), optional
+        Posterior standard deviation of each position in metres: the root-mean-square
+        over the axes of the per-axis posterior standard deviations, NaN where there is
+        no estimate. Set by :func:`tobitkf.smooth` for methods that give one.
+    sample_state : ndarray, shape (T, J), optional
+        :class:`SampleState` codes (stored as int8); set by :func:`tobitkf.smooth`.
     """
 
     positions: np.ndarray
@@ -59,6 +96,8 @@ class SkeletonSequence:
     fps: float | None = None
     body_id: int | str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+    std: np.ndarray | None = None
+    sample_state: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         topo = self.topology
@@ -81,20 +120,7 @@ class SkeletonSequence:
         if np.isinf(pos).any():
             raise ValueError("positions must be finite or NaN, found inf")
         object.__setattr__(self, "positions", pos)
-        if self.tracking_state is not None:
-            st = np.asarray(self.tracking_state)
-            if st.shape != (T, J):
-                raise ValueError(
-                    f"tracking_state must have shape (T, J) = {(T, J)}, found {st.shape}"
-                )
-            if st.size and (
-                not np.issubdtype(st.dtype, np.number)
-                or np.any(st != np.round(st))
-                or st.min() < 0
-                or st.max() > 2
-            ):
-                raise ValueError("tracking_state values must be 0, 1 or 2 (TrackingState)")
-            object.__setattr__(self, "tracking_state", st.astype(np.int8))
+        self._set_codes("tracking_state", TrackingState, "0, 1 or 2")
         if self.timestamps is not None:
             ts = np.asarray(self.timestamps, dtype=float)
             if ts.shape != (T,):
@@ -113,10 +139,39 @@ class SkeletonSequence:
             if not np.isfinite(fps) or fps <= 0:
                 raise ValueError(f"fps must be a positive number, found {self.fps!r}")
             object.__setattr__(self, "fps", fps)
+        if self.std is not None:
+            try:
+                sd = np.asarray(self.std, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"std must be numeric, found {exc}") from None
+            if sd.shape != (T, J):
+                raise ValueError(f"std must have shape (T, J) = {(T, J)}, found {sd.shape}")
+            if np.isinf(sd).any() or (sd < 0).any():
+                raise ValueError("std values must be >= 0 and finite, or NaN (no estimate)")
+            object.__setattr__(self, "std", sd)
+        self._set_codes("sample_state", SampleState, "0 to 4")
         if self.metadata is None:
             object.__setattr__(self, "metadata", {})
         elif not isinstance(self.metadata, dict):
             raise TypeError(f"metadata must be a dict, found {type(self.metadata).__name__}")
+
+    def _set_codes(self, name: str, codes: type[IntEnum], allowed: str) -> None:
+        """Check a (T, J) field of ``codes`` values (or None) and store it as int8."""
+        value = getattr(self, name)
+        if value is None:
+            return
+        a = np.asarray(value)
+        shape = self.positions.shape[:2]
+        if a.shape != shape:
+            raise ValueError(f"{name} must have shape (T, J) = {shape}, found {a.shape}")
+        if a.size and (
+            not np.issubdtype(a.dtype, np.number)
+            or np.any(a != np.round(a))
+            or a.min() < min(codes)
+            or a.max() > max(codes)
+        ):
+            raise ValueError(f"{name} values must be {allowed} ({codes.__name__})")
+        object.__setattr__(self, name, a.astype(np.int8))
 
     # ------------------------------------------------------------------ properties
     @property
@@ -142,7 +197,10 @@ class SkeletonSequence:
             f"SkeletonSequence(T={self.n_frames}, J={self.n_joints}, "
             f"topology={self.topology.name!r}, fps={self.fps}, body_id={self.body_id!r}, "
             f"tracking_state={'yes' if self.tracking_state is not None else 'no'}, "
-            f"timestamps={'yes' if self.timestamps is not None else 'no'})"
+            f"timestamps={'yes' if self.timestamps is not None else 'no'}"
+            + (", std=yes" if self.std is not None else "")
+            + (", sample_state=yes" if self.sample_state is not None else "")
+            + ")"
         )
 
     # ------------------------------------------------------------------ time
@@ -193,6 +251,8 @@ class SkeletonSequence:
             topology=topo,
             tracking_state=None if self.tracking_state is None else self.tracking_state[:, idx],
             metadata=meta,
+            std=None if self.std is None else self.std[:, idx],
+            sample_state=None if self.sample_state is None else self.sample_state[:, idx],
         )
 
     def largest_jumps(self) -> tuple[np.ndarray, np.ndarray]:

@@ -24,8 +24,22 @@ gaps, the up axis and tracking states; the robust pair is in
 :mod:`tobitkf.smoothing.robust`. ``tobitkf methods`` lists the registry.
 
 Output. A new :class:`SkeletonSequence` with the smoothed positions and the input's
-tracking states, timestamps, fps, topology, body id and metadata, plus
-``metadata["diagnostics"]``::
+timestamps, fps, topology, body id and metadata, plus:
+
+* ``sample_state`` (T, J): :class:`~tobitkf.skeleton.sequence.SampleState` of every
+  sample, worked out here for every method alike from the missing measurements, the
+  method's ``rejected`` diagnostics, whether the output is finite and whether the method
+  ran causally (see :func:`sample_states`);
+* ``std`` (T, J): the posterior standard deviation, for methods that give one (the
+  Kalman-type ones), else None;
+* ``tracking_state``: the input's, except that filled samples (REJECTED, MISSING,
+  EXTRAPOLATED) become INFERRED and samples without an estimate NOT_TRACKED (an input
+  without states gets TRACKED elsewhere as soon as one sample is filled);
+* ``metadata["provenance"]``: ``tobitkf_version``, ``method``, ``params`` (the complete
+  parameter set used, fitted values included: the same dict as the diagnostics'),
+  ``source`` (the input's path and format, when known) and ``input`` (the input's own
+  provenance, when it was smoothed before);
+* ``metadata["diagnostics"]``::
 
     clipped_fraction  (J,)  fraction of frames whose measurement was clipped (censored)
                             by the filter's limits (0 for methods without limits)
@@ -44,7 +58,8 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.core.version import __version__
+from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingState
 
 # the built-in methods register themselves when imported
 from tobitkf.smoothing import baselines as _baselines  # noqa: F401
@@ -78,6 +93,7 @@ __all__ = [
     "methods",
     "register_method",
     "run_method",
+    "sample_states",
     "smooth",
     "unregister_method",
 ]
@@ -139,7 +155,65 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
         )
     if out.diagnostics is not None and len(out.diagnostics) != inp.ys.shape[1]:
         raise ValueError(f"method {spec.name!r} returned diagnostics for a different body count")
+    if out.std is not None and np.shape(out.std) != inp.missing.shape:
+        raise ValueError(
+            f"method {spec.name!r} returned std of shape {np.shape(out.std)}; expected "
+            f"{inp.missing.shape} (frames, bodies, joints)"
+        )
     return out
+
+
+def sample_states(
+    missing: np.ndarray, rejected: np.ndarray, finite: np.ndarray, causal: bool
+) -> np.ndarray:
+    """:class:`SampleState` of every sample, time first (arrays of one shape (T, ...)).
+
+    ``missing``: no measurement (NaN or NOT_TRACKED); ``rejected``: a measurement the
+    method judged impossible; ``finite``: the output has a position; ``causal``: the
+    output at frame k used frames up to k only. A sample without a position is NONE; one
+    whose measurement was used is MEASURED; a rejected one REJECTED; any other fill is
+    MISSING when the method is not causal and used measurements of that joint exist both
+    before and after it, else EXTRAPOLATED.
+    """
+    missing = np.asarray(missing, dtype=bool)
+    rejected = np.asarray(rejected, dtype=bool) & ~missing
+    used = ~missing & ~rejected
+    out = np.full(missing.shape, SampleState.EXTRAPOLATED, dtype=np.int8)
+    if not causal and missing.shape[0]:
+        before = np.logical_or.accumulate(used, axis=0)
+        after = np.logical_or.accumulate(used[::-1], axis=0)[::-1]
+        out[before & after] = SampleState.MISSING
+    out[rejected] = SampleState.REJECTED
+    out[used] = SampleState.MEASURED
+    out[~np.asarray(finite, dtype=bool)] = SampleState.NONE
+    return out
+
+
+def _output_states(states: np.ndarray | None, sample: np.ndarray) -> np.ndarray | None:
+    """The output's tracking states: filled samples INFERRED, no estimate NOT_TRACKED,
+    measured ones as given (TRACKED when the input had no states but something was
+    filled; None when the input had none and nothing was filled)."""
+    filled = SampleState.filled(sample)
+    if states is None:
+        if not filled.any():
+            return None
+        states = np.full(sample.shape, TrackingState.TRACKED, dtype=np.int8)
+    out = np.where(filled, TrackingState.INFERRED, states)
+    out = np.where(sample == SampleState.NONE, TrackingState.NOT_TRACKED, out)
+    return out.astype(np.int8)
+
+
+def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any]) -> dict:
+    source = {k: meta[k] for k in ("source", "format") if meta.get(k) is not None}
+    prov: dict[str, Any] = {
+        "tobitkf_version": __version__,
+        "method": spec.name,
+        "params": dict(params),
+        "source": {"path" if k == "source" else k: v for k, v in source.items()} or None,
+    }
+    if isinstance(meta.get("provenance"), Mapping):
+        prov["input"] = dict(meta["provenance"])  # smoothed before: keep the chain
+    return prov
 
 
 def smooth(
@@ -267,7 +341,16 @@ def _smooth_group(
         else np.asarray(result.clipped, dtype=bool)
     )
     extra = result.diagnostics or ({},) * len(seqs)
-    rejected = [np.asarray(d.get("rejected", False)) for d in extra]
+    rejected = np.stack(
+        [np.broadcast_to(np.asarray(d.get("rejected", False), dtype=bool), missing.shape[::2])
+         for d in extra],
+        axis=1,
+    )  # fmt: skip
+    finite = np.isfinite(est).all(axis=-1)
+    sample = sample_states(missing, rejected, finite, spec.is_causal(params) and not offline)
+    std = None
+    if result.std is not None:
+        std = np.where(finite, np.asarray(result.std, dtype=float), np.nan)
     T = max(ref.n_frames, 1)
     used = {
         **params,
@@ -278,7 +361,7 @@ def _smooth_group(
     }
     out = []
     for b, s in enumerate(seqs):
-        filled = (missing[:, b] | rejected[b]) & np.isfinite(est[:, b]).all(axis=-1)
+        filled = (missing[:, b] | rejected[:, b]) & finite[:, b]
         diagnostics = {
             **extra[b],
             "clipped_fraction": clipped[:, b].sum(axis=0) / T,
@@ -288,5 +371,16 @@ def _smooth_group(
         }
         meta = dict(s.metadata)
         meta["diagnostics"] = diagnostics
-        out.append(s.replace(positions=est[:, b], metadata=meta))
+        meta["provenance"] = _provenance(spec, used, s.metadata)
+        out.append(
+            s.replace(
+                positions=est[:, b],
+                metadata=meta,
+                std=None if std is None else std[:, b],
+                sample_state=sample[:, b],
+                tracking_state=_output_states(
+                    None if states is None else states[:, b], sample[:, b]
+                ),
+            )
+        )
     return out

@@ -28,6 +28,10 @@ Tracking states. NOT_TRACKED joints and NaN positions are predicted, not updated
 INFERRED joints get their measurement variance multiplied by ``inferred_noise_factor``.
 Frames before a joint's first valid measurement stay NaN; later gaps are filled by the
 filter's prediction (hold, for a random walk) or, offline, by the RTS interpolation.
+
+Uncertainty. The output's ``std`` is the posterior standard deviation of each position:
+``sqrt(mean over the axes of the filtered (or, offline, smoothed) variances)``, NaN where
+the position is NaN. For the Tobit filters it is the Gaussian approximation's variance.
 """
 
 from __future__ import annotations
@@ -129,14 +133,17 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
             keep_probabilities=False,
             **kwargs,
         )
-    means = rts_smooth(model, result).means if inp.offline else result.means
-    est = np.array(means, dtype=float)
+    final = rts_smooth(model, result) if inp.offline else result
+    est = np.array(final.means, dtype=float)
+    # position sd: root-mean-square over the axes of the per-axis posterior sd
+    std = np.sqrt(np.mean(final.variances, axis=-1))
     # nothing observed yet: no estimate before a joint's first valid measurement
     before = np.arange(T).reshape((T,) + (1,) * len(bshape)) < first[None]
     before |= ~has_any[None]
     est[before] = np.nan
+    std[before] = np.nan
     clipped = np.asarray(result.clipped, dtype=bool).any(axis=-1) & valid
-    return SmoothOutput(est, clipped=clipped, params=used)
+    return SmoothOutput(est, clipped=clipped, params=used, std=std)
 
 
 class KalmanStepper:

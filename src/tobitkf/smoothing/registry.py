@@ -101,12 +101,16 @@ class SmoothOutput:
     diagnostics : one dict per body, merged into ``metadata["diagnostics"]``, or None
     params : resolved parameters to record beside the given ones (e.g. ``c`` in the
         sequence's axes), or None
+    std : (T, B, J) posterior standard deviation of each position (metres, the
+        root-mean-square over the axes of the per-axis standard deviations; NaN where
+        there is no estimate), or None when the method gives none
     """
 
     positions: Array
     clipped: NDArray[np.bool_] | None = None
     diagnostics: tuple[dict[str, Any], ...] | None = None
     params: Mapping[str, Any] | None = None
+    std: Array | None = None
 
 
 class LiveStepper(Protocol):
