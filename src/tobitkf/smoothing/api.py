@@ -355,7 +355,7 @@ def _smooth_group(
     used = {
         **params,
         **(result.params or {}),
-        "offline": offline,
+        "offline": offline or not spec.is_causal(params),  # the output used later frames
         "inferred_noise_factor": factor,
         "up_axis": inp.up_axis,
     }
