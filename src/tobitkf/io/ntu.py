@@ -348,34 +348,48 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             )
         prepared.append((s, present, order, body_id, body_cols, depth, color, orient, raw_state))
 
+    # one joint line per (frame, joint), built from Python lists: formatting numpy
+    # scalars one at a time made this writer most of a whole smoothing run
+    def _texts(arr: np.ndarray | None, width: int) -> list[list[str]]:
+        """(F, 25) lists of the space-joined fields of ``arr`` (F, 25, width)."""
+        if arr is None:
+            return [[" ".join(["0"] * width)] * N_JOINTS] * F
+        vals = arr.reshape(F * N_JOINTS, width).tolist()
+        flat = [" ".join("0" if v != v else repr(v) for v in row) for row in vals]
+        return [flat[f * N_JOINTS : (f + 1) * N_JOINTS] for f in range(F)]
+
+    lines_of = []
+    for s, _, _, _, _, depth, color, orient, raw_state in prepared:
+        pos = s.positions.reshape(F * N_JOINTS, 3).tolist()
+        xyz = ["0 0 0" if any(v != v for v in row) else " ".join(map(repr, row)) for row in pos]
+        extra = [_texts(depth, 2), _texts(color, 2), _texts(orient, 4)]
+        states = raw_state.astype(np.int64).tolist()
+        lines_of.append(
+            [
+                [
+                    f"{xyz[f * N_JOINTS + j]} {extra[0][f][j]} {extra[1][f][j]} "
+                    f"{extra[2][f][j]} {states[f][j]}"
+                    for j in range(N_JOINTS)
+                ]
+                for f in range(F)
+            ]
+        )
+
     def _num(x: float) -> str:
         return "0" if np.isnan(x) else fmt_float(x)
 
     out = [str(F)]
     for t in range(F):
-        here = [p for p in prepared if p[1][t]]
-        here.sort(key=lambda p: p[2][t])
+        here = [(p, lines) for p, lines in zip(prepared, lines_of, strict=True) if p[1][t]]
+        here.sort(key=lambda pl: pl[0][2][t])
         out.append(str(len(here)))
-        for s, _, _, body_id, body_cols, depth, color, orient, raw_state in here:
+        for (_s, _, _, body_id, body_cols, *_), lines in here:
             vals = [str(body_id)]
             for typ, col in body_cols:
                 vals.append(str(int(col[t])) if typ is int else _num(col[t]))
             out.append(" ".join(vals))
             out.append(str(N_JOINTS))
-            pos = s.positions[t]
-            for j in range(N_JOINTS):
-                xyz = pos[j]
-                if np.isnan(xyz).any():
-                    xyz_s = ["0", "0", "0"]
-                else:
-                    xyz_s = [fmt_float(v) for v in xyz]
-                extra = []
-                for arr, n in ((depth, 2), (color, 2), (orient, 4)):
-                    if arr is None:
-                        extra.extend(["0"] * n)
-                    else:
-                        extra.extend(_num(v) for v in arr[t, j])
-                out.append(" ".join([*xyz_s, *extra, str(int(raw_state[t, j]))]))
+            out.extend(lines[t])
     Path(path).write_text("\n".join(out) + "\n", encoding="ascii")
 
 
