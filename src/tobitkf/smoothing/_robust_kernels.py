@@ -1,0 +1,844 @@
+"""Compiled kernels of the robust smoothers (numba, ``cache=True``): the only implementation.
+
+Imported lazily by :mod:`tobitkf.smoothing.robust` and
+:mod:`tobitkf.smoothing.robust_gating` when a robust method runs, so that importing
+tobitkf (and ``tobitkf --help``) does not import numba. ``NUMBA_DISABLE_JIT=1`` runs the
+same code as plain Python (slow; for debugging).
+
+Layout: only time is a loop; the bodies of a recording (and several recordings stacked
+as bodies) are looped over inside the kernels. Every rule is written once, as a
+*frame* function (``gate_frame``, ``confirm_frame``, ``chain_frame``, ``carry_frame``,
+``online_frame``) that updates an explicit state; the batch kernels (``*_run``) loop
+over time calling them, and the live stepper calls ``online_frame`` once per frame,
+so live equals batch exactly. The rules and their reasons are in
+:mod:`tobitkf.smoothing.robust` and docs/robust.md.
+
+Arrays: positions ``(T, B, J, 3)`` with NaN for missing samples, masks ``(T, B, J)``,
+``parents (J,)`` (-1 for roots) and ``order (J,)`` the joints sorted by depth in the tree
+(roots first), so that a joint's parent is always decided before the joint itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_jit = njit(cache=True, nogil=True)
+
+#: bone lengths remembered per joint by the online bone gate (median of the last ones)
+BONE_WINDOW = 600
+#: the online bone gate starts after this many accepted bones
+BONE_MIN_COUNT = 15
+#: the online bone length is refreshed every this many frames
+BONE_REFRESH = 5
+
+# float state per body and joint (sf[..., k])
+S_LAST_T = 0  # time of the last accepted sample (gate)
+S_REJ_SINCE = 1  # start of the current rejection (gate, for max_reject)
+S_L_CUR = 2  # online bone length (median of the window)
+S_REJ_BEGIN = 3  # start of the current rejection stretch (confirmation)
+S_CONF_BEGIN = 4  # start of the current confirmation
+N_SF = 5
+# bool state per body and joint (sb[..., k])
+B_PREV_ACC = 0  # accepted by the gate in the previous frame
+B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
+B_STARTED = 2  # the joint's filter has started
+B_PREV_OK = 3  # the filter was updated with an accepted sample in the previous frame
+N_SB = 4
+# parameters (pf[k])
+P_MARGIN = 0
+P_TOL_ABS = 1
+P_TOL_REL = 2
+P_MAX_REJECT = 3
+P_MIN_RUN = 4
+P_TAU = 5
+N_PF = 6
+# per-joint parameters (pj[j, k])
+J_VMAX = 0
+J_Q = 1  # OU velocity noise density
+J_R = 2  # measurement variance
+J_SD = 3  # measurement standard deviation
+J_V0 = 4  # initial velocity variance
+N_PJ = 5
+# int parameters (pi[k])
+I_BONES = 0
+I_CARRY = 1
+I_LOOKBACK = 2
+I_TWO_PASS = 3
+N_PI = 4
+
+
+# ------------------------------------------------------------------------------ small
+@_jit
+def _dist(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
+    d0, d1, d2 = a0 - b0, a1 - b1, a2 - b2
+    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@_jit
+def _finite3(a: np.ndarray) -> bool:
+    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+
+
+@_jit
+def ou_coeffs(dt: float, tau: float, out: np.ndarray) -> None:
+    """``out = (a01, a11, q00, q01, q11)``: transition ``[[1, a01], [0, a11]]`` and unit-q
+    process noise of the integrated OU velocity model over one step ``dt`` (exact
+    discretisation; ``tau = inf`` is the constant-velocity model)."""
+    if not math.isfinite(tau):
+        out[0] = dt
+        out[1] = 1.0
+        out[2] = dt**3 / 3
+        out[3] = dt**2 / 2
+        out[4] = dt
+        return
+    rho = math.exp(-dt / tau)
+    om = -math.expm1(-dt / tau)  # 1 - rho, accurate for small steps
+    om2 = -math.expm1(-2 * dt / tau)  # 1 - rho^2
+    out[0] = tau * om
+    out[1] = rho
+    if dt < 1e-3 * tau:  # Q_xx cancels for dt << tau: the series dt^3/3 - dt^4/(4 tau)
+        out[2] = dt**3 / 3 - dt**4 / (4 * tau)
+    else:
+        out[2] = tau**2 * (dt - 2 * tau * om + 0.5 * tau * om2)
+    out[3] = 0.5 * tau**2 * om**2
+    out[4] = 0.5 * tau * om2
+
+
+@_jit
+def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
+    """``(T, 5)`` coefficients of :func:`ou_coeffs` for every step."""
+    T = steps.shape[0]
+    out = np.empty((T, 5))
+    for t in range(T):
+        ou_coeffs(steps[t], tau, out[t])
+    return out
+
+
+# ------------------------------------------------------------------------------ bones
+@_jit
+def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, v: float) -> None:
+    """Append ``v`` to a joint's window of bone lengths (the oldest leaves when full);
+    ``srt[:n]`` stays sorted, ``ring`` keeps the arrival order, ``cnt = (n, write pos)``."""
+    H = ring.shape[0]
+    n = cnt[0]
+    pos = cnt[1]
+    if n == H:  # drop the oldest from the sorted window
+        old = ring[pos]
+        lo, hi = 0, n
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if srt[mid] < old:
+                lo = mid + 1
+            else:
+                hi = mid
+        for i in range(lo, n - 1):
+            srt[i] = srt[i + 1]
+        n -= 1
+    ring[pos] = v
+    cnt[1] = (pos + 1) % H
+    i = n
+    while i > 0 and srt[i - 1] > v:
+        srt[i] = srt[i - 1]
+        i -= 1
+    srt[i] = v
+    cnt[0] = n + 1
+
+
+@_jit
+def _window_median(srt: np.ndarray, n: int) -> float:
+    if n % 2 == 1:
+        return srt[n // 2]
+    return (srt[n // 2 - 1] + srt[n // 2]) / 2
+
+
+# ------------------------------------------------------------------------------ gate
+@_jit
+def gate_frame(
+    y: np.ndarray,  # (J, 3) this frame, NaN = missing
+    yprev: np.ndarray,  # (J, 3) previous frame (ignored when not has_prev)
+    has_prev: bool,
+    tt: float,
+    dt_prev: float,  # tt - time of the previous frame
+    tidx: int,  # frame index (the online bone length is refreshed every BONE_REFRESH)
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    L_fixed: np.ndarray,  # (J,) offline bone lengths (NaN = no check)
+    use_bones: bool,
+    online: bool,  # bone lengths learnt from the accepted frames so far
+    max_reject: float,
+    last: np.ndarray,  # state (J, 3): last accepted sample
+    sf: np.ndarray,  # state (J, N_SF)
+    sb: np.ndarray,  # state (J, N_SB)
+    h_ring: np.ndarray,  # state (J, BONE_WINDOW)
+    h_sorted: np.ndarray,  # state (J, BONE_WINDOW)
+    h_cnt: np.ndarray,  # state (J, 2)
+    acc: np.ndarray,  # out (J,) accepted
+) -> None:
+    """Speed gate, bone gate, chain rule and re-acquisition for one frame (rules 1-4)."""
+    J = parents.shape[0]
+    margin = pf[P_MARGIN]
+    tol_abs = pf[P_TOL_ABS]
+    tol_rel = pf[P_TOL_REL]
+    if online and use_bones and tidx % BONE_REFRESH == 0:
+        for j in range(J):
+            if h_cnt[j, 0] >= BONE_MIN_COUNT:
+                sf[j, S_L_CUR] = _window_median(h_sorted[j], h_cnt[j, 0])
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        is_root = p < 0
+        pp = 0 if is_root else p
+        vmax = pj[j, J_VMAX]
+        valid = _finite3(y[j])
+        d = _dist(y[j, 0], y[j, 1], y[j, 2], last[j, 0], last[j, 1], last[j, 2])
+        last_t = sf[j, S_LAST_T]
+        gate = vmax * (tt - last_t) + margin
+        gate_ok = (not math.isfinite(last_t)) or (d <= gate)
+        step_ok = sb[j, B_PREV_ACC] and (d <= vmax * dt_prev + margin)
+        relock = False
+        if has_prev:
+            raw_step = _dist(y[j, 0], y[j, 1], y[j, 2], yprev[j, 0], yprev[j, 1], yprev[j, 2])
+            relock = (tt - sf[j, S_REJ_SINCE] > max_reject) and (
+                raw_step <= vmax * dt_prev + margin
+            )
+        parent_acc = True if is_root else acc[p]
+        bone_ok = True
+        blen = math.nan
+        if use_bones:
+            blen = _dist(y[j, 0], y[j, 1], y[j, 2], y[pp, 0], y[pp, 1], y[pp, 2])
+            Lj = sf[j, S_L_CUR] if online else L_fixed[j]
+            tol = tol_abs + tol_rel * Lj
+            bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
+        ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
+        acc[j] = ok
+        if online and use_bones:
+            # a re-lock means the learnt bone length was wrong: learn it again
+            if relock and not (gate_ok and bone_ok and parent_acc):
+                h_cnt[j, 0] = 0
+                h_cnt[j, 1] = 0
+                sf[j, S_L_CUR] = math.nan
+            if ok and parent_acc and not is_root:
+                _bone_push(h_ring[j], h_sorted[j], h_cnt[j], blen)
+    for j in range(J):
+        a = acc[j]
+        if a:
+            last[j, 0] = y[j, 0]
+            last[j, 1] = y[j, 1]
+            last[j, 2] = y[j, 2]
+            sf[j, S_LAST_T] = tt
+            sf[j, S_REJ_SINCE] = math.nan
+        elif _finite3(y[j]) and math.isnan(sf[j, S_REJ_SINCE]):
+            sf[j, S_REJ_SINCE] = tt
+        sb[j, B_PREV_ACC] = a
+
+
+@_jit
+def new_state(B: int, J: int, lookback: int) -> tuple:
+    """The state of ``B`` bodies of ``J`` joints before their first frame."""
+    K = lookback + 1
+    last = np.full((B, J, 3), np.nan)
+    yprev = np.full((B, J, 3), np.nan)
+    off = np.full((B, J, 3), np.nan)
+    sf = np.full((B, J, N_SF), np.nan)
+    sb = np.zeros((B, J, N_SB), dtype=np.bool_)
+    h_ring = np.zeros((B, J, BONE_WINDOW))
+    h_sorted = np.zeros((B, J, BONE_WINDOW))
+    h_cnt = np.zeros((B, J, 2), dtype=np.int64)
+    x = np.zeros((B, J, 3, 2))
+    P = np.zeros((B, J, 2, 2))
+    xs_h = np.zeros((K, B, J, 3, 2))
+    Ps_h = np.zeros((K, B, J, 2, 2))
+    ok_h = np.zeros((K, B, J), dtype=np.bool_)
+    coef_h = np.zeros((K, 5))
+    clock = np.zeros(2)  # frames seen, time of the last frame
+    return (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+            clock)  # fmt: skip
+
+
+@_jit
+def gate_run(
+    ys: np.ndarray,
+    times: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    L_fixed: np.ndarray,  # (B, J)
+    use_bones: bool,
+    online: bool,
+    max_reject: float,
+) -> np.ndarray:
+    """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    acc = np.zeros((T, B, J), dtype=np.bool_)
+    st = new_state(B, J, 0)
+    last, sf, sb, h_ring, h_sorted, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
+    for b in range(B):
+        for t in range(T):
+            has_prev = t > 0
+            dt_prev = times[t] - times[t - 1] if has_prev else math.inf
+            prev = ys[t - 1 if has_prev else t, b]
+            gate_frame(ys[t, b], prev, has_prev, times[t], dt_prev, t, parents, order, pj, pf,
+                       L_fixed[b], use_bones, online, max_reject, last[b], sf[b], sb[b],
+                       h_ring[b], h_sorted[b], h_cnt[b], acc[t, b])  # fmt: skip
+    return acc
+
+
+# ------------------------------------------------------------------------------ offline rules
+@_jit
+def drop_short_runs_run(
+    acc: np.ndarray, rejected: np.ndarray, times: np.ndarray, min_run: float
+) -> np.ndarray:
+    """Accepted runs shorter than ``min_run`` between two rejections are rejected."""
+    out = acc.copy()
+    T, B, J = acc.shape[0], acc.shape[1], acc.shape[2]
+    if T < 3 or min_run <= 0:
+        return out
+    nxt = np.empty(T + 1, dtype=np.int8)  # status of the first non-missing sample >= t
+    for b in range(B):
+        for j in range(J):
+            nxt[T] = -1  # none
+            for t in range(T - 1, -1, -1):
+                if rejected[t, b, j]:
+                    nxt[t] = 1
+                elif acc[t, b, j]:
+                    nxt[t] = 0
+                else:
+                    nxt[t] = nxt[t + 1]
+            before = -1  # status of the last non-missing sample before t
+            t = 0
+            while t < T:
+                if not acc[t, b, j]:
+                    if rejected[t, b, j]:
+                        before = 1
+                    t += 1
+                    continue
+                s = t
+                while t < T and acc[t, b, j]:
+                    t += 1
+                e = t  # the run is [s, e)
+                if s > 0 and e < T and before == 1 and nxt[e] == 1:
+                    if times[e - 1] - times[s] < min_run:
+                        for i in range(s, e):
+                            out[i, b, j] = False
+                before = 0
+    return out
+
+
+@_jit
+def chain_frame(
+    out_t: np.ndarray,  # (J,) accept mask of frame t, updated
+    out_s: np.ndarray,  # (J,) accept mask of the neighbouring frame s
+    y_t: np.ndarray,
+    y_s: np.ndarray,
+    dt: float,  # |time t - time s|
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    margin: float,
+) -> None:
+    """The chain rule on a combined mask: a joint whose parent is rejected stays accepted
+    only if it was accepted in the neighbouring frame and did not jump from it."""
+    for k in range(order.shape[0]):
+        j = order[k]
+        p = parents[j]
+        if p < 0 or not out_t[j] or out_t[p]:
+            continue
+        moved = _dist(y_t[j, 0], y_t[j, 1], y_t[j, 2], y_s[j, 0], y_s[j, 1], y_s[j, 2])
+        if not (out_s[j] and moved <= pj[j, J_VMAX] * dt + margin):
+            out_t[j] = False
+
+
+@_jit
+def enforce_chain_run(
+    acc: np.ndarray,
+    ys: np.ndarray,
+    times: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    margin: float,
+    backward: bool,
+) -> np.ndarray:
+    """:func:`chain_frame` forwards in time, then (``backward``) backwards."""
+    out = acc.copy()
+    T, B = acc.shape[0], acc.shape[1]
+    for b in range(B):
+        for t in range(1, T):
+            chain_frame(out[t, b], out[t - 1, b], ys[t, b], ys[t - 1, b],
+                        abs(times[t] - times[t - 1]), parents, order, pj, margin)  # fmt: skip
+        if backward:
+            for t in range(T - 2, -1, -1):
+                chain_frame(out[t, b], out[t + 1, b], ys[t, b], ys[t + 1, b],
+                            abs(times[t] - times[t + 1]), parents, order, pj, margin)  # fmt: skip
+    return out
+
+
+# ------------------------------------------------------------------------------ online rules
+@_jit
+def confirm_frame(
+    acc_t: np.ndarray,  # (J,) gate decision of this frame
+    missing_t: np.ndarray,
+    tt: float,
+    min_run: float,
+    sf: np.ndarray,  # state (J, N_SF)
+    out_t: np.ndarray,  # (J,) confirmed decision
+) -> None:
+    """After a rejection of at least ``min_run``, a joint is believed again only once its
+    measurements have passed the gates for ``min_run``."""
+    for j in range(acc_t.shape[0]):
+        out_t[j] = acc_t[j]
+        if missing_t[j]:
+            continue
+        if not acc_t[j]:
+            # a rejection starts a stretch, or continues it and cancels its confirmation
+            if math.isnan(sf[j, S_REJ_BEGIN]):
+                sf[j, S_REJ_BEGIN] = tt
+            sf[j, S_CONF_BEGIN] = math.nan
+            continue
+        if math.isfinite(sf[j, S_REJ_BEGIN]) and math.isnan(sf[j, S_CONF_BEGIN]):
+            # the first accepted sample after a stretch: a long stretch needs confirmation
+            if tt - sf[j, S_REJ_BEGIN] >= min_run:
+                sf[j, S_CONF_BEGIN] = tt
+            else:
+                sf[j, S_REJ_BEGIN] = math.nan
+        if math.isfinite(sf[j, S_CONF_BEGIN]):
+            if tt - sf[j, S_CONF_BEGIN] < min_run:
+                out_t[j] = False
+            else:
+                sf[j, S_CONF_BEGIN] = math.nan
+                sf[j, S_REJ_BEGIN] = math.nan
+
+
+@_jit
+def confirm_run(
+    acc: np.ndarray, missing: np.ndarray, times: np.ndarray, min_run: float
+) -> np.ndarray:
+    """:func:`confirm_frame` over time, ``(T, B, J)``."""
+    T, B, J = acc.shape[0], acc.shape[1], acc.shape[2]
+    out = acc.copy()
+    if min_run <= 0:
+        return out
+    sf = np.full((B, J, N_SF), np.nan)
+    for b in range(B):
+        for t in range(T):
+            confirm_frame(acc[t, b], missing[t, b], times[t], min_run, sf[b], out[t, b])
+    return out
+
+
+# ------------------------------------------------------------------------------ carrying
+@_jit
+def carry_frame(
+    y: np.ndarray,  # (J, 3)
+    acc: np.ndarray,  # (J,)
+    parents: np.ndarray,
+    order: np.ndarray,
+    off: np.ndarray,  # state (J, 3): offset from the parent when both were last accepted
+    anchor: np.ndarray,  # scratch (J, 3)
+    pseudo: np.ndarray,  # out (J, 3), NaN where none
+    radius: np.ndarray,  # out (J,), NaN where none
+) -> None:
+    """A rejected joint placed at its parent (measured or itself carried) plus its last
+    good offset from it; ``radius`` is the offset's length."""
+    J = parents.shape[0]
+    for j in range(J):
+        for a in range(3):
+            anchor[j, a] = y[j, a] if acc[j] else math.nan
+            pseudo[j, a] = math.nan
+        radius[j] = math.nan
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        if p < 0:
+            continue
+        if _finite3(y[j]) and not acc[j]:
+            c0 = anchor[p, 0] + off[j, 0]
+            c1 = anchor[p, 1] + off[j, 1]
+            c2 = anchor[p, 2] + off[j, 2]
+            if math.isfinite(c0) and math.isfinite(c1) and math.isfinite(c2):
+                pseudo[j, 0] = anchor[j, 0] = c0
+                pseudo[j, 1] = anchor[j, 1] = c1
+                pseudo[j, 2] = anchor[j, 2] = c2
+                radius[j] = _dist(off[j, 0], off[j, 1], off[j, 2], 0.0, 0.0, 0.0)
+        if acc[j] and acc[p]:
+            for a in range(3):
+                off[j, a] = y[j, a] - y[p, a]
+
+
+@_jit
+def carry_run(
+    ys: np.ndarray, acc: np.ndarray, parents: np.ndarray, order: np.ndarray, reverse: bool
+) -> tuple:
+    """:func:`carry_frame` over time (backwards in time with ``reverse``)."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    pseudo = np.full((T, B, J, 3), np.nan)
+    radius = np.full((T, B, J), np.nan)
+    off = np.full((J, 3), np.nan)
+    anchor = np.empty((J, 3))
+    for b in range(B):
+        off[:] = np.nan
+        for i in range(T):
+            t = T - 1 - i if reverse else i
+            carry_frame(ys[t, b], acc[t, b], parents, order, off, anchor, pseudo[t, b],
+                        radius[t, b])  # fmt: skip
+    return pseudo, radius
+
+
+# ------------------------------------------------------------------------------ OU filter
+@_jit
+def _predict(x: np.ndarray, P: np.ndarray, c: np.ndarray, q: float) -> None:
+    """x <- A x, P <- A P Aᵀ + q Q for the three axes of one joint (shared P)."""
+    a, r = c[0], c[1]
+    for i in range(x.shape[0]):
+        x0, x1 = x[i, 0], x[i, 1]
+        x[i, 0] = x0 + x1 * a
+        x[i, 1] = x1 * r
+    p00, p01, p10, p11 = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+    m00 = p00 + a * p10
+    m01 = p01 + a * p11
+    m10 = r * p10
+    m11 = r * p11
+    P[0, 0] = m00 + m01 * a + q * c[2]
+    P[0, 1] = m01 * r + q * c[3]
+    P[1, 0] = m10 + m11 * a + q * c[3]
+    P[1, 1] = m11 * r + q * c[4]
+
+
+@_jit
+def _update(x: np.ndarray, P: np.ndarray, y: np.ndarray, r: float) -> None:
+    """Kalman update of the three axes with H = [1, 0] and variance r (shared P)."""
+    S = P[0, 0] + r
+    k0 = P[0, 0] / S
+    k1 = P[1, 0] / S
+    for i in range(x.shape[0]):
+        e = y[i] - x[i, 0]
+        x[i, 0] += k0 * e
+        x[i, 1] += k1 * e
+    p00, p01, p10, p11 = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+    n00 = p00 - k0 * p00
+    n01 = p01 - k0 * p01
+    n10 = p10 - k1 * p00
+    n11 = p11 - k1 * p01
+    s = 0.5 * (n01 + n10)
+    P[0, 0] = n00
+    P[0, 1] = s
+    P[1, 0] = s
+    P[1, 1] = n11
+
+
+@_jit
+def ou_smooth_run(
+    yk: np.ndarray,  # (T, B, J, 3) accepted or carried samples, NaN elsewhere
+    rvar: np.ndarray,  # (T, B, J) measurement variance of each sample
+    steps: np.ndarray,
+    pj: np.ndarray,
+    tau: float,
+) -> np.ndarray:
+    """OU-velocity Kalman filter and RTS smoother per axis, ``(T, B, J, 3)``.
+
+    Started at frame 0 from the joint's first sample (velocity 0, P = diag(r, v0)); the
+    covariances are shared by the three axes (same variances, same missing samples).
+    """
+    T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
+    est = np.empty((T, B, J, 3))
+    if T == 0:
+        return est
+    coef = ou_table(steps, tau)
+    xf = np.empty((T, 3, 2))
+    xp = np.empty((T, 3, 2))
+    Pf = np.empty((T, 2, 2))
+    Pp = np.empty((T, 2, 2))
+    x = np.zeros((3, 2))
+    P = np.zeros((2, 2))
+    xs = np.zeros((3, 2))
+    for b in range(B):
+        for j in range(J):
+            q = pj[j, J_Q]
+            first = -1
+            for t in range(T):
+                if math.isfinite(yk[t, b, j, 0]):
+                    first = t
+                    break
+            for i in range(3):
+                x[i, 0] = yk[first, b, j, i] if first >= 0 else 0.0
+                x[i, 1] = 0.0
+            P[0, 0] = pj[j, J_R]
+            P[0, 1] = 0.0
+            P[1, 0] = 0.0
+            P[1, 1] = pj[j, J_V0]
+            for t in range(T):
+                if t > 0:  # frame 0 starts at x0 itself
+                    _predict(x, P, coef[t], q)
+                    s = 0.5 * (P[0, 1] + P[1, 0])
+                    P[0, 1] = s
+                    P[1, 0] = s
+                xp[t] = x
+                Pp[t] = P
+                if math.isfinite(yk[t, b, j, 0]):
+                    _update(x, P, yk[t, b, j], rvar[t, b, j])
+                xf[t] = x
+                Pf[t] = P
+            # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
+            xs[:] = xf[T - 1]
+            for i in range(3):
+                est[T - 1, b, j, i] = xs[i, 0]
+            for t in range(T - 2, -1, -1):
+                a, r = coef[t + 1, 0], coef[t + 1, 1]
+                f00, f01, f10, f11 = Pf[t, 0, 0], Pf[t, 0, 1], Pf[t, 1, 0], Pf[t, 1, 1]
+                # A P_t
+                m00 = f00 + a * f10
+                m01 = f01 + a * f11
+                m10 = r * f10
+                m11 = r * f11
+                p00, p01 = Pp[t + 1, 0, 0], Pp[t + 1, 0, 1]
+                p10, p11 = Pp[t + 1, 1, 0], Pp[t + 1, 1, 1]
+                det = p00 * p11 - p01 * p10
+                if det != 0.0:
+                    # Gᵀ = (P⁻)⁻¹ (A P_t)
+                    g00 = (p11 * m00 - p01 * m10) / det
+                    g01 = (p11 * m01 - p01 * m11) / det
+                    g10 = (p00 * m10 - p10 * m00) / det
+                    g11 = (p00 * m11 - p10 * m01) / det
+                else:  # singular P⁻: the minimum-norm gain (pseudo-inverse)
+                    pinv = np.linalg.pinv(Pp[t + 1])
+                    g00 = pinv[0, 0] * m00 + pinv[0, 1] * m10
+                    g01 = pinv[0, 0] * m01 + pinv[0, 1] * m11
+                    g10 = pinv[1, 0] * m00 + pinv[1, 1] * m10
+                    g11 = pinv[1, 0] * m01 + pinv[1, 1] * m11
+                for i in range(3):
+                    d0 = xs[i, 0] - xp[t + 1, i, 0]
+                    d1 = xs[i, 1] - xp[t + 1, i, 1]
+                    # G = Gtᵀ: G[0, :] = (g00, g10), G[1, :] = (g01, g11)
+                    xs[i, 0] = xf[t, i, 0] + (g00 * d0 + g10 * d1)
+                    xs[i, 1] = xf[t, i, 1] + (g01 * d0 + g11 * d1)
+                    est[t, b, j, i] = xs[i, 0]
+    return est
+
+
+# ------------------------------------------------------------------------------ pipelines
+@_jit
+def _finish(est: np.ndarray, ys: np.ndarray, missing: np.ndarray, acc: np.ndarray) -> None:
+    """No estimate before a joint's first valid sample; raw output for a joint never
+    accepted (offline)."""
+    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
+    for b in range(B):
+        for j in range(J):
+            never = True
+            for t in range(T):
+                if acc[t, b, j]:
+                    never = False
+                    break
+            if never:
+                for t in range(T):
+                    for i in range(3):
+                        est[t, b, j, i] = ys[t, b, j, i]
+                continue
+            for t in range(T):
+                if not missing[t, b, j]:
+                    break
+                for i in range(3):
+                    est[t, b, j, i] = math.nan
+
+
+@_jit
+def offline_run(
+    ys: np.ndarray,
+    missing: np.ndarray,
+    times: np.ndarray,
+    steps: np.ndarray,
+    rinf: np.ndarray,  # (T, B, J) variance multiplier of INFERRED samples (else 1)
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    pi: np.ndarray,
+    L_fixed: np.ndarray,  # (B, J)
+) -> tuple:
+    """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
+
+    Returns ``(est (T, B, J, 3), rejected (T, B, J))``.
+    """
+    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
+    use_bones = pi[I_BONES] != 0
+    two_pass = pi[I_TWO_PASS] != 0
+    max_reject = pf[P_MAX_REJECT]
+    min_run = pf[P_MIN_RUN]
+    acc = gate_run(ys, times, parents, order, pj, pf, L_fixed, use_bones, False, max_reject)
+    if two_pass:
+        ys_r = ys[::-1].copy()
+        times_r = -times[::-1]
+        acc_b = gate_run(ys_r, times_r, parents, order, pj, pf, L_fixed, use_bones, False,
+                         max_reject)  # fmt: skip
+        for t in range(T):
+            for b in range(B):
+                for j in range(J):
+                    acc[t, b, j] = acc[t, b, j] and acc_b[T - 1 - t, b, j]
+    if min_run > 0:
+        acc = drop_short_runs_run(acc, ~missing & ~acc, times, min_run)
+    if two_pass:
+        acc = enforce_chain_run(acc, ys, times, parents, order, pj, pf[P_MARGIN], True)
+    rejected = ~missing & ~acc
+    yk = np.full((T, B, J, 3), np.nan)
+    rvar = np.empty((T, B, J))
+    if pi[I_CARRY] != 0:
+        pseudo, radius = carry_run(ys, acc, parents, order, False)
+        pb, rb = carry_run(ys, acc, parents, order, True)
+    else:
+        pseudo = pb = np.empty((0, 0, 0, 3))
+        radius = rb = np.empty((0, 0, 0))
+    for t in range(T):
+        for b in range(B):
+            for j in range(J):
+                r = pj[j, J_R]
+                if acc[t, b, j]:
+                    yk[t, b, j] = ys[t, b, j]
+                rvar[t, b, j] = r * rinf[t, b, j]
+                if pi[I_CARRY] != 0 and not acc[t, b, j]:
+                    # a stretch with no earlier good offset takes the next one
+                    src_p, rad = pseudo[t, b, j], radius[t, b, j]
+                    if not math.isfinite(rad) and math.isfinite(rb[t, b, j]):
+                        src_p, rad = pb[t, b, j], rb[t, b, j]
+                    if math.isfinite(rad):
+                        yk[t, b, j] = src_p
+                        # sd = the bone length: the joint may have rotated about its parent
+                        rvar[t, b, j] = r * max(1.0, (rad / pj[j, J_SD]) ** 2)
+    est = ou_smooth_run(yk, rvar, steps, pj, pf[P_TAU])
+    _finish(est, ys, missing, acc)
+    return est, rejected
+
+
+@_jit
+def online_frame(
+    y: np.ndarray,  # (B, J, 3) this frame, NaN = missing
+    missing: np.ndarray,  # (B, J)
+    rinf: np.ndarray,  # (B, J) variance multiplier of INFERRED samples (else 1)
+    tt: float,  # time of this frame
+    dt: float,  # time step of the filter before this frame
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    pi: np.ndarray,
+    st: tuple,  # from new_state(B, J, lookback)
+    scratch: np.ndarray,  # work (2, J, 3)
+    scratch1: np.ndarray,  # work (2, J)
+    acc: np.ndarray,  # work (2, B, J)
+    out: np.ndarray,  # out (B, J, 3)
+    rejected: np.ndarray,  # out (B, J)
+) -> None:
+    """``robust_online``, one frame: gate, confirmation, chain, carrying, causal OU filter
+    with roll-back at rejection onsets. Everything it remembers is in ``st``."""
+    (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+     clock) = st  # fmt: skip
+    B, J = missing.shape[0], missing.shape[1]
+    tidx = int(clock[0])
+    has_prev = tidx > 0
+    dt_prev = tt - clock[1] if has_prev else math.inf
+    lookback = pi[I_LOOKBACK]
+    K = lookback + 1
+    slot = tidx % K
+    q_c = coef_h[slot]
+    ou_coeffs(dt, pf[P_TAU], q_c)
+    min_run = pf[P_MIN_RUN]
+    use_bones = pi[I_BONES] != 0
+    carry = pi[I_CARRY] != 0
+    anchor = scratch[0]
+    pseudo = scratch[1]
+    radius = scratch1[0]
+    no_lengths = scratch1[1]  # the online gate learns its bone lengths (unused)
+    for b in range(B):
+        gate = acc[0, b]
+        final = acc[1, b]
+        radius[:] = np.nan
+        gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
+                   no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
+                   h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
+        if min_run > 0:
+            confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
+            if has_prev:
+                prev_final = sb[b, :, B_PREV_FINAL].copy()
+                chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
+                            pj, pf[P_MARGIN])  # fmt: skip
+        else:
+            final[:] = gate
+        if carry:
+            carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
+        # the causal OU filter, joint by joint
+        for j in range(J):
+            a = final[j]
+            rejected[b, j] = not (a or missing[b, j])
+            carried = carry and not a and math.isfinite(radius[j])
+            started = sb[b, j, B_STARTED]
+            r = pj[j, J_R] * rinf[b, j]
+            if carried:
+                r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
+            xj, Pj = x[b, j], P[b, j]
+            # a rejection starts: drop the last `lookback` accepted frames from the state
+            if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
+                s0 = tidx - lookback - 1
+                if ok_h[s0 % K, b, j]:
+                    xj[:] = xs_h[s0 % K, b, j]
+                    Pj[:] = Ps_h[s0 % K, b, j]
+                    for kk in range(s0 + 1, tidx):
+                        _predict(xj, Pj, coef_h[kk % K], pj[j, J_Q])
+            if has_prev and started:
+                _predict(xj, Pj, q_c, pj[j, J_Q])
+            if a and not started:
+                for i in range(3):
+                    xj[i, 0] = y[b, j, i]
+                    xj[i, 1] = 0.0
+                Pj[0, 0] = r
+                Pj[0, 1] = 0.0
+                Pj[1, 0] = 0.0
+                Pj[1, 1] = pj[j, J_V0]
+                sb[b, j, B_STARTED] = True
+            elif started and a:
+                _update(xj, Pj, y[b, j], r)
+            elif started and carried:
+                _update(xj, Pj, pseudo[j], r)
+            xs_h[slot, b, j] = xj
+            Ps_h[slot, b, j] = Pj
+            ok_h[slot, b, j] = a
+            sb[b, j, B_PREV_OK] = a
+            sb[b, j, B_PREV_FINAL] = a
+            if sb[b, j, B_STARTED]:
+                for i in range(3):
+                    out[b, j, i] = xj[i, 0]
+            else:  # nothing accepted yet: the measurement as it is (NaN when missing)
+                for i in range(3):
+                    out[b, j, i] = y[b, j, i]
+        yprev[b] = y[b]
+    clock[0] = tidx + 1
+    clock[1] = tt
+
+
+@_jit
+def online_run(
+    ys: np.ndarray,
+    missing: np.ndarray,
+    times: np.ndarray,
+    steps: np.ndarray,
+    rinf: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    pi: np.ndarray,
+) -> tuple:
+    """``robust_online`` over a recording: :func:`online_frame` for every frame."""
+    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
+    st = new_state(B, J, pi[I_LOOKBACK])
+    scratch = np.empty((2, J, 3))
+    scratch1 = np.full((2, J), np.nan)
+    acc = np.zeros((2, B, J), dtype=np.bool_)
+    est = np.empty((T, B, J, 3))
+    rejected = np.zeros((T, B, J), dtype=np.bool_)
+    for t in range(T):
+        online_frame(ys[t], missing[t], rinf[t], times[t], steps[t], parents, order, pj, pf,
+                     pi, st, scratch, scratch1, acc, est[t], rejected[t])  # fmt: skip
+    return est, rejected
