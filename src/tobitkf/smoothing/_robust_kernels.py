@@ -78,6 +78,14 @@ def _dist(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> f
 
 
 @_jit
+def _copy2(dst: np.ndarray, src: np.ndarray) -> None:
+    """dst[...] = src for two-dimensional arrays (cheaper to compile than a slice copy)."""
+    for i in range(src.shape[0]):
+        for k in range(src.shape[1]):
+            dst[i, k] = src[i, k]
+
+
+@_jit
 def _finite3(a: np.ndarray) -> bool:
     return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
 
@@ -119,31 +127,49 @@ def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ bones
 @_jit
+def _lower_bound(srt: np.ndarray, n: int, v: float) -> int:
+    """First index i < n with srt[i] >= v (n when none); srt[:n] sorted."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if srt[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_jit
 def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, v: float) -> None:
     """Append ``v`` to a joint's window of bone lengths (the oldest leaves when full);
-    ``srt[:n]`` stays sorted, ``ring`` keeps the arrival order, ``cnt = (n, write pos)``."""
+    ``srt[:n]`` stays sorted, ``ring`` keeps the arrival order, ``cnt = (n, write pos)``.
+
+    Full window: the oldest value's slot in ``srt`` becomes a hole that moves to where
+    ``v`` belongs (only the values between the two move)."""
     H = ring.shape[0]
     n = cnt[0]
     pos = cnt[1]
-    if n == H:  # drop the oldest from the sorted window
-        old = ring[pos]
-        lo, hi = 0, n
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if srt[mid] < old:
-                lo = mid + 1
-            else:
-                hi = mid
-        for i in range(lo, n - 1):
-            srt[i] = srt[i + 1]
-        n -= 1
-    ring[pos] = v
     cnt[1] = (pos + 1) % H
-    i = n
-    while i > 0 and srt[i - 1] > v:
-        srt[i] = srt[i - 1]
-        i -= 1
-    srt[i] = v
+    if n == H:
+        old = ring[pos]
+        ring[pos] = v
+        k = _lower_bound(srt, n, old)  # an element equal to old: the hole
+        if v >= old:
+            while k + 1 < n and srt[k + 1] < v:
+                srt[k] = srt[k + 1]
+                k += 1
+        else:
+            while k > 0 and srt[k - 1] > v:
+                srt[k] = srt[k - 1]
+                k -= 1
+        srt[k] = v
+        return
+    ring[pos] = v
+    k = n
+    while k > 0 and srt[k - 1] > v:
+        srt[k] = srt[k - 1]
+        k -= 1
+    srt[k] = v
     cnt[0] = n + 1
 
 
@@ -237,9 +263,9 @@ def gate_frame(
         sb[j, B_PREV_ACC] = a
 
 
-@_jit
 def new_state(B: int, J: int, lookback: int) -> tuple:
-    """The state of ``B`` bodies of ``J`` joints before their first frame."""
+    """The state of ``B`` bodies of ``J`` joints before their first frame (plain numpy:
+    nothing to compile)."""
     K = lookback + 1
     last = np.full((B, J, 3), np.nan)
     yprev = np.full((B, J, 3), np.nan)
@@ -260,6 +286,11 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
             clock)  # fmt: skip
 
 
+def new_work(B: int, J: int) -> tuple:
+    """Work arrays of :func:`online_frame` (``scratch``, ``scratch1``, ``acc``)."""
+    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((2, B, J), dtype=np.bool_)
+
+
 @_jit
 def gate_run(
     ys: np.ndarray,
@@ -272,11 +303,11 @@ def gate_run(
     use_bones: bool,
     online: bool,
     max_reject: float,
+    st: tuple,  # new_state(B, J, 0)
 ) -> np.ndarray:
     """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    st = new_state(B, J, 0)
     last, sf, sb, h_ring, h_sorted, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
     for b in range(B):
         for t in range(T):
@@ -481,7 +512,7 @@ def carry_run(
     off = np.full((J, 3), np.nan)
     anchor = np.empty((J, 3))
     for b in range(B):
-        off[:] = np.nan
+        off.fill(np.nan)
         for i in range(T):
             t = T - 1 - i if reverse else i
             carry_frame(ys[t, b], acc[t, b], parents, order, off, anchor, pseudo[t, b],
@@ -577,14 +608,14 @@ def ou_smooth_run(
                     s = 0.5 * (P[0, 1] + P[1, 0])
                     P[0, 1] = s
                     P[1, 0] = s
-                xp[t] = x
-                Pp[t] = P
+                _copy2(xp[t], x)
+                _copy2(Pp[t], P)
                 if math.isfinite(yk[t, b, j, 0]):
                     _update(x, P, yk[t, b, j], rvar[t, b, j])
-                xf[t] = x
-                Pf[t] = P
+                _copy2(xf[t], x)
+                _copy2(Pf[t], P)
             # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
-            xs[:] = xf[T - 1]
+            _copy2(xs, xf[T - 1])
             for i in range(3):
                 est[T - 1, b, j, i] = xs[i, 0]
             for t in range(T - 2, -1, -1):
@@ -604,12 +635,13 @@ def ou_smooth_run(
                     g01 = (p11 * m01 - p01 * m11) / det
                     g10 = (p00 * m10 - p10 * m00) / det
                     g11 = (p00 * m11 - p10 * m01) / det
-                else:  # singular P⁻: the minimum-norm gain (pseudo-inverse)
-                    pinv = np.linalg.pinv(Pp[t + 1])
-                    g00 = pinv[0, 0] * m00 + pinv[0, 1] * m10
-                    g01 = pinv[0, 0] * m01 + pinv[0, 1] * m11
-                    g10 = pinv[1, 0] * m00 + pinv[1, 1] * m10
-                    g11 = pinv[1, 0] * m01 + pinv[1, 1] * m11
+                else:  # singular P⁻ (rank <= 1): the minimum-norm gain, P⁺ = P / trace²
+                    tr = p00 + p11
+                    w = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
+                    g00 = w * (p00 * m00 + p01 * m10)
+                    g01 = w * (p00 * m01 + p01 * m11)
+                    g10 = w * (p10 * m00 + p11 * m10)
+                    g11 = w * (p10 * m01 + p11 * m11)
                 for i in range(3):
                     d0 = xs[i, 0] - xp[t + 1, i, 0]
                     d1 = xs[i, 1] - xp[t + 1, i, 1]
@@ -620,98 +652,7 @@ def ou_smooth_run(
     return est
 
 
-# ------------------------------------------------------------------------------ pipelines
-@_jit
-def _finish(est: np.ndarray, ys: np.ndarray, missing: np.ndarray, acc: np.ndarray) -> None:
-    """No estimate before a joint's first valid sample; raw output for a joint never
-    accepted (offline)."""
-    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
-    for b in range(B):
-        for j in range(J):
-            never = True
-            for t in range(T):
-                if acc[t, b, j]:
-                    never = False
-                    break
-            if never:
-                for t in range(T):
-                    for i in range(3):
-                        est[t, b, j, i] = ys[t, b, j, i]
-                continue
-            for t in range(T):
-                if not missing[t, b, j]:
-                    break
-                for i in range(3):
-                    est[t, b, j, i] = math.nan
-
-
-@_jit
-def offline_run(
-    ys: np.ndarray,
-    missing: np.ndarray,
-    times: np.ndarray,
-    steps: np.ndarray,
-    rinf: np.ndarray,  # (T, B, J) variance multiplier of INFERRED samples (else 1)
-    parents: np.ndarray,
-    order: np.ndarray,
-    pj: np.ndarray,
-    pf: np.ndarray,
-    pi: np.ndarray,
-    L_fixed: np.ndarray,  # (B, J)
-) -> tuple:
-    """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
-
-    Returns ``(est (T, B, J, 3), rejected (T, B, J))``.
-    """
-    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
-    use_bones = pi[I_BONES] != 0
-    two_pass = pi[I_TWO_PASS] != 0
-    max_reject = pf[P_MAX_REJECT]
-    min_run = pf[P_MIN_RUN]
-    acc = gate_run(ys, times, parents, order, pj, pf, L_fixed, use_bones, False, max_reject)
-    if two_pass:
-        ys_r = ys[::-1].copy()
-        times_r = -times[::-1]
-        acc_b = gate_run(ys_r, times_r, parents, order, pj, pf, L_fixed, use_bones, False,
-                         max_reject)  # fmt: skip
-        for t in range(T):
-            for b in range(B):
-                for j in range(J):
-                    acc[t, b, j] = acc[t, b, j] and acc_b[T - 1 - t, b, j]
-    if min_run > 0:
-        acc = drop_short_runs_run(acc, ~missing & ~acc, times, min_run)
-    if two_pass:
-        acc = enforce_chain_run(acc, ys, times, parents, order, pj, pf[P_MARGIN], True)
-    rejected = ~missing & ~acc
-    yk = np.full((T, B, J, 3), np.nan)
-    rvar = np.empty((T, B, J))
-    if pi[I_CARRY] != 0:
-        pseudo, radius = carry_run(ys, acc, parents, order, False)
-        pb, rb = carry_run(ys, acc, parents, order, True)
-    else:
-        pseudo = pb = np.empty((0, 0, 0, 3))
-        radius = rb = np.empty((0, 0, 0))
-    for t in range(T):
-        for b in range(B):
-            for j in range(J):
-                r = pj[j, J_R]
-                if acc[t, b, j]:
-                    yk[t, b, j] = ys[t, b, j]
-                rvar[t, b, j] = r * rinf[t, b, j]
-                if pi[I_CARRY] != 0 and not acc[t, b, j]:
-                    # a stretch with no earlier good offset takes the next one
-                    src_p, rad = pseudo[t, b, j], radius[t, b, j]
-                    if not math.isfinite(rad) and math.isfinite(rb[t, b, j]):
-                        src_p, rad = pb[t, b, j], rb[t, b, j]
-                    if math.isfinite(rad):
-                        yk[t, b, j] = src_p
-                        # sd = the bone length: the joint may have rotated about its parent
-                        rvar[t, b, j] = r * max(1.0, (rad / pj[j, J_SD]) ** 2)
-    est = ou_smooth_run(yk, rvar, steps, pj, pf[P_TAU])
-    _finish(est, ys, missing, acc)
-    return est, rejected
-
-
+# ------------------------------------------------------------------------------ online
 @_jit
 def online_frame(
     y: np.ndarray,  # (B, J, 3) this frame, NaN = missing
@@ -754,7 +695,7 @@ def online_frame(
     for b in range(B):
         gate = acc[0, b]
         final = acc[1, b]
-        radius[:] = np.nan
+        radius.fill(np.nan)
         gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                    no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
                    h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
@@ -765,7 +706,8 @@ def online_frame(
                 chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
                             pj, pf[P_MARGIN])  # fmt: skip
         else:
-            final[:] = gate
+            for j in range(J):
+                final[j] = gate[j]
         if carry:
             carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
         # the causal OU filter, joint by joint
@@ -782,8 +724,8 @@ def online_frame(
             if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
                 s0 = tidx - lookback - 1
                 if ok_h[s0 % K, b, j]:
-                    xj[:] = xs_h[s0 % K, b, j]
-                    Pj[:] = Ps_h[s0 % K, b, j]
+                    _copy2(xj, xs_h[s0 % K, b, j])
+                    _copy2(Pj, Ps_h[s0 % K, b, j])
                     for kk in range(s0 + 1, tidx):
                         _predict(xj, Pj, coef_h[kk % K], pj[j, J_Q])
             if has_prev and started:
@@ -801,8 +743,8 @@ def online_frame(
                 _update(xj, Pj, y[b, j], r)
             elif started and carried:
                 _update(xj, Pj, pseudo[j], r)
-            xs_h[slot, b, j] = xj
-            Ps_h[slot, b, j] = Pj
+            _copy2(xs_h[slot, b, j], xj)
+            _copy2(Ps_h[slot, b, j], Pj)
             ok_h[slot, b, j] = a
             sb[b, j, B_PREV_OK] = a
             sb[b, j, B_PREV_FINAL] = a
@@ -812,7 +754,7 @@ def online_frame(
             else:  # nothing accepted yet: the measurement as it is (NaN when missing)
                 for i in range(3):
                     out[b, j, i] = y[b, j, i]
-        yprev[b] = y[b]
+        _copy2(yprev[b], y[b])
     clock[0] = tidx + 1
     clock[1] = tt
 
@@ -829,13 +771,13 @@ def online_run(
     pj: np.ndarray,
     pf: np.ndarray,
     pi: np.ndarray,
+    st: tuple,  # new_state(B, J, lookback)
+    scratch: np.ndarray,  # \
+    scratch1: np.ndarray,  # new_work(B, J)
+    acc: np.ndarray,  # /
 ) -> tuple:
     """``robust_online`` over a recording: :func:`online_frame` for every frame."""
     T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
-    st = new_state(B, J, pi[I_LOOKBACK])
-    scratch = np.empty((2, J, 3))
-    scratch1 = np.full((2, J), np.nan)
-    acc = np.zeros((2, B, J), dtype=np.bool_)
     est = np.empty((T, B, J, 3))
     rejected = np.zeros((T, B, J), dtype=np.bool_)
     for t in range(T):

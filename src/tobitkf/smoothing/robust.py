@@ -218,6 +218,59 @@ def _inferred_scale(states: Any, missing: NDArray[np.bool_], factor: float) -> A
     return np.ascontiguousarray(scale[..., 0])
 
 
+def _offline(
+    ys: Array,
+    missing: NDArray[np.bool_],
+    times: Array,
+    steps: Array,
+    rinf: Array,
+    setup: _Setup,
+    params: dict[str, Any],
+    L_fixed: Array,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
+
+    One kernel call per stage for all bodies (compiling them as one would take longer).
+    Returns ``(est (T, B, J, 3), rejected (T, B, J))``.
+    """
+    k = kernels()
+    par, order, pj, pf, _ = setup.args()
+    gate_args = (par, order, pj, pf, L_fixed, bool(params["bones"]), False,
+                 float(params["max_reject"]))  # fmt: skip
+    B, J = missing.shape[1:]
+    acc = k.gate_run(ys, times, *gate_args, k.new_state(B, J, 0))
+    if params["two_pass"]:
+        back = k.gate_run(np.ascontiguousarray(ys[::-1]), np.ascontiguousarray(-times[::-1]),
+                          *gate_args, k.new_state(B, J, 0))  # fmt: skip
+        acc &= back[::-1]
+    if params["min_run"] > 0:
+        acc = k.drop_short_runs_run(acc, ~missing & ~acc, times, float(params["min_run"]))
+    if params["two_pass"]:
+        acc = k.enforce_chain_run(acc, ys, times, par, order, pj, float(params["margin"]), True)
+    rejected = ~missing & ~acc
+    yk = np.where(acc[..., None], ys, np.nan)
+    r = pj[:, k.J_R]
+    rvar = r * rinf
+    if params["carry"]:
+        pseudo, radius = k.carry_run(ys, acc, par, order, False)
+        # a stretch with no earlier good offset takes the next one
+        pb, rb = k.carry_run(ys, acc, par, order, True)
+        take = ~np.isfinite(radius) & np.isfinite(rb)
+        pseudo[take], radius[take] = pb[take], rb[take]
+        carried = np.isfinite(radius)
+        yk[carried] = pseudo[carried]
+        # standard deviation = the bone length: the joint may have rotated about its parent
+        with np.errstate(invalid="ignore"):
+            scale = np.maximum(1.0, (radius / pj[:, k.J_SD]) ** 2)
+        rvar = np.where(carried, r * scale, rvar)
+    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]))
+    # no estimate before a joint's first valid sample; joints never accepted stay raw
+    est[np.cumsum(~missing, axis=0) == 0] = np.nan
+    never = ~acc.any(axis=0)
+    est[:, never] = ys[:, never]
+    return est, rejected
+
+
 def _robust_bodies(
     ys: Array,
     missing: NDArray[np.bool_],
@@ -245,9 +298,11 @@ def _robust_bodies(
     rinf = _inferred_scale(states, missing, factor)
     if offline:
         L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
-        est, rejected = k.offline_run(ys, missing, times, steps, rinf, *setup.args(), L_fixed)
+        est, rejected = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
     else:
-        est, rejected = k.online_run(ys, missing, times, steps, rinf, *setup.args())
+        state = k.new_state(B, J, int(params["lookback"]))
+        est, rejected = k.online_run(ys, missing, times, steps, rinf, *setup.args(), state,
+                                     *k.new_work(B, J))  # fmt: skip
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -293,8 +348,7 @@ class RobustStepper:
         B, J = missing.shape
         if self._state is None:
             self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]))
-            self._scratch = (np.empty((2, J, 3)), np.full((2, J), np.nan),
-                             np.zeros((2, B, J), dtype=bool))  # fmt: skip
+            self._scratch = k.new_work(B, J)
             self._time = 0.0
         else:
             self._time = self._time + dt  # the batch times: the cumulated steps
