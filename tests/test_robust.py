@@ -523,17 +523,19 @@ def test_online_bone_window_is_the_median_of_the_last_600_lengths():
 
     rng = np.random.default_rng(6)
     H = k.BONE_WINDOW
-    ring, srt, cnt = np.zeros(H), np.zeros(H), np.zeros(2, dtype=np.int64)
+    ring, srt, cnt = np.zeros((2, H)), np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
     hist: list[float] = []
     for i in range(2500):
         if i in (700, 720):  # a re-lock forgets the lengths learnt so far
-            hist, cnt[:] = [], 0
+            hist, cnt[1] = [], 0
         v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
         hist.append(v)
-        k._bone_push(ring, srt, cnt, v)
-        n = int(cnt[0])
+        k._bone_push(ring, srt, cnt, 1, v)  # joint 1 of two
+        n = int(cnt[1, 0])
         assert n == min(len(hist), H)
-        assert k._window_median(srt, n) == np.median(hist[-H:])
+        assert k._window_median(srt, 1, n) == np.median(hist[-H:])
+        np.testing.assert_array_equal(srt[1, :n], np.sort(hist[-H:]))
+    assert not ring[0].any() and not srt[0].any() and not cnt[0].any()
 
 
 def test_kernels_run_as_plain_python_with_jit_disabled():

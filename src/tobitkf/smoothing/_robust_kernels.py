@@ -86,8 +86,8 @@ def _copy2(dst: np.ndarray, src: np.ndarray) -> None:
 
 
 @_jit
-def _finite3(a: np.ndarray) -> bool:
-    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+def _finite3(a0: float, a1: float, a2: float) -> bool:
+    return math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2)
 
 
 @_jit
@@ -127,12 +127,12 @@ def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ bones
 @_jit
-def _lower_bound(srt: np.ndarray, n: int, v: float) -> int:
-    """First index i < n with srt[i] >= v (n when none); srt[:n] sorted."""
+def _lower_bound(srt: np.ndarray, j: int, n: int, v: float) -> int:
+    """First index i < n with srt[j, i] >= v (n when none); srt[j, :n] sorted."""
     lo, hi = 0, n
     while lo < hi:
         mid = (lo + hi) // 2
-        if srt[mid] < v:
+        if srt[j, mid] < v:
             lo = mid + 1
         else:
             hi = mid
@@ -140,44 +140,68 @@ def _lower_bound(srt: np.ndarray, n: int, v: float) -> int:
 
 
 @_jit
-def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, v: float) -> None:
-    """Append ``v`` to a joint's window of bone lengths (the oldest leaves when full);
-    ``srt[:n]`` stays sorted, ``ring`` keeps the arrival order, ``cnt = (n, write pos)``.
-
-    Full window: the oldest value's slot in ``srt`` becomes a hole that moves to where
-    ``v`` belongs (only the values between the two move)."""
-    H = ring.shape[0]
-    n = cnt[0]
-    pos = cnt[1]
-    cnt[1] = (pos + 1) % H
+def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+    """Append ``v`` to joint ``j``'s window of bone lengths (the oldest leaves when full);
+    ``srt[j, :n]`` stays sorted, ``ring[j]`` keeps the arrival order, ``cnt[j] = (n, write
+    position)``. Full window: the oldest value's slot in ``srt`` becomes a hole that moves
+    to where ``v`` belongs (only the values between the two move)."""
+    H = ring.shape[1]
+    n = cnt[j, 0]
+    pos = cnt[j, 1]
+    cnt[j, 1] = (pos + 1) % H
     if n == H:
-        old = ring[pos]
-        ring[pos] = v
-        k = _lower_bound(srt, n, old)  # an element equal to old: the hole
+        old = ring[j, pos]
+        ring[j, pos] = v
+        k = _lower_bound(srt, j, n, old)  # an element equal to old: the hole
         if v >= old:
-            while k + 1 < n and srt[k + 1] < v:
-                srt[k] = srt[k + 1]
+            while k + 1 < n and srt[j, k + 1] < v:
+                srt[j, k] = srt[j, k + 1]
                 k += 1
         else:
-            while k > 0 and srt[k - 1] > v:
-                srt[k] = srt[k - 1]
+            while k > 0 and srt[j, k - 1] > v:
+                srt[j, k] = srt[j, k - 1]
                 k -= 1
-        srt[k] = v
+        srt[j, k] = v
         return
-    ring[pos] = v
+    ring[j, pos] = v
     k = n
-    while k > 0 and srt[k - 1] > v:
-        srt[k] = srt[k - 1]
+    while k > 0 and srt[j, k - 1] > v:
+        srt[j, k] = srt[j, k - 1]
         k -= 1
-    srt[k] = v
-    cnt[0] = n + 1
+    srt[j, k] = v
+    cnt[j, 0] = n + 1
 
 
 @_jit
-def _window_median(srt: np.ndarray, n: int) -> float:
+def _window_median(srt: np.ndarray, j: int, n: int) -> float:
+    """Median of ``srt[j, :n]`` (sorted), as np.median takes it."""
     if n % 2 == 1:
-        return srt[n // 2]
-    return (srt[n // 2 - 1] + srt[n // 2]) / 2
+        return srt[j, n // 2]
+    return (srt[j, n // 2 - 1] + srt[j, n // 2]) / 2
+
+
+@_jit
+def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Median over frames of each joint's distance to its parent, ``(B, J)`` (NaN for
+    roots and for bones never seen: frames with a non-finite end are left out)."""
+    T, B, J = pos.shape[0], pos.shape[1], pos.shape[2]
+    out = np.full((B, J), np.nan)
+    buf = np.empty(T)
+    for b in range(B):
+        for j in range(J):
+            p = parents[j]
+            if p < 0:
+                continue
+            n = 0
+            for t in range(T):
+                d = _dist(pos[t, b, j, 0], pos[t, b, j, 1], pos[t, b, j, 2],
+                          pos[t, b, p, 0], pos[t, b, p, 1], pos[t, b, p, 2])  # fmt: skip
+                if math.isfinite(d):
+                    buf[n] = d
+                    n += 1
+            if n > 0:
+                out[b, j] = np.median(buf[:n])
+    return out
 
 
 # ------------------------------------------------------------------------------ gate
@@ -213,14 +237,14 @@ def gate_frame(
     if online and use_bones and tidx % BONE_REFRESH == 0:
         for j in range(J):
             if h_cnt[j, 0] >= BONE_MIN_COUNT:
-                sf[j, S_L_CUR] = _window_median(h_sorted[j], h_cnt[j, 0])
+                sf[j, S_L_CUR] = _window_median(h_sorted, j, h_cnt[j, 0])
     for k in range(J):
         j = order[k]
         p = parents[j]
         is_root = p < 0
         pp = 0 if is_root else p
         vmax = pj[j, J_VMAX]
-        valid = _finite3(y[j])
+        valid = _finite3(y[j, 0], y[j, 1], y[j, 2])
         d = _dist(y[j, 0], y[j, 1], y[j, 2], last[j, 0], last[j, 1], last[j, 2])
         last_t = sf[j, S_LAST_T]
         gate = vmax * (tt - last_t) + margin
@@ -249,7 +273,7 @@ def gate_frame(
                 h_cnt[j, 1] = 0
                 sf[j, S_L_CUR] = math.nan
             if ok and parent_acc and not is_root:
-                _bone_push(h_ring[j], h_sorted[j], h_cnt[j], blen)
+                _bone_push(h_ring, h_sorted, h_cnt, j, blen)
     for j in range(J):
         a = acc[j]
         if a:
@@ -258,7 +282,7 @@ def gate_frame(
             last[j, 2] = y[j, 2]
             sf[j, S_LAST_T] = tt
             sf[j, S_REJ_SINCE] = math.nan
-        elif _finite3(y[j]) and math.isnan(sf[j, S_REJ_SINCE]):
+        elif _finite3(y[j, 0], y[j, 1], y[j, 2]) and math.isnan(sf[j, S_REJ_SINCE]):
             sf[j, S_REJ_SINCE] = tt
         sb[j, B_PREV_ACC] = a
 
@@ -278,7 +302,7 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     x = np.zeros((B, J, 3, 2))
     P = np.zeros((B, J, 2, 2))
     xs_h = np.zeros((K, B, J, 3, 2))
-    Ps_h = np.zeros((K, B, J, 2, 2))
+    Ps_h = np.zeros((K, B, J, 4))  # p00, p01, p10, p11
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
@@ -487,7 +511,7 @@ def carry_frame(
         p = parents[j]
         if p < 0:
             continue
-        if _finite3(y[j]) and not acc[j]:
+        if _finite3(y[j, 0], y[j, 1], y[j, 2]) and not acc[j]:
             c0 = anchor[p, 0] + off[j, 0]
             c1 = anchor[p, 1] + off[j, 1]
             c2 = anchor[p, 2] + off[j, 2]
@@ -522,44 +546,54 @@ def carry_run(
 
 # ------------------------------------------------------------------------------ OU filter
 @_jit
-def _predict(x: np.ndarray, P: np.ndarray, c: np.ndarray, q: float) -> None:
-    """x <- A x, P <- A P Aᵀ + q Q for the three axes of one joint (shared P)."""
-    a, r = c[0], c[1]
-    for i in range(x.shape[0]):
-        x0, x1 = x[i, 0], x[i, 1]
-        x[i, 0] = x0 + x1 * a
-        x[i, 1] = x1 * r
-    p00, p01, p10, p11 = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+def _predict_P(
+    p00: float, p01: float, p10: float, p11: float, c: np.ndarray, k: int, q: float
+) -> tuple:
+    """A P Aᵀ + q Q with A, Q from the coefficients ``c[k]`` (:func:`ou_coeffs`)."""
+    a, r = c[k, 0], c[k, 1]
     m00 = p00 + a * p10
     m01 = p01 + a * p11
     m10 = r * p10
     m11 = r * p11
-    P[0, 0] = m00 + m01 * a + q * c[2]
-    P[0, 1] = m01 * r + q * c[3]
-    P[1, 0] = m10 + m11 * a + q * c[3]
-    P[1, 1] = m11 * r + q * c[4]
+    return (m00 + m01 * a + q * c[k, 2], m01 * r + q * c[k, 3], m10 + m11 * a + q * c[k, 3],
+            m11 * r + q * c[k, 4])  # fmt: skip
 
 
 @_jit
-def _update(x: np.ndarray, P: np.ndarray, y: np.ndarray, r: float) -> None:
-    """Kalman update of the three axes with H = [1, 0] and variance r (shared P)."""
-    S = P[0, 0] + r
-    k0 = P[0, 0] / S
-    k1 = P[1, 0] / S
-    for i in range(x.shape[0]):
-        e = y[i] - x[i, 0]
-        x[i, 0] += k0 * e
-        x[i, 1] += k1 * e
-    p00, p01, p10, p11 = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+def _update_P(p00: float, p01: float, p10: float, p11: float, r: float) -> tuple:
+    """Kalman gain (k0, k1) for H = [1, 0] and variance r, and the updated P
+    (symmetrised): ``(k0, k1, p00, p01, p10, p11)``."""
+    S = p00 + r
+    k0 = p00 / S
+    k1 = p10 / S
     n00 = p00 - k0 * p00
     n01 = p01 - k0 * p01
     n10 = p10 - k1 * p00
     n11 = p11 - k1 * p01
     s = 0.5 * (n01 + n10)
-    P[0, 0] = n00
-    P[0, 1] = s
-    P[1, 0] = s
-    P[1, 1] = n11
+    return k0, k1, n00, s, s, n11
+
+
+@_jit
+def _rts_gain(f: np.ndarray, p: np.ndarray, c: np.ndarray, t: int) -> tuple:
+    """Gᵀ = (P⁻_{t+1})⁻¹ A_{t+1} P_t from the filtered ``f[t]`` and the predicted
+    ``p[t + 1]`` covariances (rows of four: p00, p01, p10, p11)."""
+    a, r = c[t + 1, 0], c[t + 1, 1]
+    f00, f01, f10, f11 = f[t, 0], f[t, 1], f[t, 2], f[t, 3]
+    m00 = f00 + a * f10  # A P_t
+    m01 = f01 + a * f11
+    m10 = r * f10
+    m11 = r * f11
+    p00, p01, p10, p11 = p[t + 1, 0], p[t + 1, 1], p[t + 1, 2], p[t + 1, 3]
+    det = p00 * p11 - p01 * p10
+    if det != 0.0:
+        return ((p11 * m00 - p01 * m10) / det, (p11 * m01 - p01 * m11) / det,
+                (p00 * m10 - p10 * m00) / det, (p00 * m11 - p10 * m01) / det)  # fmt: skip
+    # singular P⁻ (rank <= 1): the minimum-norm gain, P⁺ = P / trace²
+    tr = p00 + p11
+    w = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
+    return (w * (p00 * m00 + p01 * m10), w * (p00 * m01 + p01 * m11),
+            w * (p10 * m00 + p11 * m10), w * (p10 * m01 + p11 * m11))  # fmt: skip
 
 
 @_jit
@@ -582,11 +616,9 @@ def ou_smooth_run(
     coef = ou_table(steps, tau)
     xf = np.empty((T, 3, 2))
     xp = np.empty((T, 3, 2))
-    Pf = np.empty((T, 2, 2))
-    Pp = np.empty((T, 2, 2))
+    Pf = np.empty((T, 4))
+    Pp = np.empty((T, 4))
     x = np.zeros((3, 2))
-    P = np.zeros((2, 2))
-    xs = np.zeros((3, 2))
     for b in range(B):
         for j in range(J):
             q = pj[j, J_Q]
@@ -598,57 +630,38 @@ def ou_smooth_run(
             for i in range(3):
                 x[i, 0] = yk[first, b, j, i] if first >= 0 else 0.0
                 x[i, 1] = 0.0
-            P[0, 0] = pj[j, J_R]
-            P[0, 1] = 0.0
-            P[1, 0] = 0.0
-            P[1, 1] = pj[j, J_V0]
+            p00, p01, p10, p11 = pj[j, J_R], 0.0, 0.0, pj[j, J_V0]
             for t in range(T):
                 if t > 0:  # frame 0 starts at x0 itself
-                    _predict(x, P, coef[t], q)
-                    s = 0.5 * (P[0, 1] + P[1, 0])
-                    P[0, 1] = s
-                    P[1, 0] = s
-                _copy2(xp[t], x)
-                _copy2(Pp[t], P)
-                if math.isfinite(yk[t, b, j, 0]):
-                    _update(x, P, yk[t, b, j], rvar[t, b, j])
-                _copy2(xf[t], x)
-                _copy2(Pf[t], P)
-            # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
-            _copy2(xs, xf[T - 1])
-            for i in range(3):
-                est[T - 1, b, j, i] = xs[i, 0]
-            for t in range(T - 2, -1, -1):
-                a, r = coef[t + 1, 0], coef[t + 1, 1]
-                f00, f01, f10, f11 = Pf[t, 0, 0], Pf[t, 0, 1], Pf[t, 1, 0], Pf[t, 1, 1]
-                # A P_t
-                m00 = f00 + a * f10
-                m01 = f01 + a * f11
-                m10 = r * f10
-                m11 = r * f11
-                p00, p01 = Pp[t + 1, 0, 0], Pp[t + 1, 0, 1]
-                p10, p11 = Pp[t + 1, 1, 0], Pp[t + 1, 1, 1]
-                det = p00 * p11 - p01 * p10
-                if det != 0.0:
-                    # Gᵀ = (P⁻)⁻¹ (A P_t)
-                    g00 = (p11 * m00 - p01 * m10) / det
-                    g01 = (p11 * m01 - p01 * m11) / det
-                    g10 = (p00 * m10 - p10 * m00) / det
-                    g11 = (p00 * m11 - p10 * m01) / det
-                else:  # singular P⁻ (rank <= 1): the minimum-norm gain, P⁺ = P / trace²
-                    tr = p00 + p11
-                    w = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
-                    g00 = w * (p00 * m00 + p01 * m10)
-                    g01 = w * (p00 * m01 + p01 * m11)
-                    g10 = w * (p10 * m00 + p11 * m10)
-                    g11 = w * (p10 * m01 + p11 * m11)
+                    a, r = coef[t, 0], coef[t, 1]
+                    for i in range(3):
+                        x[i, 0], x[i, 1] = x[i, 0] + x[i, 1] * a, x[i, 1] * r
+                    p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef, t, q)
+                    p01 = p10 = 0.5 * (p01 + p10)
                 for i in range(3):
-                    d0 = xs[i, 0] - xp[t + 1, i, 0]
-                    d1 = xs[i, 1] - xp[t + 1, i, 1]
+                    xp[t, i, 0], xp[t, i, 1] = x[i, 0], x[i, 1]
+                Pp[t, 0], Pp[t, 1], Pp[t, 2], Pp[t, 3] = p00, p01, p10, p11
+                if math.isfinite(yk[t, b, j, 0]):
+                    k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, rvar[t, b, j])
+                    for i in range(3):
+                        e = yk[t, b, j, i] - x[i, 0]
+                        x[i, 0] += k0 * e
+                        x[i, 1] += k1 * e
+                for i in range(3):
+                    xf[t, i, 0], xf[t, i, 1] = x[i, 0], x[i, 1]
+                Pf[t, 0], Pf[t, 1], Pf[t, 2], Pf[t, 3] = p00, p01, p10, p11
+            # RTS, x becoming the smoothed state: x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
+            for i in range(3):
+                est[T - 1, b, j, i] = x[i, 0]
+            for t in range(T - 2, -1, -1):
+                g00, g01, g10, g11 = _rts_gain(Pf, Pp, coef, t)
+                for i in range(3):
+                    d0 = x[i, 0] - xp[t + 1, i, 0]
+                    d1 = x[i, 1] - xp[t + 1, i, 1]
                     # G = Gtᵀ: G[0, :] = (g00, g10), G[1, :] = (g01, g11)
-                    xs[i, 0] = xf[t, i, 0] + (g00 * d0 + g10 * d1)
-                    xs[i, 1] = xf[t, i, 1] + (g01 * d0 + g11 * d1)
-                    est[t, b, j, i] = xs[i, 0]
+                    x[i, 0] = xf[t, i, 0] + (g00 * d0 + g10 * d1)
+                    x[i, 1] = xf[t, i, 1] + (g01 * d0 + g11 * d1)
+                    est[t, b, j, i] = x[i, 0]
     return est
 
 
@@ -710,50 +723,63 @@ def online_frame(
                 final[j] = gate[j]
         if carry:
             carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
-        # the causal OU filter, joint by joint
+        # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
         for j in range(J):
             a = final[j]
             rejected[b, j] = not (a or missing[b, j])
             carried = carry and not a and math.isfinite(radius[j])
             started = sb[b, j, B_STARTED]
+            q = pj[j, J_Q]
             r = pj[j, J_R] * rinf[b, j]
             if carried:
                 r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
-            xj, Pj = x[b, j], P[b, j]
+            p00, p01, p10, p11 = P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1]
             # a rejection starts: drop the last `lookback` accepted frames from the state
             if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
-                s0 = tidx - lookback - 1
-                if ok_h[s0 % K, b, j]:
-                    _copy2(xj, xs_h[s0 % K, b, j])
-                    _copy2(Pj, Ps_h[s0 % K, b, j])
-                    for kk in range(s0 + 1, tidx):
-                        _predict(xj, Pj, coef_h[kk % K], pj[j, J_Q])
+                s0 = (tidx - lookback - 1) % K
+                if ok_h[s0, b, j]:
+                    for i in range(3):
+                        x[b, j, i, 0], x[b, j, i, 1] = xs_h[s0, b, j, i, 0], xs_h[s0, b, j, i, 1]
+                    p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
+                        Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
+                    for kk in range(tidx - lookback, tidx):
+                        c = kk % K
+                        for i in range(3):
+                            x[b, j, i, 0], x[b, j, i, 1] = (
+                                x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
+                                x[b, j, i, 1] * coef_h[c, 1],
+                            )
+                        p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
             if has_prev and started:
-                _predict(xj, Pj, q_c, pj[j, J_Q])
-            if a and not started:
                 for i in range(3):
-                    xj[i, 0] = y[b, j, i]
-                    xj[i, 1] = 0.0
-                Pj[0, 0] = r
-                Pj[0, 1] = 0.0
-                Pj[1, 0] = 0.0
-                Pj[1, 1] = pj[j, J_V0]
+                    x[b, j, i, 0], x[b, j, i, 1] = (
+                        x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
+                        x[b, j, i, 1] * coef_h[slot, 1],
+                    )
+                p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
+            if a and not started:  # the filter starts at the sample itself
+                for i in range(3):
+                    x[b, j, i, 0], x[b, j, i, 1] = y[b, j, i], 0.0
+                p00, p01, p10, p11 = r, 0.0, 0.0, pj[j, J_V0]
                 sb[b, j, B_STARTED] = True
-            elif started and a:
-                _update(xj, Pj, y[b, j], r)
-            elif started and carried:
-                _update(xj, Pj, pseudo[j], r)
-            _copy2(xs_h[slot, b, j], xj)
-            _copy2(Ps_h[slot, b, j], Pj)
+            elif started and (a or carried):
+                k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, r)
+                for i in range(3):
+                    e = (y[b, j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
+                    x[b, j, i, 0] += k0 * e
+                    x[b, j, i, 1] += k1 * e
+            P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
+            for i in range(3):
+                xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
+            Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
+            Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
             ok_h[slot, b, j] = a
             sb[b, j, B_PREV_OK] = a
             sb[b, j, B_PREV_FINAL] = a
-            if sb[b, j, B_STARTED]:
-                for i in range(3):
-                    out[b, j, i] = xj[i, 0]
-            else:  # nothing accepted yet: the measurement as it is (NaN when missing)
-                for i in range(3):
-                    out[b, j, i] = y[b, j, i]
+            started = sb[b, j, B_STARTED]
+            for i in range(3):
+                # nothing accepted yet: the measurement as it is (NaN when missing)
+                out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
         _copy2(yprev[b], y[b])
     clock[0] = tidx + 1
     clock[1] = tt

@@ -113,21 +113,12 @@ def bone_lengths(positions: Array, parents: Any) -> Array:
     ``positions (T, ..., J, 3)`` gives ``(..., J)``: one length per joint of every body.
     """
     pos = np.asarray(positions, dtype=float)
-    par = np.asarray(parents, dtype=int)
-    out = np.full(pos.shape[1:-1], np.nan)
-    child = np.flatnonzero(par >= 0)
-    if child.size == 0 or pos.shape[0] == 0:
-        return out
-    d = np.linalg.norm(pos[..., child, :] - pos[..., par[child], :], axis=-1)
-    d[~np.isfinite(d)] = np.nan
-    d = np.sort(d, axis=0)  # NaN last
-    n = np.isfinite(d).sum(axis=0)
-    lo = np.take_along_axis(d, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
-    hi = np.take_along_axis(d, (n // 2)[None] - (n == 0)[None], axis=0)[0]
-    # the median as np.median takes it: the middle value, or the mean of the two middle ones
-    med = np.where(n % 2 == 1, lo, (lo + hi) / 2)
-    out[..., child] = np.where(n > 0, med, np.nan)
-    return out
+    T, J = pos.shape[0], pos.shape[-2]
+    if T == 0 or pos.size == 0:
+        return np.full(pos.shape[1:-1], np.nan)
+    flat = np.ascontiguousarray(pos.reshape(T, -1, J, 3))
+    par, _ = joint_order(parents)
+    return kernels().bone_lengths_run(flat, par).reshape(pos.shape[1:-1])
 
 
 def gate_measurements(
