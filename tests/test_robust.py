@@ -597,3 +597,23 @@ def test_online_output_is_the_measurement_until_a_joint_is_first_accepted():
     np.testing.assert_array_equal(out.positions[:10, wrist], ys[:10, wrist])
     assert np.isnan(out.positions[:10, elbow]).all()
     assert np.abs(out.positions[20:, wrist] - ys[20:, wrist]).max() < 0.01
+
+
+def test_bone_lengths_equal_np_median_of_the_finite_lengths():
+    # brute force: per body and joint, np.median of the finite distances to the parent
+    rng = np.random.default_rng(13)
+    parents = (-1, 0, 1, 1, 3)
+    T, B = 41, 3
+    pos = rng.normal(size=(T, B, 5, 3))
+    pos[:, 1, 2] = pos[:, 1, 1] + [0.2, 0.0, 0.0]  # a constant bone: all lengths equal
+    pos[rng.random((T, B, 5)) < 0.2] = np.nan  # odd and even counts of finite lengths
+    pos[:, 2, 4] = np.nan  # a bone never seen
+    L = bone_lengths(pos, parents)
+    assert L.shape == (B, 5) and np.isnan(L[:, 0]).all() and np.isnan(L[2, 4])
+    for b in range(B):
+        for j in range(1, 5):
+            d = np.linalg.norm(pos[:, b, j] - pos[:, b, parents[j]], axis=-1)
+            d = d[np.isfinite(d)]
+            if d.size:
+                assert L[b, j] == np.median(d)
+    np.testing.assert_array_equal(bone_lengths(pos[:, 1], parents), L[1])

@@ -7,10 +7,11 @@ same code as plain Python (slow; for debugging).
 
 Layout: only time is a loop; the bodies of a recording (and several recordings stacked
 as bodies) are looped over inside the kernels. Every rule is written once, as a
-*frame* function (``gate_frame``, ``confirm_frame``, ``chain_frame``, ``carry_frame``,
-``online_frame``) that updates an explicit state; the batch kernels (``*_run``) loop
-over time calling them, and the live stepper calls ``online_frame`` once per frame,
-so live equals batch exactly. The rules and their reasons are in
+*frame* function (``gate_frame``, ``confirm_frame``, ``chain_frame``, ``carry_frame``)
+that updates an explicit state; the batch kernels (``*_run``) loop over time calling
+them. ``online_frames`` runs ``robust_online`` over the next frames of a stream with its
+state: the batch runner passes the whole recording, the live stepper one frame per
+call, so live equals batch exactly. The rules and their reasons are in
 :mod:`tobitkf.smoothing.robust` and docs/robust.md.
 
 Arrays: positions ``(T, B, J, 3)`` with NaN for missing samples, masks ``(T, B, J)``,
@@ -181,6 +182,43 @@ def _window_median(srt: np.ndarray, j: int, n: int) -> float:
 
 
 @_jit
+def _median(a: np.ndarray, n: int) -> float:
+    """Median of ``a[:n]`` as np.median takes it (the mean of the two middle values for
+    even n); reorders ``a[:n]``. Quickselect with a three-way partition (many equal
+    values, as in hierarchy-converted skeletons, cost nothing)."""
+    k = (n - 1) // 2
+    lo, hi = 0, n - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        p0, p1, p2 = a[lo], a[mid], a[hi]
+        pivot = max(min(p0, p1), min(max(p0, p1), p2))  # median of three
+        lt, i, gt = lo, lo, hi
+        while i <= gt:
+            if a[i] < pivot:
+                a[lt], a[i] = a[i], a[lt]
+                lt += 1
+                i += 1
+            elif a[i] > pivot:
+                a[i], a[gt] = a[gt], a[i]
+                gt -= 1
+            else:
+                i += 1
+        if k < lt:
+            hi = lt - 1
+        elif k > gt:
+            lo = gt + 1
+        else:
+            break
+    # a[k] is the k-th smallest, everything after it is not smaller
+    if n % 2 == 1:
+        return a[k]
+    upper = a[k + 1]
+    for i in range(k + 2, n):
+        upper = min(upper, a[i])
+    return (a[k] + upper) / 2
+
+
+@_jit
 def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """Median over frames of each joint's distance to its parent, ``(B, J)`` (NaN for
     roots and for bones never seen: frames with a non-finite end are left out)."""
@@ -200,7 +238,7 @@ def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
                     buf[n] = d
                     n += 1
             if n > 0:
-                out[b, j] = np.median(buf[:n])
+                out[b, j] = _median(buf, n)
     return out
 
 
@@ -311,7 +349,7 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
 
 
 def new_work(B: int, J: int) -> tuple:
-    """Work arrays of :func:`online_frame` (``scratch``, ``scratch1``, ``acc``)."""
+    """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
     return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((2, B, J), dtype=np.bool_)
 
 
@@ -667,146 +705,125 @@ def ou_smooth_run(
 
 # ------------------------------------------------------------------------------ online
 @_jit
-def online_frame(
-    y: np.ndarray,  # (B, J, 3) this frame, NaN = missing
-    missing: np.ndarray,  # (B, J)
-    rinf: np.ndarray,  # (B, J) variance multiplier of INFERRED samples (else 1)
-    tt: float,  # time of this frame
-    dt: float,  # time step of the filter before this frame
+def online_frames(
+    ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
+    missing_n: np.ndarray,  # (n, B, J)
+    rinf_n: np.ndarray,  # (n, B, J) variance multiplier of INFERRED samples (else 1)
+    times: np.ndarray,  # (n,) time of each frame
+    steps: np.ndarray,  # (n,) time step of the filter before each frame
     parents: np.ndarray,
     order: np.ndarray,
     pj: np.ndarray,
     pf: np.ndarray,
     pi: np.ndarray,
-    st: tuple,  # from new_state(B, J, lookback)
+    st: tuple,  # new_state(B, J, lookback), carried from call to call
     scratch: np.ndarray,  # work (2, J, 3)
     scratch1: np.ndarray,  # work (2, J)
     acc: np.ndarray,  # work (2, B, J)
-    out: np.ndarray,  # out (B, J, 3)
-    rejected: np.ndarray,  # out (B, J)
+    out_n: np.ndarray,  # out (n, B, J, 3)
+    rejected_n: np.ndarray,  # out (n, B, J)
 ) -> None:
-    """``robust_online``, one frame: gate, confirmation, chain, carrying, causal OU filter
-    with roll-back at rejection onsets. Everything it remembers is in ``st``."""
+    """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
+    filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
+    batch runner passes a whole recording, the live stepper one frame per call."""
     (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
      clock) = st  # fmt: skip
-    B, J = missing.shape[0], missing.shape[1]
-    tidx = int(clock[0])
-    has_prev = tidx > 0
-    dt_prev = tt - clock[1] if has_prev else math.inf
-    lookback = pi[I_LOOKBACK]
-    K = lookback + 1
-    slot = tidx % K
-    q_c = coef_h[slot]
-    ou_coeffs(dt, pf[P_TAU], q_c)
-    min_run = pf[P_MIN_RUN]
-    use_bones = pi[I_BONES] != 0
-    carry = pi[I_CARRY] != 0
-    anchor = scratch[0]
-    pseudo = scratch[1]
-    radius = scratch1[0]
-    no_lengths = scratch1[1]  # the online gate learns its bone lengths (unused)
-    for b in range(B):
-        gate = acc[0, b]
-        final = acc[1, b]
-        radius.fill(np.nan)
-        gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
-                   no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
-                   h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
-        if min_run > 0:
-            confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
-            if has_prev:
-                prev_final = sb[b, :, B_PREV_FINAL].copy()
-                chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
-                            pj, pf[P_MARGIN])  # fmt: skip
-        else:
+    B, J = ys.shape[1], ys.shape[2]
+    for f in range(ys.shape[0]):
+        y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
+        tt, dt = times[f], steps[f]
+        out, rejected = out_n[f], rejected_n[f]
+        tidx = int(clock[0])
+        has_prev = tidx > 0
+        dt_prev = tt - clock[1] if has_prev else math.inf
+        lookback = pi[I_LOOKBACK]
+        K = lookback + 1
+        slot = tidx % K
+        q_c = coef_h[slot]
+        ou_coeffs(dt, pf[P_TAU], q_c)
+        min_run = pf[P_MIN_RUN]
+        use_bones = pi[I_BONES] != 0
+        carry = pi[I_CARRY] != 0
+        anchor = scratch[0]
+        pseudo = scratch[1]
+        radius = scratch1[0]
+        no_lengths = scratch1[1]  # the online gate learns its bone lengths (unused)
+        for b in range(B):
+            gate = acc[0, b]
+            final = acc[1, b]
+            radius.fill(np.nan)
+            gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
+                       no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
+                       h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
+            if min_run > 0:
+                confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
+                if has_prev:
+                    prev_final = sb[b, :, B_PREV_FINAL].copy()
+                    chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
+                                pj, pf[P_MARGIN])  # fmt: skip
+            else:
+                for j in range(J):
+                    final[j] = gate[j]
+            if carry:
+                carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
+            # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
             for j in range(J):
-                final[j] = gate[j]
-        if carry:
-            carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
-        # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
-        for j in range(J):
-            a = final[j]
-            rejected[b, j] = not (a or missing[b, j])
-            carried = carry and not a and math.isfinite(radius[j])
-            started = sb[b, j, B_STARTED]
-            q = pj[j, J_Q]
-            r = pj[j, J_R] * rinf[b, j]
-            if carried:
-                r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
-            p00, p01, p10, p11 = P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1]
-            # a rejection starts: drop the last `lookback` accepted frames from the state
-            if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
-                s0 = (tidx - lookback - 1) % K
-                if ok_h[s0, b, j]:
-                    for i in range(3):
-                        x[b, j, i, 0], x[b, j, i, 1] = xs_h[s0, b, j, i, 0], xs_h[s0, b, j, i, 1]
-                    p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
-                        Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
-                    for kk in range(tidx - lookback, tidx):
-                        c = kk % K
+                a = final[j]
+                rejected[b, j] = not (a or missing[b, j])
+                carried = carry and not a and math.isfinite(radius[j])
+                started = sb[b, j, B_STARTED]
+                q = pj[j, J_Q]
+                r = pj[j, J_R] * rinf[b, j]
+                if carried:
+                    r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
+                p00, p01, p10, p11 = P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1]
+                # a rejection starts: drop the last `lookback` accepted frames from the state
+                if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
+                    s0 = (tidx - lookback - 1) % K
+                    if ok_h[s0, b, j]:
                         for i in range(3):
-                            x[b, j, i, 0], x[b, j, i, 1] = (
-                                x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
-                                x[b, j, i, 1] * coef_h[c, 1],
-                            )
-                        p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
-            if has_prev and started:
+                            x[b, j, i, 0] = xs_h[s0, b, j, i, 0]
+                            x[b, j, i, 1] = xs_h[s0, b, j, i, 1]
+                        p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
+                            Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
+                        for kk in range(tidx - lookback, tidx):
+                            c = kk % K
+                            for i in range(3):
+                                x[b, j, i, 0], x[b, j, i, 1] = (
+                                    x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
+                                    x[b, j, i, 1] * coef_h[c, 1],
+                                )
+                            p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
+                if has_prev and started:
+                    for i in range(3):
+                        x[b, j, i, 0], x[b, j, i, 1] = (
+                            x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
+                            x[b, j, i, 1] * coef_h[slot, 1],
+                        )
+                    p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
+                if a and not started:  # the filter starts at the sample itself
+                    for i in range(3):
+                        x[b, j, i, 0], x[b, j, i, 1] = y[b, j, i], 0.0
+                    p00, p01, p10, p11 = r, 0.0, 0.0, pj[j, J_V0]
+                    sb[b, j, B_STARTED] = True
+                elif started and (a or carried):
+                    k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, r)
+                    for i in range(3):
+                        e = (y[b, j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
+                        x[b, j, i, 0] += k0 * e
+                        x[b, j, i, 1] += k1 * e
+                P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
                 for i in range(3):
-                    x[b, j, i, 0], x[b, j, i, 1] = (
-                        x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
-                        x[b, j, i, 1] * coef_h[slot, 1],
-                    )
-                p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
-            if a and not started:  # the filter starts at the sample itself
+                    xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
+                Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
+                Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
+                ok_h[slot, b, j] = a
+                sb[b, j, B_PREV_OK] = a
+                sb[b, j, B_PREV_FINAL] = a
+                started = sb[b, j, B_STARTED]
                 for i in range(3):
-                    x[b, j, i, 0], x[b, j, i, 1] = y[b, j, i], 0.0
-                p00, p01, p10, p11 = r, 0.0, 0.0, pj[j, J_V0]
-                sb[b, j, B_STARTED] = True
-            elif started and (a or carried):
-                k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, r)
-                for i in range(3):
-                    e = (y[b, j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
-                    x[b, j, i, 0] += k0 * e
-                    x[b, j, i, 1] += k1 * e
-            P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
-            for i in range(3):
-                xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
-            Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
-            Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
-            ok_h[slot, b, j] = a
-            sb[b, j, B_PREV_OK] = a
-            sb[b, j, B_PREV_FINAL] = a
-            started = sb[b, j, B_STARTED]
-            for i in range(3):
-                # nothing accepted yet: the measurement as it is (NaN when missing)
-                out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
-        _copy2(yprev[b], y[b])
-    clock[0] = tidx + 1
-    clock[1] = tt
-
-
-@_jit
-def online_run(
-    ys: np.ndarray,
-    missing: np.ndarray,
-    times: np.ndarray,
-    steps: np.ndarray,
-    rinf: np.ndarray,
-    parents: np.ndarray,
-    order: np.ndarray,
-    pj: np.ndarray,
-    pf: np.ndarray,
-    pi: np.ndarray,
-    st: tuple,  # new_state(B, J, lookback)
-    scratch: np.ndarray,  # \
-    scratch1: np.ndarray,  # new_work(B, J)
-    acc: np.ndarray,  # /
-) -> tuple:
-    """``robust_online`` over a recording: :func:`online_frame` for every frame."""
-    T, B, J = missing.shape[0], missing.shape[1], missing.shape[2]
-    est = np.empty((T, B, J, 3))
-    rejected = np.zeros((T, B, J), dtype=np.bool_)
-    for t in range(T):
-        online_frame(ys[t], missing[t], rinf[t], times[t], steps[t], parents, order, pj, pf,
-                     pi, st, scratch, scratch1, acc, est[t], rejected[t])  # fmt: skip
-    return est, rejected
+                    # nothing accepted yet: the measurement as it is (NaN when missing)
+                    out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
+            _copy2(yprev[b], y[b])
+        clock[0] = tidx + 1
+        clock[1] = tt

@@ -301,8 +301,9 @@ def _robust_bodies(
         est, rejected = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
     else:
         state = k.new_state(B, J, int(params["lookback"]))
-        est, rejected = k.online_run(ys, missing, times, steps, rinf, *setup.args(), state,
-                                     *k.new_work(B, J))  # fmt: skip
+        est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
+        k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
+                        *k.new_work(B, J), est, rejected)  # fmt: skip
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -324,7 +325,7 @@ def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutpu
 
 
 class RobustStepper:
-    """Live form of ``robust_online``: one :func:`online_frame` call per frame.
+    """Live form of ``robust_online``: one ``online_frames`` call per frame.
 
     The state (per body and joint: last accepted sample and its time, rejection and
     confirmation starts, the window of bone lengths, the OU filter state with its
@@ -352,14 +353,16 @@ class RobustStepper:
             self._time = 0.0
         else:
             self._time = self._time + dt  # the batch times: the cumulated steps
-        out = np.empty((B, J, 3))
+        out = np.empty((1, B, J, 3))
         self.rejected = np.zeros((B, J), dtype=bool)
-        k.online_frame(
-            np.ascontiguousarray(ys, dtype=float), np.ascontiguousarray(missing, dtype=bool),
-            _inferred_scale(states, missing, self.factor), float(self._time), float(dt),
-            *self.setup.args(), self._state, *self._scratch, out, self.rejected,
+        k.online_frames(
+            np.ascontiguousarray(ys, dtype=float)[None],
+            np.ascontiguousarray(missing, dtype=bool)[None],
+            _inferred_scale(states, missing, self.factor)[None],
+            np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
+            *self._scratch, out, self.rejected[None],
         )  # fmt: skip
-        return out
+        return out[0]
 
 
 def robust_smooth(
