@@ -435,3 +435,185 @@ def test_kimore_robust_never_jumps_more_than_raw(exercise):
     raw = largest_jump(seq.positions)
     for offline in (True, False):
         assert largest_jump(robust_smooth(seq, offline=offline).positions) < raw
+
+
+# ----------------------------------------------------------------------------- references
+def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None):
+    """The OU-velocity filter (+ RTS) per axis by the package's generic Kalman core.
+
+    ``ys (T, J, 3)`` NaN where missing; nothing is rejected; INFERRED samples get
+    ``factor`` times the variance; ``drop``: frames whose samples the filter skips.
+    Offline: started at frame 0 from the joint's first sample with velocity 0 and
+    P0 = diag(r, q tau / 2), then updated with every sample. Online: the state *is* the
+    first sample (velocity 0, P = diag(r, q tau / 2)), the filter runs from there.
+    """
+    from tobitkf.core.kalman import kalman_filter, rts_smooth
+    from tobitkf.core.model import LinearGaussian
+
+    T, J, _ = ys.shape
+    A, Q = _ou_matrices(np.full(T, 1 / FPS), tau)
+    y = ys.copy()
+    if drop is not None:
+        y[drop] = np.nan
+    rs = np.where(states == TrackingState.INFERRED, factor, 1.0)
+    means = np.full((T, J, 3), np.nan)
+    for j in range(J):
+        f = int(np.argmax(np.isfinite(ys[:, j, 0])))  # the first sample
+        s = 0 if offline else f
+        yj = y[s:, j].copy()
+        if not offline:
+            yj[0] = np.nan  # the state starts at it: no update
+        Aj, Qj = A[s:].copy(), q * Q[s:]
+        Aj[0], Qj[0] = np.eye(2), 0.0  # the first step starts at x0 itself
+        x0 = np.stack([ys[f, j], np.zeros(3)], axis=-1)  # (3, 2)
+        P0 = np.diag([r * (1.0 if offline else rs[f, j]), q * tau / 2])
+        model = LinearGaussian(A=A[1], H=np.array([[1.0, 0.0]]), Q=q * Q[1],
+                               R=np.array([[r]]), x0=x0, P0=P0)  # fmt: skip
+        scale = np.broadcast_to(rs[s:, j, None, None], (T - s, 3, 1))
+        res = kalman_filter(model, yj[..., None], A_seq=Aj, Q_seq=Qj, R_scale=scale)
+        mj = (rts_smooth(model, res).means if offline else res.means)[..., 0]
+        means[f:, j] = mj[f - s :]
+    return means
+
+
+@pytest.mark.parametrize("offline", [True, False])
+def test_ou_smoother_equals_the_generic_kalman_core_when_nothing_is_rejected(offline):
+    # gates wide open: robust is then the OU-velocity KF (+ RTS) of the Kalman core
+    truth = _skeleton_motion(T=90, seed=9)
+    rng = np.random.default_rng(4)
+    ys = truth + rng.normal(scale=0.01, size=truth.shape)
+    ys[:6, 3] = np.nan  # Head appears late
+    ys[30:41, 7] = np.nan  # a gap in HandLeft
+    states = np.full(ys.shape[:2], int(TrackingState.TRACKED), dtype=np.int8)
+    states[rng.random(states.shape) < 0.1] = TrackingState.INFERRED
+    tau, spd, sd = 0.15, 0.5, 0.01
+    params = dict(v_max=1e6, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=0)
+    out = robust_smooth(_seq(ys, states), offline=offline, **params)
+    assert not out.metadata["diagnostics"]["rejected"].any()
+    ref = _ou_reference(ys, states, tau, 2 * spd**2 / tau, sd**2, 4.0, offline)
+    np.testing.assert_array_equal(np.isnan(out.positions), np.isnan(ref))
+    np.testing.assert_allclose(out.positions, ref, rtol=0, atol=1e-12, equal_nan=True)
+
+
+def test_online_lookback_drops_the_last_frames_before_a_rejection_from_the_state():
+    # at the onset of a rejection (here: of a gap) the last `lookback` accepted frames leave
+    # the filter state; the outputs already emitted stay; afterwards the filter continues
+    # as if those frames had never been measured
+    truth = _skeleton_motion(T=80, seed=10)
+    ys = truth + np.random.default_rng(5).normal(scale=0.01, size=truth.shape)
+    hand = get_topology("kinect_v2").index("HandLeft")
+    ys[40:50, hand] = np.nan
+    states = np.full(ys.shape[:2], int(TrackingState.TRACKED), dtype=np.int8)
+    tau, spd, sd = 0.15, 0.5, 0.01
+    params = dict(v_max=1e6, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=2)
+    out = robust_smooth(_seq(ys), offline=False, **params).positions
+    q, r = 2 * spd**2 / tau, sd**2
+    plain = _ou_reference(ys, states, tau, q, r, 1.0, False)
+    rolled = _ou_reference(ys, states, tau, q, r, 1.0, False, drop=(slice(38, 40), hand))
+    np.testing.assert_allclose(out[:40, hand], plain[:40, hand], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[40:, hand], rolled[40:, hand], rtol=0, atol=1e-12)
+    assert np.abs(rolled[45, hand] - plain[45, hand]).max() > 1e-4  # it made a difference
+    other = [j for j in range(ys.shape[1]) if j != hand]
+    np.testing.assert_allclose(out[:, other], plain[:, other], rtol=0, atol=1e-12)
+
+
+def test_online_bone_window_is_the_median_of_the_last_600_lengths():
+    # the bounded window the online bone gate keeps, against np.median(history[-600:])
+    from tobitkf.smoothing import _robust_kernels as k
+
+    rng = np.random.default_rng(6)
+    H = k.BONE_WINDOW
+    ring, srt, cnt = np.zeros((2, H)), np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
+    hist: list[float] = []
+    for i in range(2500):
+        if i in (700, 720):  # a re-lock forgets the lengths learnt so far
+            hist, cnt[1] = [], 0
+        v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
+        hist.append(v)
+        k._bone_push(ring, srt, cnt, 1, v)  # joint 1 of two
+        n = int(cnt[1, 0])
+        assert n == min(len(hist), H)
+        assert k._window_median(srt, 1, n) == np.median(hist[-H:])
+        np.testing.assert_array_equal(srt[1, :n], np.sort(hist[-H:]))
+    assert not ring[0].any() and not srt[0].any() and not cnt[0].any()
+
+
+def test_kernels_run_as_plain_python_with_jit_disabled():
+    # NUMBA_DISABLE_JIT=1 runs the same code uncompiled (for debugging): same numbers
+    import os
+    import subprocess
+    import sys
+
+    pos = _skeleton_motion(T=40, seed=11)
+    chain = _hand_chain(get_topology("kinect_v2"))
+    pos[22:32, chain] += [0.0, 0.6, 0.0]  # a sustained failure of the right hand: gates at work
+    script = (
+        "import sys, numpy as np\n"
+        "from tobitkf.skeleton.sequence import SkeletonSequence\n"
+        "from tobitkf.smoothing.robust import robust_smooth\n"
+        "pos = np.load(sys.argv[1])\n"
+        "seq = SkeletonSequence(positions=pos, topology='kinect_v2', fps=30.0)\n"
+        "np.save(sys.argv[2], np.stack([robust_smooth(seq, offline=o).positions "
+        "for o in (True, False)]))\n"
+    )
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        np.save(Path(tmp) / "in.npy", pos)
+        env = {**os.environ, "NUMBA_DISABLE_JIT": "1"}
+        subprocess.run([sys.executable, "-c", script, str(Path(tmp) / "in.npy"),
+                        str(Path(tmp) / "out.npy")], check=True, env=env)  # fmt: skip
+        plain = np.load(Path(tmp) / "out.npy")
+    seq = _seq(pos)
+    for i, offline in enumerate((True, False)):
+        out = robust_smooth(seq, offline=offline)
+        assert out.metadata["diagnostics"]["rejected"][22:32, chain].mean() > 0.5
+        np.testing.assert_allclose(plain[i], out.positions, rtol=0, atol=1e-12)
+
+
+def test_importing_tobitkf_does_not_import_numba():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, tobitkf, tobitkf.smoothing.api, tobitkf.smoothing.robust\n"
+        "assert 'numba' not in sys.modules, 'numba imported'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_online_output_is_the_measurement_until_a_joint_is_first_accepted():
+    # causal: whether a joint will ever be accepted is unknown live, so until its first
+    # accepted sample robust_online returns what was measured (offline: NaN before the
+    # first valid sample, then the smoother)
+    topo = get_topology("kinect_v2")
+    ys = _skeleton_motion(T=60, seed=12)
+    elbow, wrist = topo.index("ElbowLeft"), topo.index("WristLeft")
+    ys[:10, elbow] = np.nan  # the parent appears late: the wrist cannot pass the chain rule
+    out = robust_smooth(_seq(ys), offline=False)
+    rej = out.metadata["diagnostics"]["rejected"]
+    assert rej[:10, wrist].all() and not rej[14:, wrist].any()  # confirmed after min_run
+    np.testing.assert_array_equal(out.positions[:10, wrist], ys[:10, wrist])
+    assert np.isnan(out.positions[:10, elbow]).all()
+    assert np.abs(out.positions[20:, wrist] - ys[20:, wrist]).max() < 0.01
+
+
+def test_bone_lengths_equal_np_median_of_the_finite_lengths():
+    # brute force: per body and joint, np.median of the finite distances to the parent
+    rng = np.random.default_rng(13)
+    parents = (-1, 0, 1, 1, 3)
+    T, B = 41, 3
+    pos = rng.normal(size=(T, B, 5, 3))
+    pos[:, 1, 2] = pos[:, 1, 1] + [0.2, 0.0, 0.0]  # a constant bone: all lengths equal
+    pos[rng.random((T, B, 5)) < 0.2] = np.nan  # odd and even counts of finite lengths
+    pos[:, 2, 4] = np.nan  # a bone never seen
+    L = bone_lengths(pos, parents)
+    assert L.shape == (B, 5) and np.isnan(L[:, 0]).all() and np.isnan(L[2, 4])
+    for b in range(B):
+        for j in range(1, 5):
+            d = np.linalg.norm(pos[:, b, j] - pos[:, b, parents[j]], axis=-1)
+            d = d[np.isfinite(d)]
+            if d.size:
+                assert L[b, j] == np.median(d)
+    np.testing.assert_array_equal(bone_lengths(pos[:, 1], parents), L[1])

@@ -10,8 +10,8 @@ frame by frame, whether a measurement is physically possible, treats the impossi
 ones as missing, and smooths what is left with a velocity-state Kalman filter (and,
 offline, the RTS smoother, which interpolates across rejected stretches).
 
-Gating (per frame, joints from the root outwards, vectorised over joints)
---------------------------------------------------------------------------
+Gating (per frame, joints from the root outwards)
+-------------------------------------------------
 A valid measurement ``y_j(t)`` is *accepted* when
 
 1. **speed gate** — it is reachable from the joint's last accepted measurement
@@ -60,7 +60,17 @@ standard deviation is ``speed_sd``, per body region) and measurement noise ``noi
 (per region), ``H = [1, 0]``.  Offline the RTS smoother runs after the filter; online the
 filter output is returned: across a rejected stretch the OU velocity decays with
 ``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
-held.
+held. Online, a joint not accepted yet is returned as measured (its filter starts at its
+first accepted sample; live, nobody knows whether it ever will be).
+
+Implementation
+--------------
+Every rule and both filters are compiled kernels
+(:mod:`tobitkf.smoothing._robust_kernels`, numba, cached on disk, imported on first use):
+time is the only loop, all bodies of a recording go through one call. ``robust_online``
+is a frame function with explicit state; the batch runner and the live stepper
+(:class:`RobustStepper`, registered as the method's ``live``) both call it, so a live
+stream gives exactly the batch result with constant work per frame.
 
 The physical reasoning for every default is in ``docs/robust.md``.
 """
@@ -72,8 +82,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.core.kalman import kalman_filter, rts_smooth
-from tobitkf.core.model import LinearGaussian
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing.params import (
@@ -86,15 +94,7 @@ from tobitkf.smoothing.params import (
     region_value,
 )
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
-from tobitkf.smoothing.robust_gating import (
-    bone_lengths,
-    carry_with_parent,
-    confirm_reacquisition,
-    drop_short_runs,
-    enforce_chain,
-    gate_measurements,
-    region_values,
-)
+from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     frame_steps,
@@ -155,167 +155,123 @@ def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
     """Transition and unit-q process noise ``(T, 2, 2)`` of the integrated OU velocity model.
 
     ``dv = -v/tau dt + sqrt(q) dW``, ``dx = v dt``, discretised exactly over each step;
-    ``tau = inf`` is the constant-velocity (white-acceleration) model.
+    ``tau = inf`` is the constant-velocity (white-acceleration) model. (The filters use
+    the same coefficients, :func:`tobitkf.smoothing._robust_kernels.ou_coeffs`.)
     """
-    dt = np.asarray(steps, dtype=float)
-    T = dt.shape[0]
+    c = kernels().ou_table(np.ascontiguousarray(steps, dtype=float), float(tau))
+    T = c.shape[0]
     A = np.zeros((T, 2, 2))
-    Q = np.empty((T, 2, 2))
-    if not np.isfinite(tau):
-        A[:, 0, 0] = A[:, 1, 1] = 1.0
-        A[:, 0, 1] = dt
-        Q[:, 0, 0] = dt**3 / 3
-        Q[:, 0, 1] = Q[:, 1, 0] = dt**2 / 2
-        Q[:, 1, 1] = dt
-        return A, Q
-    rho = np.exp(-dt / tau)
-    om = -np.expm1(-dt / tau)  # 1 - rho, accurate for small steps
-    om2 = -np.expm1(-2 * dt / tau)  # 1 - rho^2
     A[:, 0, 0] = 1.0
-    A[:, 0, 1] = tau * om
-    A[:, 1, 1] = rho
-    Q[:, 0, 0] = tau**2 * (dt - 2 * tau * om + 0.5 * tau * om2)
-    Q[:, 0, 1] = Q[:, 1, 0] = 0.5 * tau**2 * om**2
-    Q[:, 1, 1] = 0.5 * tau * om2
-    # Q_xx suffers cancellation for dt << tau: use the series dt^3/3 - dt^4/(4 tau) there
-    small = dt < 1e-3 * tau
-    Q[small, 0, 0] = dt[small] ** 3 / 3 - dt[small] ** 4 / (4 * tau)
+    A[:, 0, 1], A[:, 1, 1] = c[:, 0], c[:, 1]
+    Q = np.empty((T, 2, 2))
+    Q[:, 0, 0], Q[:, 1, 1] = c[:, 2], c[:, 4]
+    Q[:, 0, 1] = Q[:, 1, 0] = c[:, 3]
     return A, Q
 
 
-def _cv_smooth(
+class _Setup:
+    """What the kernels take for one topology and parameter set (per joint and global)."""
+
+    def __init__(self, topo: Topology, params: dict[str, Any]) -> None:
+        k = kernels()
+        J = topo.n_joints
+        self.vmax = region_values(topo, params["v_max"], "v_max")
+        self.spd = region_values(topo, params["speed_sd"], "speed_sd")
+        self.sd = region_values(topo, params["noise_sd"], "noise_sd")
+        tau = params["tau"]
+        # stationary velocity variance of the OU model is q tau / 2
+        qa = 2 * self.spd**2 / tau if np.isfinite(tau) else self.spd**2
+        self.parents, self.order = joint_order(topo.parents)
+        self.pj = np.zeros((J, k.N_PJ))
+        self.pj[:, k.J_VMAX] = self.vmax
+        self.pj[:, k.J_Q] = qa
+        self.pj[:, k.J_R] = self.sd**2
+        self.pj[:, k.J_SD] = self.sd
+        self.pj[:, k.J_V0] = qa * tau / 2 if np.isfinite(tau) else 1.0
+        self.pf = np.zeros(k.N_PF)
+        self.pf[k.P_MARGIN] = params["margin"]
+        self.pf[k.P_TOL_ABS] = params["bone_tol_abs"]
+        self.pf[k.P_TOL_REL] = params["bone_tol_rel"]
+        self.pf[k.P_MAX_REJECT] = params["max_reject"]
+        self.pf[k.P_MIN_RUN] = params["min_run"]
+        self.pf[k.P_TAU] = tau
+        self.pi = np.zeros(k.N_PI, dtype=np.int64)
+        self.pi[k.I_BONES] = bool(params["bones"])
+        self.pi[k.I_CARRY] = bool(params["carry"])
+        self.pi[k.I_LOOKBACK] = int(params["lookback"])
+        self.pi[k.I_TWO_PASS] = bool(params["two_pass"])
+        self.resolved = {
+            "v_max": self.vmax.tolist(),
+            "speed_sd": self.spd.tolist(),
+            "noise_sd": self.sd.tolist(),
+        }
+
+    def args(self) -> tuple[Any, ...]:
+        return self.parents, self.order, self.pj, self.pf, self.pi
+
+
+def _inferred_scale(states: Any, missing: NDArray[np.bool_], factor: float) -> Array:
+    """Measurement-variance multiplier per sample: ``factor`` for valid INFERRED ones."""
+    scale = inferred_r_scale(states, ~missing, factor)
+    if scale is None:
+        return np.ones(missing.shape)
+    return np.ascontiguousarray(scale[..., 0])
+
+
+def _offline(
     ys: Array,
+    missing: NDArray[np.bool_],
+    times: Array,
     steps: Array,
-    tau: float,
-    q: Array,
-    r: Array,
-    r_scale: Array | None,
-    offline: bool,
-) -> Array:
-    """OU-velocity KF (+ RTS) per axis; ys (T, J, 3) with NaN missing; q, r (J,)."""
-    out = np.full_like(ys, np.nan)
-    A_seq, base_Q = _ou_matrices(steps, tau)
-    # joints sharing (q, r) run in one vectorised pass
-    keys = np.stack([q, r], axis=1)
-    for key in np.unique(keys, axis=0):
-        idx = np.flatnonzero(np.all(keys == key, axis=1))
-        qa, rr = float(key[0]), float(key[1])
-        y = ys[:, idx, :, None]  # (T, j, 3, 1)
-        valid = np.isfinite(y[..., 0])
-        first = np.argmax(valid, axis=0)  # (j, 3)
-        has = valid.any(axis=0)
-        x0p = np.take_along_axis(y[..., 0], first[None], axis=0)[0]
-        x0 = np.stack([np.where(has, x0p, 0.0), np.zeros_like(x0p)], axis=-1)  # (j, 3, 2)
-        # P0: position known to the noise, velocity from its stationary distribution
-        P0 = np.diag([rr, qa * tau / 2 if np.isfinite(tau) else 1.0])
-        model = LinearGaussian(
-            A=A_seq[0],
-            H=np.array([[1.0, 0.0]]),
-            Q=qa * base_Q[0],
-            R=np.array([[rr]]),
-            x0=x0,
-            P0=P0,
-        )
-        kwargs: dict[str, Any] = {"A_seq": A_seq, "Q_seq": qa * base_Q}
-        if r_scale is not None:
-            kwargs["R_scale"] = r_scale[:, idx, :, None]
-        # the first step predicts from x0 with A_seq[0]; start at the first sample itself
-        A_seq0 = A_seq.copy()
-        A_seq0[0] = np.eye(2)
-        Q0 = kwargs["Q_seq"].copy()
-        Q0[0] = 0.0
-        kwargs["A_seq"], kwargs["Q_seq"] = A_seq0, Q0
-        res = kalman_filter(model, y, **kwargs)
-        means = rts_smooth(model, res).means if offline else res.means
-        out[:, idx, :] = means[..., 0]
-    return out
+    rinf: Array,
+    setup: _Setup,
+    params: dict[str, Any],
+    L_fixed: Array,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
 
-
-def _causal_filter(
-    ys: Array,
-    acc: NDArray[np.bool_],
-    steps: Array,
-    tau: float,
-    q: Array,
-    r: Array,
-    r_scale: Array | None,
-    lookback: int,
-    carried: NDArray[np.bool_] | None = None,
-) -> Array:
-    """Causal OU-velocity Kalman filter per axis with roll-back at rejection onsets.
-
-    Same model as :func:`_cv_smooth` (started at a joint's first accepted sample with
-    P = diag(r, stationary velocity variance)).  When a joint's measurement is
-    rejected right after an accepted one, the last ``lookback`` accepted frames are
-    dropped from its *state* (re-predicted from the state before them): the entry of a
-    tracking failure is often gradual, and its first frames pass the gates.  Outputs
-    already emitted for those frames are not changed (the filter stays causal).
+    One kernel call per stage for all bodies (compiling them as one would take longer).
+    Returns ``(est (T, B, J, 3), rejected (T, B, J))``.
     """
-    T, J, _ = ys.shape
-    N = J * 3
-    y = ys.reshape(T, N)
-    ok = np.repeat(acc, 3, axis=1) & np.isfinite(y)
-    if carried is None:
-        extra = np.zeros_like(ok)
-    else:
-        extra = np.repeat(carried, 3, axis=1) & np.isfinite(y)
-    qn = np.repeat(q, 3)
-    rn = np.repeat(r, 3)[None, :] * (1.0 if r_scale is None else r_scale.reshape(T, N))
-    rn = np.broadcast_to(rn, (T, N))
-    A_seq, base_Q = _ou_matrices(steps, tau)
-    v0 = qn * tau / 2 if np.isfinite(tau) else np.ones(N)
-    xs = np.zeros((T, N, 2))
-    Ps = np.zeros((T, N, 2, 2))
-    x = np.zeros((N, 2))
-    P = np.zeros((N, 2, 2))
-    started = np.zeros(N, dtype=bool)
-    out = np.full((T, N), np.nan)
-    prev_ok = np.zeros(N, dtype=bool)
-
-    def predict(x: Array, P: Array, t: int, sel: Any) -> tuple[Array, Array]:
-        A = A_seq[t]
-        Q = qn[sel, None, None] * base_Q[t]
-        return x @ A.T, A @ P @ A.T + Q
-
-    for t in range(T):
-        if lookback > 0 and t > lookback:
-            onset = started & prev_ok & ~ok[t]
-            if onset.any():
-                s0 = t - lookback - 1
-                sel = onset & ok[s0]  # keep it simple: only when the base frame was good
-                if sel.any():
-                    xb, Pb = xs[s0, sel], Ps[s0, sel]
-                    for k in range(s0 + 1, t):
-                        xb, Pb = predict(xb, Pb, k, sel)
-                    x[sel], P[sel] = xb, Pb
-        # predict (frame 0 and fresh starts: nothing to predict from)
-        if t > 0:
-            xp, Pp = predict(x, P, t, slice(None))
-            x = np.where(started[:, None], xp, x)
-            P = np.where(started[:, None, None], Pp, P)
-        new = ok[t] & ~started
-        if new.any():
-            x[new, 0] = y[t, new]
-            x[new, 1] = 0.0
-            P[new] = 0.0
-            P[new, 0, 0] = rn[t, new]
-            P[new, 1, 1] = v0[new]
-            started |= new
-        upd = (ok[t] | extra[t]) & ~new & started
-        if upd.any():
-            S = P[upd, 0, 0] + rn[t, upd]
-            K = P[upd, :, 0] / S[:, None]
-            innov = y[t, upd] - x[upd, 0]
-            x[upd] = x[upd] + K * innov[:, None]
-            P[upd] = P[upd] - K[:, :, None] * P[upd, 0, :][:, None, :]
-            P[upd] = 0.5 * (P[upd] + np.swapaxes(P[upd], -1, -2))
-        xs[t], Ps[t] = x, P
-        out[t] = np.where(started, x[:, 0], np.nan)
-        prev_ok = ok[t]
-    return out.reshape(T, J, 3)
+    k = kernels()
+    par, order, pj, pf, _ = setup.args()
+    gate_args = (par, order, pj, pf, L_fixed, bool(params["bones"]), False,
+                 float(params["max_reject"]))  # fmt: skip
+    B, J = missing.shape[1:]
+    acc = k.gate_run(ys, times, *gate_args, k.new_state(B, J, 0))
+    if params["two_pass"]:
+        back = k.gate_run(np.ascontiguousarray(ys[::-1]), np.ascontiguousarray(-times[::-1]),
+                          *gate_args, k.new_state(B, J, 0))  # fmt: skip
+        acc &= back[::-1]
+    if params["min_run"] > 0:
+        acc = k.drop_short_runs_run(acc, ~missing & ~acc, times, float(params["min_run"]))
+    if params["two_pass"]:
+        acc = k.enforce_chain_run(acc, ys, times, par, order, pj, float(params["margin"]), True)
+    rejected = ~missing & ~acc
+    yk = np.where(acc[..., None], ys, np.nan)
+    r = pj[:, k.J_R]
+    rvar = r * rinf
+    if params["carry"]:
+        pseudo, radius = k.carry_run(ys, acc, par, order, False)
+        # a stretch with no earlier good offset takes the next one
+        pb, rb = k.carry_run(ys, acc, par, order, True)
+        take = ~np.isfinite(radius) & np.isfinite(rb)
+        pseudo[take], radius[take] = pb[take], rb[take]
+        carried = np.isfinite(radius)
+        yk[carried] = pseudo[carried]
+        # standard deviation = the bone length: the joint may have rotated about its parent
+        with np.errstate(invalid="ignore"):
+            scale = np.maximum(1.0, (radius / pj[:, k.J_SD]) ** 2)
+        rvar = np.where(carried, r * scale, rvar)
+    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]))
+    # no estimate before a joint's first valid sample; joints never accepted stay raw
+    est[np.cumsum(~missing, axis=0) == 0] = np.nan
+    never = ~acc.any(axis=0)
+    est[:, never] = ys[:, never]
+    return est, rejected
 
 
-def _robust_body(
+def _robust_bodies(
     ys: Array,
     missing: NDArray[np.bool_],
     states: Any,
@@ -325,101 +281,88 @@ def _robust_body(
     params: dict[str, Any],
     factor: float,
     offline: bool,
-) -> tuple[Array, dict[str, Any]]:
-    """Gate and smooth one body: ys (T, J, 3) NaN where missing; returns (est, diagnostics)."""
-    T, J = missing.shape
-    vmax = region_values(topo, params["v_max"], "v_max")
-    spd = region_values(topo, params["speed_sd"], "speed_sd")
-    # stationary velocity variance of the OU model is q tau / 2
-    qa = 2 * spd**2 / params["tau"] if np.isfinite(params["tau"]) else spd**2
-    sd = region_values(topo, params["noise_sd"], "noise_sd")
-    parents = topo.parents
-    L = bone_lengths(ys, parents) if params["bones"] else None
-    gate_kw = dict(
-        margin=params["margin"],
-        bone_len=L,
-        bone_tol_abs=params["bone_tol_abs"],
-        bone_tol_rel=params["bone_tol_rel"],
-        max_reject=params["max_reject"],
-    )
+) -> tuple[Array, list[dict[str, Any]], dict[str, Any]]:
+    """Gate and smooth every body at once: ys (T, B, J, 3) NaN where missing.
+
+    Returns the estimates, one diagnostics dict per body and the resolved per-joint
+    parameters.
+    """
+    T, B, J = missing.shape
+    setup = _Setup(topo, params)
+    L = bone_lengths(ys, topo.parents) if params["bones"] else None  # (B, J)
+    k = kernels()
+    ys = np.ascontiguousarray(ys, dtype=float)
+    missing = np.ascontiguousarray(missing, dtype=bool)
+    times = np.ascontiguousarray(times, dtype=float)
+    steps = np.ascontiguousarray(steps, dtype=float)
+    rinf = _inferred_scale(states, missing, factor)
     if offline:
-        acc = gate_measurements(ys, times, parents, vmax, **gate_kw)
-        if params["two_pass"]:
-            acc_b = gate_measurements(ys[::-1], -times[::-1], parents, vmax, **gate_kw)[::-1]
-            acc &= acc_b
+        L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
+        est, rejected = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
     else:
-        acc = gate_measurements(ys, times, parents, vmax, online_bones=True, **gate_kw)
-    if offline and params["min_run"] > 0:
-        acc = drop_short_runs(acc, ~missing & ~acc, times, params["min_run"])
-    if offline and params["two_pass"]:
-        acc = enforce_chain(acc, ys, times, parents, vmax, params["margin"])
-    if not offline and params["min_run"] > 0:
-        acc = confirm_reacquisition(acc, missing, times, params["min_run"])
-        acc = enforce_chain(acc, ys, times, parents, vmax, params["margin"], backward=False)
-    rejected = ~missing & ~acc
-    yk = ys.copy()
-    yk[~acc] = np.nan
-    r_scale = inferred_r_scale(states, ~missing, factor)
-    carried = np.zeros((T, J), dtype=bool)
-    if params["carry"]:
-        pseudo, radius = carry_with_parent(ys, acc, parents)
-        if offline:  # a stretch with no earlier good offset takes the next one
-            pb, rb = carry_with_parent(ys[::-1], acc[::-1], parents)
-            take = ~np.isfinite(radius) & np.isfinite(rb[::-1])
-            pseudo[take], radius[take] = pb[::-1][take], rb[::-1][take]
-        carried = np.isfinite(pseudo).all(axis=-1)
-        yk[carried] = pseudo[carried]
-        # standard deviation = the bone length: the joint may have rotated about its parent
-        scale = np.maximum(1.0, (np.nan_to_num(radius) / sd[None, :]) ** 2)
-        rs = np.ones((T, J, 3)) if r_scale is None else r_scale.copy()
-        rs[carried] = scale[carried][:, None]
-        r_scale = rs
-    if offline:
-        est = _cv_smooth(yk, steps, params["tau"], qa, sd**2, r_scale, True)
-    else:
-        est = _causal_filter(
-            yk, acc, steps, params["tau"], qa, sd**2, r_scale, int(params["lookback"]), carried
-        )
-    # no estimate before a joint's first valid measurement, none for joints never accepted
-    valid = ~missing
-    first = np.where(valid.any(axis=0), np.argmax(valid, axis=0), T)
-    before = np.arange(T)[:, None] < first[None, :]
-    est[before] = np.nan
-    never = ~acc.any(axis=0)
-    est[:, never] = ys[:, never]
-    resolved = {"v_max": vmax.tolist(), "speed_sd": spd.tolist(), "noise_sd": sd.tolist()}
-    diagnostics = {
-        "rejected_fraction": rejected.sum(axis=0) / T,
-        "rejected": rejected,
-        "bone_lengths": L if L is not None else np.full(J, np.nan),
-        "resolved": resolved,
-    }
-    return est, diagnostics
+        state = k.new_state(B, J, int(params["lookback"]))
+        est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
+        k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
+                        *k.new_work(B, J), est, rejected)  # fmt: skip
+    diags = [
+        {
+            "rejected_fraction": rejected[:, b].sum(axis=0) / T,
+            "rejected": rejected[:, b],
+            "bone_lengths": L[b] if L is not None else np.full(J, np.nan),
+        }
+        for b in range(B)
+    ]
+    return est, diags, setup.resolved
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
-    """Runner: every body of ``inp`` gated and smoothed on its own."""
-    B = inp.ys.shape[1]
-    est = np.full_like(inp.ys, np.nan)
-    diags = []
-    for b in range(B):
-        states = None if inp.tracking_state is None else inp.tracking_state[:, b]
-        est[:, b], d = _robust_body(
-            inp.ys[:, b],
-            inp.missing[:, b],
-            states,
-            inp.times,
-            inp.steps,
-            inp.topology,
-            params,
-            inp.inferred_noise_factor,
-            offline,
-        )
-        diags.append(d)
-    resolved = diags[0].pop("resolved") if diags else {}
-    for d in diags[1:]:
-        d.pop("resolved")
-    return SmoothOutput(est, diagnostics=tuple(diags), params=resolved)
+    """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
+    est, diags, resolved = _robust_bodies(
+        inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
+        inp.inferred_noise_factor, offline,
+    )  # fmt: skip
+    return SmoothOutput(est, diagnostics=tuple(diags), params=resolved if diags else {})
+
+
+class RobustStepper:
+    """Live form of ``robust_online``: one ``online_frames`` call per frame.
+
+    The state (per body and joint: last accepted sample and its time, rejection and
+    confirmation starts, the window of bone lengths, the OU filter state with its
+    ``lookback`` history) lives in arrays; the batch runner runs the same frame
+    function over a recording, so a stream gives exactly the batch numbers. Work per
+    frame is constant (the bone-length window holds at most 600 lengths).
+    """
+
+    def __init__(self, topology: Topology, up_axis: int, inferred_noise_factor: float,
+                 **params: Any) -> None:  # fmt: skip
+        full = dict(ROBUST_DEFAULTS)
+        full.update(params)
+        self.setup = _Setup(topology, full)
+        self.factor = inferred_noise_factor
+        self._state: Any = None
+        self._time = 0.0
+
+    def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float) -> Array:
+        """Smooth one frame: ys (B, J, 3) NaN where missing; returns (B, J, 3)."""
+        k = kernels()
+        B, J = missing.shape
+        if self._state is None:
+            self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]))
+            self._scratch = k.new_work(B, J)
+            self._time = 0.0
+        else:
+            self._time = self._time + dt  # the batch times: the cumulated steps
+        out = np.empty((1, B, J, 3))
+        self.rejected = np.zeros((B, J), dtype=bool)
+        k.online_frames(
+            np.ascontiguousarray(ys, dtype=float)[None],
+            np.ascontiguousarray(missing, dtype=bool)[None],
+            _inferred_scale(states, missing, self.factor)[None],
+            np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
+            *self._scratch, out, self.rejected[None],
+        )  # fmt: skip
+        return out[0]
 
 
 def robust_smooth(
@@ -490,11 +433,12 @@ def robust_smooth(
     states = sequence.tracking_state
     ys, missing = measurements(sequence.positions, states)
     steps = frame_steps(sequence)[0]
-    est, diag = _robust_body(
-        ys, missing, states, frame_times(sequence, steps), steps, sequence.topology, full,
-        factor, offline,
+    est, diags, resolved = _robust_bodies(
+        ys[:, None], missing[:, None], None if states is None else states[:, None],
+        frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
     )  # fmt: skip
-    used = {**full, **diag.pop("resolved"), "inferred_noise_factor": factor, "offline": offline}
+    est, diag = est[:, 0], diags[0]
+    used = {**full, **resolved, "inferred_noise_factor": factor, "offline": offline}
     filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
     diagnostics = {
         **diag,
@@ -519,6 +463,7 @@ def _register(name: str, offline: bool, description: str) -> None:
         validators=ROBUST_VALIDATORS,
         description=description,
         causal=not offline,
+        live=None if offline else RobustStepper,
     )
 
 

@@ -6,8 +6,11 @@ Speed gate, bone gate, chain rule, re-acquisition after ``max_reject``, offline
 pseudo-measurements that carry a rejected joint with its parent
 (:func:`carry_with_parent`). The rules and their reasons are in
 :mod:`tobitkf.smoothing.robust` and docs/robust.md. Arrays are ``(T, J, 3)`` positions
-with NaN for missing samples and ``(T, J)`` accept masks; time is looped over, joints
-are vectorised.
+with NaN for missing samples and ``(T, J)`` accept masks.
+
+The rules are implemented once, as compiled kernels in
+:mod:`tobitkf.smoothing._robust_kernels` (imported on first use, so that importing
+tobitkf does not import numba); the functions here are their one-body forms.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ __all__ = [
     "enforce_chain",
     "gate_measurements",
     "joint_levels",
+    "joint_order",
+    "kernels",
     "region_values",
 ]
 
@@ -72,19 +77,48 @@ def region_values(topology: Any, values: Any, name: str) -> Array:
     return arr
 
 
+def kernels() -> Any:
+    """The compiled kernels module (imports numba on first use)."""
+    from tobitkf.smoothing import _robust_kernels
+
+    return _robust_kernels
+
+
+def joint_order(parents: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``(parents, order)`` as the kernels take them: int64 parents and the joints sorted
+    by depth in the tree (roots first)."""
+    par = np.ascontiguousarray(parents, dtype=np.int64)
+    levels = joint_levels(tuple(int(p) for p in par))
+    return par, np.ascontiguousarray(np.concatenate(levels), dtype=np.int64)
+
+
+def _gate_params(J: int, v_max: Any, margin: float, tol_abs: float = np.inf,
+                 tol_rel: float = np.inf) -> tuple[Array, Array]:  # fmt: skip
+    k = kernels()
+    pj = np.zeros((J, k.N_PJ))
+    pj[:, k.J_VMAX] = np.broadcast_to(np.asarray(v_max, dtype=float), (J,))
+    pf = np.zeros(k.N_PF)
+    pf[k.P_MARGIN], pf[k.P_TOL_ABS], pf[k.P_TOL_REL] = margin, tol_abs, tol_rel
+    return pj, pf
+
+
+def _body(a: Any, dtype: Any = float) -> NDArray[Any]:
+    """(T, J, ...) -> (T, 1, J, ...) contiguous, the kernels' layout."""
+    return np.ascontiguousarray(np.asarray(a, dtype=dtype)[:, None])
+
+
 def bone_lengths(positions: Array, parents: Any) -> Array:
-    """Median length of each joint's bone to its parent over frames, ``(J,)`` (NaN for roots)."""
+    """Median length of each joint's bone to its parent over frames (NaN for roots).
+
+    ``positions (T, ..., J, 3)`` gives ``(..., J)``: one length per joint of every body.
+    """
     pos = np.asarray(positions, dtype=float)
-    J = pos.shape[1]
-    out = np.full(J, np.nan)
-    for j, p in enumerate(parents):
-        if p < 0:
-            continue
-        d = np.linalg.norm(pos[:, j] - pos[:, p], axis=-1)
-        d = d[np.isfinite(d)]
-        if d.size:
-            out[j] = float(np.median(d))
-    return out
+    T, J = pos.shape[0], pos.shape[-2]
+    if T == 0 or pos.size == 0:
+        return np.full(pos.shape[1:-1], np.nan)
+    flat = np.ascontiguousarray(pos.reshape(T, -1, J, 3))
+    par, _ = joint_order(parents)
+    return kernels().bone_lengths_run(flat, par).reshape(pos.shape[1:-1])
 
 
 def gate_measurements(
@@ -112,9 +146,10 @@ def gate_measurements(
     bone_len : (J,) reference bone lengths (NaN: no bone check), or None for no bone gate.
     bone_tol_abs, bone_tol_rel : bone tolerance ``abs + rel * L``.
     online_bones : use, at frame t, the median of the bone lengths of the frames accepted
-        before t instead of ``bone_len`` (causal; the bone gate starts after 15 of them;
-        a joint re-locked by ``max_reject`` learns its bone length again, so wrong
-        first frames cannot lock it out).
+        before t (the last 600 of them, refreshed every 5 frames) instead of ``bone_len``
+        (causal; the bone gate starts after 15 of them; a joint re-locked by
+        ``max_reject`` learns its bone length again, so wrong first frames cannot lock
+        it out).
     max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
         its measurement moves plausibly from the previous frame's (no lock-out when the
         reference itself was wrong).
@@ -123,75 +158,18 @@ def gate_measurements(
     -------
     (T, J) bool, True = accepted.
     """
-    ys = np.asarray(ys, dtype=float)
-    T, J, _ = ys.shape
-    par = np.asarray(parents, dtype=int)
-    levels = joint_levels(tuple(int(p) for p in par))
-    acc = np.zeros((T, J), dtype=bool)
-    last = np.full((J, 3), np.nan)
-    last_t = np.full(J, np.nan)
-    prev_acc = np.zeros(J, dtype=bool)
-    rej_since = np.full(J, np.nan)
-    valid_all = np.isfinite(ys).all(axis=-1)
-    use_bones = bone_len is not None
-    hist: list[list[float]] = [[] for _ in range(J)]
-    L_cur = np.full(J, np.nan)
-    for t in range(T):
-        if online_bones and use_bones and t % 5 == 0:
-            for j in range(J):
-                if len(hist[j]) >= 15:
-                    L_cur[j] = float(np.median(hist[j][-600:]))
-        L = L_cur if online_bones else bone_len
-        tt = times[t]
-        dt_prev = times[t] - times[t - 1] if t > 0 else np.inf
-        acc_t = np.zeros(J, dtype=bool)
-        for idx in levels:
-            y = ys[t, idx]
-            valid = valid_all[t, idx]
-            d = np.linalg.norm(y - last[idx], axis=-1)
-            elapsed = tt - last_t[idx]
-            gate = v_max[idx] * elapsed + margin
-            has_last = np.isfinite(last_t[idx])
-            gate_ok = ~has_last | (d <= gate)
-            step_ok = prev_acc[idx] & (d <= v_max[idx] * dt_prev + margin)
-            if t > 0:
-                raw_step = np.linalg.norm(y - ys[t - 1, idx], axis=-1)
-                relock = (tt - rej_since[idx] > max_reject) & (
-                    raw_step <= v_max[idx] * dt_prev + margin
-                )
-            else:
-                relock = np.zeros(len(idx), dtype=bool)
-            p = par[idx]
-            is_root = p < 0
-            pp = np.where(is_root, 0, p)
-            parent_acc = np.where(is_root, True, acc_t[pp])
-            if use_bones:
-                blen = np.linalg.norm(y - ys[t, pp], axis=-1)
-                Lj = L[idx]
-                tol = bone_tol_abs + bone_tol_rel * Lj
-                bone_ok = ~np.isfinite(Lj) | ~(np.abs(blen - Lj) > tol)
-                bone_ok |= is_root
-            else:
-                bone_ok = np.ones(len(idx), dtype=bool)
-            ok = valid & ((gate_ok & np.where(parent_acc, bone_ok, step_ok)) | relock)
-            acc_t[idx] = ok
-            if online_bones and use_bones:
-                # a re-lock means the learnt bone length was wrong: learn it again
-                for k in np.flatnonzero(relock & ~(gate_ok & bone_ok & parent_acc)):
-                    hist[idx[k]] = []
-                    L_cur[idx[k]] = np.nan
-                for k in np.flatnonzero(ok & parent_acc & ~is_root):
-                    hist[idx[k]].append(float(blen[k]))
-        upd = acc_t
-        last[upd] = ys[t, upd]
-        last_t[upd] = tt
-        prev_acc = acc_t
-        valid_t = valid_all[t]
-        start = valid_t & ~acc_t & ~np.isfinite(rej_since)
-        rej_since[start] = tt
-        rej_since[acc_t] = np.nan
-        acc[t] = acc_t
-    return acc
+    y = _body(ys)
+    J = y.shape[2]
+    par, order = joint_order(parents)
+    pj, pf = _gate_params(J, v_max, margin, bone_tol_abs, bone_tol_rel)
+    L = np.full((1, J), np.nan) if bone_len is None else np.asarray(bone_len, float)[None]
+    k = kernels()
+    acc = k.gate_run(
+        y, np.ascontiguousarray(times, dtype=float), par, order, pj, pf,
+        np.ascontiguousarray(L), bone_len is not None, bool(online_bones), float(max_reject),
+        k.new_state(1, J, 0),
+    )  # fmt: skip
+    return acc[:, 0]
 
 
 def enforce_chain(
@@ -214,23 +192,14 @@ def enforce_chain(
     jump from it; the sweep runs forwards, then (unless ``backward=False``, the causal
     form used online) backwards, from the root outwards.
     """
-    out = acc.copy()
-    T = out.shape[0]
-    par = np.asarray(parents, dtype=int)
-    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
-    sweeps = [(range(1, T), -1), (range(T - 2, -1, -1), 1)]
-    for order, step in sweeps if backward else sweeps[:1]:
-        for t in order:
-            s = t + step
-            bound = v_max * abs(times[t] - times[s]) + margin
-            for idx in levels:
-                orphan = out[t, idx] & ~out[t, par[idx]]
-                if not orphan.any():
-                    continue
-                moved = np.linalg.norm(ys[t, idx] - ys[s, idx], axis=-1)
-                keep = out[s, idx] & (moved <= bound[idx])
-                out[t, idx] &= ~orphan | keep
-    return out
+    y = _body(ys)
+    par, order = joint_order(parents)
+    pj, _ = _gate_params(y.shape[2], v_max, margin)
+    out = kernels().enforce_chain_run(
+        _body(acc, bool), y, np.ascontiguousarray(times, dtype=float), par, order, pj,
+        float(margin), bool(backward),
+    )  # fmt: skip
+    return out[:, 0]
 
 
 def confirm_reacquisition(
@@ -244,31 +213,11 @@ def confirm_reacquisition(
     Inside a long failure a wrong sample sometimes passes the gates for a frame or two
     (its bone happens to fit); online we cannot look ahead, so we wait.
     """
-    out = acc.copy()
-    T, J = acc.shape
-    if min_run <= 0 or T < 2:
-        return out
-    rej_begin = np.full(J, np.nan)  # start of the current rejection stretch
-    conf_begin = np.full(J, np.nan)  # start of the current confirmation, if any
-    for t in range(T):
-        valid = ~missing[t]
-        r = valid & ~acc[t]
-        a = valid & acc[t]
-        # a rejection starts a stretch, or continues it and cancels its confirmation
-        rej_begin[r & np.isnan(rej_begin)] = times[t]
-        conf_begin[r] = np.nan
-        # the first accepted sample after a stretch: a long stretch needs confirmation
-        first = a & np.isfinite(rej_begin) & np.isnan(conf_begin)
-        long = first & (times[t] - rej_begin >= min_run)
-        conf_begin[long] = times[t]
-        rej_begin[first & ~long] = np.nan
-        waiting = a & np.isfinite(conf_begin)
-        still = waiting & (times[t] - conf_begin < min_run)
-        out[t, still] = False
-        done = waiting & ~still
-        conf_begin[done] = np.nan
-        rej_begin[done] = np.nan
-    return out
+    out = kernels().confirm_run(
+        _body(acc, bool), _body(missing, bool), np.ascontiguousarray(times, dtype=float),
+        float(min_run),
+    )  # fmt: skip
+    return out[:, 0]
 
 
 def carry_with_parent(ys: Array, acc: NDArray[np.bool_], parents: Any) -> tuple[Array, Array]:
@@ -286,27 +235,9 @@ def carry_with_parent(ys: Array, acc: NDArray[np.bool_], parents: Any) -> tuple[
         roots, no earlier offset, no parent position).
     radius : (T, J) length of the offset used (the bone length), NaN where no pseudo.
     """
-    T, J, _ = ys.shape
-    par = np.asarray(parents, dtype=int)
-    valid = np.isfinite(ys).all(axis=-1)
-    pseudo = np.full_like(ys, np.nan)
-    radius = np.full((T, J), np.nan)
-    anchor = np.where(acc[..., None], ys, np.nan)
-    off = np.full((J, 3), np.nan)
-    levels = [idx[par[idx] >= 0] for idx in joint_levels(tuple(int(p) for p in par))]
-    for t in range(T):
-        for idx in levels:
-            p = par[idx]
-            rej = valid[t, idx] & ~acc[t, idx]
-            cand = anchor[t, p] + off[idx]
-            put = rej & np.isfinite(cand).all(axis=-1)
-            if put.any():
-                pseudo[t, idx[put]] = cand[put]
-                anchor[t, idx[put]] = cand[put]
-                radius[t, idx[put]] = np.linalg.norm(off[idx[put]], axis=-1)
-            both = acc[t, idx] & acc[t, p]
-            off[idx[both]] = ys[t, idx[both]] - ys[t, p[both]]
-    return pseudo, radius
+    par, order = joint_order(parents)
+    pseudo, radius = kernels().carry_run(_body(ys), _body(acc, bool), par, order, False)
+    return pseudo[:, 0], radius[:, 0]
 
 
 def drop_short_runs(
@@ -319,22 +250,8 @@ def drop_short_runs(
     the whole bridge across the failure towards that one sample.  A re-acquisition is
     believed only when it lasts ``min_run`` seconds.
     """
-    out = acc.copy()
-    T, J = acc.shape
-    if T < 3 or min_run <= 0:
-        return out
-    for j in range(J):
-        a = acc[:, j]
-        edges = np.flatnonzero(np.diff(np.r_[0, a.astype(np.int8), 0]))
-        for s, e in zip(edges[::2], edges[1::2], strict=True):  # run [s, e)
-            if s == 0 or e >= T:
-                continue
-            # the neighbours of the run: last non-missing before, first after
-            before = np.flatnonzero(rejected[:s, j] | acc[:s, j])
-            after = np.flatnonzero(rejected[e:, j] | acc[e:, j])
-            if not (before.size and after.size):
-                continue
-            if rejected[before[-1], j] and rejected[e + after[0], j]:
-                if times[e - 1] - times[s] < min_run:
-                    out[s:e, j] = False
-    return out
+    out = kernels().drop_short_runs_run(
+        _body(acc, bool), _body(rejected, bool), np.ascontiguousarray(times, dtype=float),
+        float(min_run),
+    )  # fmt: skip
+    return out[:, 0]

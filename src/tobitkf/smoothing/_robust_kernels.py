@@ -1,0 +1,829 @@
+"""Compiled kernels of the robust smoothers (numba, ``cache=True``): the only implementation.
+
+Imported lazily by :mod:`tobitkf.smoothing.robust` and
+:mod:`tobitkf.smoothing.robust_gating` when a robust method runs, so that importing
+tobitkf (and ``tobitkf --help``) does not import numba. ``NUMBA_DISABLE_JIT=1`` runs the
+same code as plain Python (slow; for debugging).
+
+Layout: only time is a loop; the bodies of a recording (and several recordings stacked
+as bodies) are looped over inside the kernels. Every rule is written once, as a
+*frame* function (``gate_frame``, ``confirm_frame``, ``chain_frame``, ``carry_frame``)
+that updates an explicit state; the batch kernels (``*_run``) loop over time calling
+them. ``online_frames`` runs ``robust_online`` over the next frames of a stream with its
+state: the batch runner passes the whole recording, the live stepper one frame per
+call, so live equals batch exactly. The rules and their reasons are in
+:mod:`tobitkf.smoothing.robust` and docs/robust.md.
+
+Arrays: positions ``(T, B, J, 3)`` with NaN for missing samples, masks ``(T, B, J)``,
+``parents (J,)`` (-1 for roots) and ``order (J,)`` the joints sorted by depth in the tree
+(roots first), so that a joint's parent is always decided before the joint itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_jit = njit(cache=True, nogil=True)
+
+#: bone lengths remembered per joint by the online bone gate (median of the last ones)
+BONE_WINDOW = 600
+#: the online bone gate starts after this many accepted bones
+BONE_MIN_COUNT = 15
+#: the online bone length is refreshed every this many frames
+BONE_REFRESH = 5
+
+# float state per body and joint (sf[..., k])
+S_LAST_T = 0  # time of the last accepted sample (gate)
+S_REJ_SINCE = 1  # start of the current rejection (gate, for max_reject)
+S_L_CUR = 2  # online bone length (median of the window)
+S_REJ_BEGIN = 3  # start of the current rejection stretch (confirmation)
+S_CONF_BEGIN = 4  # start of the current confirmation
+N_SF = 5
+# bool state per body and joint (sb[..., k])
+B_PREV_ACC = 0  # accepted by the gate in the previous frame
+B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
+B_STARTED = 2  # the joint's filter has started
+B_PREV_OK = 3  # the filter was updated with an accepted sample in the previous frame
+N_SB = 4
+# parameters (pf[k])
+P_MARGIN = 0
+P_TOL_ABS = 1
+P_TOL_REL = 2
+P_MAX_REJECT = 3
+P_MIN_RUN = 4
+P_TAU = 5
+N_PF = 6
+# per-joint parameters (pj[j, k])
+J_VMAX = 0
+J_Q = 1  # OU velocity noise density
+J_R = 2  # measurement variance
+J_SD = 3  # measurement standard deviation
+J_V0 = 4  # initial velocity variance
+N_PJ = 5
+# int parameters (pi[k])
+I_BONES = 0
+I_CARRY = 1
+I_LOOKBACK = 2
+I_TWO_PASS = 3
+N_PI = 4
+
+
+# ------------------------------------------------------------------------------ small
+@_jit
+def _dist(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
+    d0, d1, d2 = a0 - b0, a1 - b1, a2 - b2
+    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@_jit
+def _copy2(dst: np.ndarray, src: np.ndarray) -> None:
+    """dst[...] = src for two-dimensional arrays (cheaper to compile than a slice copy)."""
+    for i in range(src.shape[0]):
+        for k in range(src.shape[1]):
+            dst[i, k] = src[i, k]
+
+
+@_jit
+def _finite3(a0: float, a1: float, a2: float) -> bool:
+    return math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2)
+
+
+@_jit
+def ou_coeffs(dt: float, tau: float, out: np.ndarray) -> None:
+    """``out = (a01, a11, q00, q01, q11)``: transition ``[[1, a01], [0, a11]]`` and unit-q
+    process noise of the integrated OU velocity model over one step ``dt`` (exact
+    discretisation; ``tau = inf`` is the constant-velocity model)."""
+    if not math.isfinite(tau):
+        out[0] = dt
+        out[1] = 1.0
+        out[2] = dt**3 / 3
+        out[3] = dt**2 / 2
+        out[4] = dt
+        return
+    rho = math.exp(-dt / tau)
+    om = -math.expm1(-dt / tau)  # 1 - rho, accurate for small steps
+    om2 = -math.expm1(-2 * dt / tau)  # 1 - rho^2
+    out[0] = tau * om
+    out[1] = rho
+    if dt < 1e-3 * tau:  # Q_xx cancels for dt << tau: the series dt^3/3 - dt^4/(4 tau)
+        out[2] = dt**3 / 3 - dt**4 / (4 * tau)
+    else:
+        out[2] = tau**2 * (dt - 2 * tau * om + 0.5 * tau * om2)
+    out[3] = 0.5 * tau**2 * om**2
+    out[4] = 0.5 * tau * om2
+
+
+@_jit
+def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
+    """``(T, 5)`` coefficients of :func:`ou_coeffs` for every step."""
+    T = steps.shape[0]
+    out = np.empty((T, 5))
+    for t in range(T):
+        ou_coeffs(steps[t], tau, out[t])
+    return out
+
+
+# ------------------------------------------------------------------------------ bones
+@_jit
+def _lower_bound(srt: np.ndarray, j: int, n: int, v: float) -> int:
+    """First index i < n with srt[j, i] >= v (n when none); srt[j, :n] sorted."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if srt[j, mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_jit
+def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+    """Append ``v`` to joint ``j``'s window of bone lengths (the oldest leaves when full);
+    ``srt[j, :n]`` stays sorted, ``ring[j]`` keeps the arrival order, ``cnt[j] = (n, write
+    position)``. Full window: the oldest value's slot in ``srt`` becomes a hole that moves
+    to where ``v`` belongs (only the values between the two move)."""
+    H = ring.shape[1]
+    n = cnt[j, 0]
+    pos = cnt[j, 1]
+    cnt[j, 1] = (pos + 1) % H
+    if n == H:
+        old = ring[j, pos]
+        ring[j, pos] = v
+        k = _lower_bound(srt, j, n, old)  # an element equal to old: the hole
+        if v >= old:
+            while k + 1 < n and srt[j, k + 1] < v:
+                srt[j, k] = srt[j, k + 1]
+                k += 1
+        else:
+            while k > 0 and srt[j, k - 1] > v:
+                srt[j, k] = srt[j, k - 1]
+                k -= 1
+        srt[j, k] = v
+        return
+    ring[j, pos] = v
+    k = n
+    while k > 0 and srt[j, k - 1] > v:
+        srt[j, k] = srt[j, k - 1]
+        k -= 1
+    srt[j, k] = v
+    cnt[j, 0] = n + 1
+
+
+@_jit
+def _window_median(srt: np.ndarray, j: int, n: int) -> float:
+    """Median of ``srt[j, :n]`` (sorted), as np.median takes it."""
+    if n % 2 == 1:
+        return srt[j, n // 2]
+    return (srt[j, n // 2 - 1] + srt[j, n // 2]) / 2
+
+
+@_jit
+def _median(a: np.ndarray, n: int) -> float:
+    """Median of ``a[:n]`` as np.median takes it (the mean of the two middle values for
+    even n); reorders ``a[:n]``. Quickselect with a three-way partition (many equal
+    values, as in hierarchy-converted skeletons, cost nothing)."""
+    k = (n - 1) // 2
+    lo, hi = 0, n - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        p0, p1, p2 = a[lo], a[mid], a[hi]
+        pivot = max(min(p0, p1), min(max(p0, p1), p2))  # median of three
+        lt, i, gt = lo, lo, hi
+        while i <= gt:
+            if a[i] < pivot:
+                a[lt], a[i] = a[i], a[lt]
+                lt += 1
+                i += 1
+            elif a[i] > pivot:
+                a[i], a[gt] = a[gt], a[i]
+                gt -= 1
+            else:
+                i += 1
+        if k < lt:
+            hi = lt - 1
+        elif k > gt:
+            lo = gt + 1
+        else:
+            break
+    # a[k] is the k-th smallest, everything after it is not smaller
+    if n % 2 == 1:
+        return a[k]
+    upper = a[k + 1]
+    for i in range(k + 2, n):
+        upper = min(upper, a[i])
+    return (a[k] + upper) / 2
+
+
+@_jit
+def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Median over frames of each joint's distance to its parent, ``(B, J)`` (NaN for
+    roots and for bones never seen: frames with a non-finite end are left out)."""
+    T, B, J = pos.shape[0], pos.shape[1], pos.shape[2]
+    out = np.full((B, J), np.nan)
+    buf = np.empty(T)
+    for b in range(B):
+        for j in range(J):
+            p = parents[j]
+            if p < 0:
+                continue
+            n = 0
+            for t in range(T):
+                d = _dist(pos[t, b, j, 0], pos[t, b, j, 1], pos[t, b, j, 2],
+                          pos[t, b, p, 0], pos[t, b, p, 1], pos[t, b, p, 2])  # fmt: skip
+                if math.isfinite(d):
+                    buf[n] = d
+                    n += 1
+            if n > 0:
+                out[b, j] = _median(buf, n)
+    return out
+
+
+# ------------------------------------------------------------------------------ gate
+@_jit
+def gate_frame(
+    y: np.ndarray,  # (J, 3) this frame, NaN = missing
+    yprev: np.ndarray,  # (J, 3) previous frame (ignored when not has_prev)
+    has_prev: bool,
+    tt: float,
+    dt_prev: float,  # tt - time of the previous frame
+    tidx: int,  # frame index (the online bone length is refreshed every BONE_REFRESH)
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    L_fixed: np.ndarray,  # (J,) offline bone lengths (NaN = no check)
+    use_bones: bool,
+    online: bool,  # bone lengths learnt from the accepted frames so far
+    max_reject: float,
+    last: np.ndarray,  # state (J, 3): last accepted sample
+    sf: np.ndarray,  # state (J, N_SF)
+    sb: np.ndarray,  # state (J, N_SB)
+    h_ring: np.ndarray,  # state (J, BONE_WINDOW)
+    h_sorted: np.ndarray,  # state (J, BONE_WINDOW)
+    h_cnt: np.ndarray,  # state (J, 2)
+    acc: np.ndarray,  # out (J,) accepted
+) -> None:
+    """Speed gate, bone gate, chain rule and re-acquisition for one frame (rules 1-4)."""
+    J = parents.shape[0]
+    margin = pf[P_MARGIN]
+    tol_abs = pf[P_TOL_ABS]
+    tol_rel = pf[P_TOL_REL]
+    if online and use_bones and tidx % BONE_REFRESH == 0:
+        for j in range(J):
+            if h_cnt[j, 0] >= BONE_MIN_COUNT:
+                sf[j, S_L_CUR] = _window_median(h_sorted, j, h_cnt[j, 0])
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        is_root = p < 0
+        pp = 0 if is_root else p
+        vmax = pj[j, J_VMAX]
+        valid = _finite3(y[j, 0], y[j, 1], y[j, 2])
+        d = _dist(y[j, 0], y[j, 1], y[j, 2], last[j, 0], last[j, 1], last[j, 2])
+        last_t = sf[j, S_LAST_T]
+        gate = vmax * (tt - last_t) + margin
+        gate_ok = (not math.isfinite(last_t)) or (d <= gate)
+        step_ok = sb[j, B_PREV_ACC] and (d <= vmax * dt_prev + margin)
+        relock = False
+        if has_prev:
+            raw_step = _dist(y[j, 0], y[j, 1], y[j, 2], yprev[j, 0], yprev[j, 1], yprev[j, 2])
+            relock = (tt - sf[j, S_REJ_SINCE] > max_reject) and (
+                raw_step <= vmax * dt_prev + margin
+            )
+        parent_acc = True if is_root else acc[p]
+        bone_ok = True
+        blen = math.nan
+        if use_bones:
+            blen = _dist(y[j, 0], y[j, 1], y[j, 2], y[pp, 0], y[pp, 1], y[pp, 2])
+            Lj = sf[j, S_L_CUR] if online else L_fixed[j]
+            tol = tol_abs + tol_rel * Lj
+            bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
+        ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
+        acc[j] = ok
+        if online and use_bones:
+            # a re-lock means the learnt bone length was wrong: learn it again
+            if relock and not (gate_ok and bone_ok and parent_acc):
+                h_cnt[j, 0] = 0
+                h_cnt[j, 1] = 0
+                sf[j, S_L_CUR] = math.nan
+            if ok and parent_acc and not is_root:
+                _bone_push(h_ring, h_sorted, h_cnt, j, blen)
+    for j in range(J):
+        a = acc[j]
+        if a:
+            last[j, 0] = y[j, 0]
+            last[j, 1] = y[j, 1]
+            last[j, 2] = y[j, 2]
+            sf[j, S_LAST_T] = tt
+            sf[j, S_REJ_SINCE] = math.nan
+        elif _finite3(y[j, 0], y[j, 1], y[j, 2]) and math.isnan(sf[j, S_REJ_SINCE]):
+            sf[j, S_REJ_SINCE] = tt
+        sb[j, B_PREV_ACC] = a
+
+
+def new_state(B: int, J: int, lookback: int) -> tuple:
+    """The state of ``B`` bodies of ``J`` joints before their first frame (plain numpy:
+    nothing to compile)."""
+    K = lookback + 1
+    last = np.full((B, J, 3), np.nan)
+    yprev = np.full((B, J, 3), np.nan)
+    off = np.full((B, J, 3), np.nan)
+    sf = np.full((B, J, N_SF), np.nan)
+    sb = np.zeros((B, J, N_SB), dtype=np.bool_)
+    h_ring = np.zeros((B, J, BONE_WINDOW))
+    h_sorted = np.zeros((B, J, BONE_WINDOW))
+    h_cnt = np.zeros((B, J, 2), dtype=np.int64)
+    x = np.zeros((B, J, 3, 2))
+    P = np.zeros((B, J, 2, 2))
+    xs_h = np.zeros((K, B, J, 3, 2))
+    Ps_h = np.zeros((K, B, J, 4))  # p00, p01, p10, p11
+    ok_h = np.zeros((K, B, J), dtype=np.bool_)
+    coef_h = np.zeros((K, 5))
+    clock = np.zeros(2)  # frames seen, time of the last frame
+    return (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+            clock)  # fmt: skip
+
+
+def new_work(B: int, J: int) -> tuple:
+    """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
+    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((2, B, J), dtype=np.bool_)
+
+
+@_jit
+def gate_run(
+    ys: np.ndarray,
+    times: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    L_fixed: np.ndarray,  # (B, J)
+    use_bones: bool,
+    online: bool,
+    max_reject: float,
+    st: tuple,  # new_state(B, J, 0)
+) -> np.ndarray:
+    """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    acc = np.zeros((T, B, J), dtype=np.bool_)
+    last, sf, sb, h_ring, h_sorted, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
+    for b in range(B):
+        for t in range(T):
+            has_prev = t > 0
+            dt_prev = times[t] - times[t - 1] if has_prev else math.inf
+            prev = ys[t - 1 if has_prev else t, b]
+            gate_frame(ys[t, b], prev, has_prev, times[t], dt_prev, t, parents, order, pj, pf,
+                       L_fixed[b], use_bones, online, max_reject, last[b], sf[b], sb[b],
+                       h_ring[b], h_sorted[b], h_cnt[b], acc[t, b])  # fmt: skip
+    return acc
+
+
+# ------------------------------------------------------------------------------ offline rules
+@_jit
+def drop_short_runs_run(
+    acc: np.ndarray, rejected: np.ndarray, times: np.ndarray, min_run: float
+) -> np.ndarray:
+    """Accepted runs shorter than ``min_run`` between two rejections are rejected."""
+    out = acc.copy()
+    T, B, J = acc.shape[0], acc.shape[1], acc.shape[2]
+    if T < 3 or min_run <= 0:
+        return out
+    nxt = np.empty(T + 1, dtype=np.int8)  # status of the first non-missing sample >= t
+    for b in range(B):
+        for j in range(J):
+            nxt[T] = -1  # none
+            for t in range(T - 1, -1, -1):
+                if rejected[t, b, j]:
+                    nxt[t] = 1
+                elif acc[t, b, j]:
+                    nxt[t] = 0
+                else:
+                    nxt[t] = nxt[t + 1]
+            before = -1  # status of the last non-missing sample before t
+            t = 0
+            while t < T:
+                if not acc[t, b, j]:
+                    if rejected[t, b, j]:
+                        before = 1
+                    t += 1
+                    continue
+                s = t
+                while t < T and acc[t, b, j]:
+                    t += 1
+                e = t  # the run is [s, e)
+                if s > 0 and e < T and before == 1 and nxt[e] == 1:
+                    if times[e - 1] - times[s] < min_run:
+                        for i in range(s, e):
+                            out[i, b, j] = False
+                before = 0
+    return out
+
+
+@_jit
+def chain_frame(
+    out_t: np.ndarray,  # (J,) accept mask of frame t, updated
+    out_s: np.ndarray,  # (J,) accept mask of the neighbouring frame s
+    y_t: np.ndarray,
+    y_s: np.ndarray,
+    dt: float,  # |time t - time s|
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    margin: float,
+) -> None:
+    """The chain rule on a combined mask: a joint whose parent is rejected stays accepted
+    only if it was accepted in the neighbouring frame and did not jump from it."""
+    for k in range(order.shape[0]):
+        j = order[k]
+        p = parents[j]
+        if p < 0 or not out_t[j] or out_t[p]:
+            continue
+        moved = _dist(y_t[j, 0], y_t[j, 1], y_t[j, 2], y_s[j, 0], y_s[j, 1], y_s[j, 2])
+        if not (out_s[j] and moved <= pj[j, J_VMAX] * dt + margin):
+            out_t[j] = False
+
+
+@_jit
+def enforce_chain_run(
+    acc: np.ndarray,
+    ys: np.ndarray,
+    times: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    margin: float,
+    backward: bool,
+) -> np.ndarray:
+    """:func:`chain_frame` forwards in time, then (``backward``) backwards."""
+    out = acc.copy()
+    T, B = acc.shape[0], acc.shape[1]
+    for b in range(B):
+        for t in range(1, T):
+            chain_frame(out[t, b], out[t - 1, b], ys[t, b], ys[t - 1, b],
+                        abs(times[t] - times[t - 1]), parents, order, pj, margin)  # fmt: skip
+        if backward:
+            for t in range(T - 2, -1, -1):
+                chain_frame(out[t, b], out[t + 1, b], ys[t, b], ys[t + 1, b],
+                            abs(times[t] - times[t + 1]), parents, order, pj, margin)  # fmt: skip
+    return out
+
+
+# ------------------------------------------------------------------------------ online rules
+@_jit
+def confirm_frame(
+    acc_t: np.ndarray,  # (J,) gate decision of this frame
+    missing_t: np.ndarray,
+    tt: float,
+    min_run: float,
+    sf: np.ndarray,  # state (J, N_SF)
+    out_t: np.ndarray,  # (J,) confirmed decision
+) -> None:
+    """After a rejection of at least ``min_run``, a joint is believed again only once its
+    measurements have passed the gates for ``min_run``."""
+    for j in range(acc_t.shape[0]):
+        out_t[j] = acc_t[j]
+        if missing_t[j]:
+            continue
+        if not acc_t[j]:
+            # a rejection starts a stretch, or continues it and cancels its confirmation
+            if math.isnan(sf[j, S_REJ_BEGIN]):
+                sf[j, S_REJ_BEGIN] = tt
+            sf[j, S_CONF_BEGIN] = math.nan
+            continue
+        if math.isfinite(sf[j, S_REJ_BEGIN]) and math.isnan(sf[j, S_CONF_BEGIN]):
+            # the first accepted sample after a stretch: a long stretch needs confirmation
+            if tt - sf[j, S_REJ_BEGIN] >= min_run:
+                sf[j, S_CONF_BEGIN] = tt
+            else:
+                sf[j, S_REJ_BEGIN] = math.nan
+        if math.isfinite(sf[j, S_CONF_BEGIN]):
+            if tt - sf[j, S_CONF_BEGIN] < min_run:
+                out_t[j] = False
+            else:
+                sf[j, S_CONF_BEGIN] = math.nan
+                sf[j, S_REJ_BEGIN] = math.nan
+
+
+@_jit
+def confirm_run(
+    acc: np.ndarray, missing: np.ndarray, times: np.ndarray, min_run: float
+) -> np.ndarray:
+    """:func:`confirm_frame` over time, ``(T, B, J)``."""
+    T, B, J = acc.shape[0], acc.shape[1], acc.shape[2]
+    out = acc.copy()
+    if min_run <= 0:
+        return out
+    sf = np.full((B, J, N_SF), np.nan)
+    for b in range(B):
+        for t in range(T):
+            confirm_frame(acc[t, b], missing[t, b], times[t], min_run, sf[b], out[t, b])
+    return out
+
+
+# ------------------------------------------------------------------------------ carrying
+@_jit
+def carry_frame(
+    y: np.ndarray,  # (J, 3)
+    acc: np.ndarray,  # (J,)
+    parents: np.ndarray,
+    order: np.ndarray,
+    off: np.ndarray,  # state (J, 3): offset from the parent when both were last accepted
+    anchor: np.ndarray,  # scratch (J, 3)
+    pseudo: np.ndarray,  # out (J, 3), NaN where none
+    radius: np.ndarray,  # out (J,), NaN where none
+) -> None:
+    """A rejected joint placed at its parent (measured or itself carried) plus its last
+    good offset from it; ``radius`` is the offset's length."""
+    J = parents.shape[0]
+    for j in range(J):
+        for a in range(3):
+            anchor[j, a] = y[j, a] if acc[j] else math.nan
+            pseudo[j, a] = math.nan
+        radius[j] = math.nan
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        if p < 0:
+            continue
+        if _finite3(y[j, 0], y[j, 1], y[j, 2]) and not acc[j]:
+            c0 = anchor[p, 0] + off[j, 0]
+            c1 = anchor[p, 1] + off[j, 1]
+            c2 = anchor[p, 2] + off[j, 2]
+            if math.isfinite(c0) and math.isfinite(c1) and math.isfinite(c2):
+                pseudo[j, 0] = anchor[j, 0] = c0
+                pseudo[j, 1] = anchor[j, 1] = c1
+                pseudo[j, 2] = anchor[j, 2] = c2
+                radius[j] = _dist(off[j, 0], off[j, 1], off[j, 2], 0.0, 0.0, 0.0)
+        if acc[j] and acc[p]:
+            for a in range(3):
+                off[j, a] = y[j, a] - y[p, a]
+
+
+@_jit
+def carry_run(
+    ys: np.ndarray, acc: np.ndarray, parents: np.ndarray, order: np.ndarray, reverse: bool
+) -> tuple:
+    """:func:`carry_frame` over time (backwards in time with ``reverse``)."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    pseudo = np.full((T, B, J, 3), np.nan)
+    radius = np.full((T, B, J), np.nan)
+    off = np.full((J, 3), np.nan)
+    anchor = np.empty((J, 3))
+    for b in range(B):
+        off.fill(np.nan)
+        for i in range(T):
+            t = T - 1 - i if reverse else i
+            carry_frame(ys[t, b], acc[t, b], parents, order, off, anchor, pseudo[t, b],
+                        radius[t, b])  # fmt: skip
+    return pseudo, radius
+
+
+# ------------------------------------------------------------------------------ OU filter
+@_jit
+def _predict_P(
+    p00: float, p01: float, p10: float, p11: float, c: np.ndarray, k: int, q: float
+) -> tuple:
+    """A P Aᵀ + q Q with A, Q from the coefficients ``c[k]`` (:func:`ou_coeffs`)."""
+    a, r = c[k, 0], c[k, 1]
+    m00 = p00 + a * p10
+    m01 = p01 + a * p11
+    m10 = r * p10
+    m11 = r * p11
+    return (m00 + m01 * a + q * c[k, 2], m01 * r + q * c[k, 3], m10 + m11 * a + q * c[k, 3],
+            m11 * r + q * c[k, 4])  # fmt: skip
+
+
+@_jit
+def _update_P(p00: float, p01: float, p10: float, p11: float, r: float) -> tuple:
+    """Kalman gain (k0, k1) for H = [1, 0] and variance r, and the updated P
+    (symmetrised): ``(k0, k1, p00, p01, p10, p11)``."""
+    S = p00 + r
+    k0 = p00 / S
+    k1 = p10 / S
+    n00 = p00 - k0 * p00
+    n01 = p01 - k0 * p01
+    n10 = p10 - k1 * p00
+    n11 = p11 - k1 * p01
+    s = 0.5 * (n01 + n10)
+    return k0, k1, n00, s, s, n11
+
+
+@_jit
+def _rts_gain(f: np.ndarray, p: np.ndarray, c: np.ndarray, t: int) -> tuple:
+    """Gᵀ = (P⁻_{t+1})⁻¹ A_{t+1} P_t from the filtered ``f[t]`` and the predicted
+    ``p[t + 1]`` covariances (rows of four: p00, p01, p10, p11)."""
+    a, r = c[t + 1, 0], c[t + 1, 1]
+    f00, f01, f10, f11 = f[t, 0], f[t, 1], f[t, 2], f[t, 3]
+    m00 = f00 + a * f10  # A P_t
+    m01 = f01 + a * f11
+    m10 = r * f10
+    m11 = r * f11
+    p00, p01, p10, p11 = p[t + 1, 0], p[t + 1, 1], p[t + 1, 2], p[t + 1, 3]
+    det = p00 * p11 - p01 * p10
+    if det != 0.0:
+        return ((p11 * m00 - p01 * m10) / det, (p11 * m01 - p01 * m11) / det,
+                (p00 * m10 - p10 * m00) / det, (p00 * m11 - p10 * m01) / det)  # fmt: skip
+    # singular P⁻ (rank <= 1): the minimum-norm gain, P⁺ = P / trace²
+    tr = p00 + p11
+    w = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
+    return (w * (p00 * m00 + p01 * m10), w * (p00 * m01 + p01 * m11),
+            w * (p10 * m00 + p11 * m10), w * (p10 * m01 + p11 * m11))  # fmt: skip
+
+
+@_jit
+def ou_smooth_run(
+    yk: np.ndarray,  # (T, B, J, 3) accepted or carried samples, NaN elsewhere
+    rvar: np.ndarray,  # (T, B, J) measurement variance of each sample
+    steps: np.ndarray,
+    pj: np.ndarray,
+    tau: float,
+) -> np.ndarray:
+    """OU-velocity Kalman filter and RTS smoother per axis, ``(T, B, J, 3)``.
+
+    Started at frame 0 from the joint's first sample (velocity 0, P = diag(r, v0)); the
+    covariances are shared by the three axes (same variances, same missing samples).
+    """
+    T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
+    est = np.empty((T, B, J, 3))
+    if T == 0:
+        return est
+    coef = ou_table(steps, tau)
+    xf = np.empty((T, 3, 2))
+    xp = np.empty((T, 3, 2))
+    Pf = np.empty((T, 4))
+    Pp = np.empty((T, 4))
+    x = np.zeros((3, 2))
+    for b in range(B):
+        for j in range(J):
+            q = pj[j, J_Q]
+            first = -1
+            for t in range(T):
+                if math.isfinite(yk[t, b, j, 0]):
+                    first = t
+                    break
+            for i in range(3):
+                x[i, 0] = yk[first, b, j, i] if first >= 0 else 0.0
+                x[i, 1] = 0.0
+            p00, p01, p10, p11 = pj[j, J_R], 0.0, 0.0, pj[j, J_V0]
+            for t in range(T):
+                if t > 0:  # frame 0 starts at x0 itself
+                    a, r = coef[t, 0], coef[t, 1]
+                    for i in range(3):
+                        x[i, 0], x[i, 1] = x[i, 0] + x[i, 1] * a, x[i, 1] * r
+                    p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef, t, q)
+                    p01 = p10 = 0.5 * (p01 + p10)
+                for i in range(3):
+                    xp[t, i, 0], xp[t, i, 1] = x[i, 0], x[i, 1]
+                Pp[t, 0], Pp[t, 1], Pp[t, 2], Pp[t, 3] = p00, p01, p10, p11
+                if math.isfinite(yk[t, b, j, 0]):
+                    k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, rvar[t, b, j])
+                    for i in range(3):
+                        e = yk[t, b, j, i] - x[i, 0]
+                        x[i, 0] += k0 * e
+                        x[i, 1] += k1 * e
+                for i in range(3):
+                    xf[t, i, 0], xf[t, i, 1] = x[i, 0], x[i, 1]
+                Pf[t, 0], Pf[t, 1], Pf[t, 2], Pf[t, 3] = p00, p01, p10, p11
+            # RTS, x becoming the smoothed state: x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
+            for i in range(3):
+                est[T - 1, b, j, i] = x[i, 0]
+            for t in range(T - 2, -1, -1):
+                g00, g01, g10, g11 = _rts_gain(Pf, Pp, coef, t)
+                for i in range(3):
+                    d0 = x[i, 0] - xp[t + 1, i, 0]
+                    d1 = x[i, 1] - xp[t + 1, i, 1]
+                    # G = Gtᵀ: G[0, :] = (g00, g10), G[1, :] = (g01, g11)
+                    x[i, 0] = xf[t, i, 0] + (g00 * d0 + g10 * d1)
+                    x[i, 1] = xf[t, i, 1] + (g01 * d0 + g11 * d1)
+                    est[t, b, j, i] = x[i, 0]
+    return est
+
+
+# ------------------------------------------------------------------------------ online
+@_jit
+def online_frames(
+    ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
+    missing_n: np.ndarray,  # (n, B, J)
+    rinf_n: np.ndarray,  # (n, B, J) variance multiplier of INFERRED samples (else 1)
+    times: np.ndarray,  # (n,) time of each frame
+    steps: np.ndarray,  # (n,) time step of the filter before each frame
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    pi: np.ndarray,
+    st: tuple,  # new_state(B, J, lookback), carried from call to call
+    scratch: np.ndarray,  # work (2, J, 3)
+    scratch1: np.ndarray,  # work (2, J)
+    acc: np.ndarray,  # work (2, B, J)
+    out_n: np.ndarray,  # out (n, B, J, 3)
+    rejected_n: np.ndarray,  # out (n, B, J)
+) -> None:
+    """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
+    filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
+    batch runner passes a whole recording, the live stepper one frame per call."""
+    (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+     clock) = st  # fmt: skip
+    B, J = ys.shape[1], ys.shape[2]
+    for f in range(ys.shape[0]):
+        y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
+        tt, dt = times[f], steps[f]
+        out, rejected = out_n[f], rejected_n[f]
+        tidx = int(clock[0])
+        has_prev = tidx > 0
+        dt_prev = tt - clock[1] if has_prev else math.inf
+        lookback = pi[I_LOOKBACK]
+        K = lookback + 1
+        slot = tidx % K
+        q_c = coef_h[slot]
+        ou_coeffs(dt, pf[P_TAU], q_c)
+        min_run = pf[P_MIN_RUN]
+        use_bones = pi[I_BONES] != 0
+        carry = pi[I_CARRY] != 0
+        anchor = scratch[0]
+        pseudo = scratch[1]
+        radius = scratch1[0]
+        no_lengths = scratch1[1]  # the online gate learns its bone lengths (unused)
+        for b in range(B):
+            gate = acc[0, b]
+            final = acc[1, b]
+            radius.fill(np.nan)
+            gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
+                       no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
+                       h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
+            if min_run > 0:
+                confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
+                if has_prev:
+                    prev_final = sb[b, :, B_PREV_FINAL].copy()
+                    chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
+                                pj, pf[P_MARGIN])  # fmt: skip
+            else:
+                for j in range(J):
+                    final[j] = gate[j]
+            if carry:
+                carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
+            # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
+            for j in range(J):
+                a = final[j]
+                rejected[b, j] = not (a or missing[b, j])
+                carried = carry and not a and math.isfinite(radius[j])
+                started = sb[b, j, B_STARTED]
+                q = pj[j, J_Q]
+                r = pj[j, J_R] * rinf[b, j]
+                if carried:
+                    r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
+                p00, p01, p10, p11 = P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1]
+                # a rejection starts: drop the last `lookback` accepted frames from the state
+                if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
+                    s0 = (tidx - lookback - 1) % K
+                    if ok_h[s0, b, j]:
+                        for i in range(3):
+                            x[b, j, i, 0] = xs_h[s0, b, j, i, 0]
+                            x[b, j, i, 1] = xs_h[s0, b, j, i, 1]
+                        p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
+                            Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
+                        for kk in range(tidx - lookback, tidx):
+                            c = kk % K
+                            for i in range(3):
+                                x[b, j, i, 0], x[b, j, i, 1] = (
+                                    x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
+                                    x[b, j, i, 1] * coef_h[c, 1],
+                                )
+                            p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
+                if has_prev and started:
+                    for i in range(3):
+                        x[b, j, i, 0], x[b, j, i, 1] = (
+                            x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
+                            x[b, j, i, 1] * coef_h[slot, 1],
+                        )
+                    p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
+                if a and not started:  # the filter starts at the sample itself
+                    for i in range(3):
+                        x[b, j, i, 0], x[b, j, i, 1] = y[b, j, i], 0.0
+                    p00, p01, p10, p11 = r, 0.0, 0.0, pj[j, J_V0]
+                    sb[b, j, B_STARTED] = True
+                elif started and (a or carried):
+                    k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, r)
+                    for i in range(3):
+                        e = (y[b, j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
+                        x[b, j, i, 0] += k0 * e
+                        x[b, j, i, 1] += k1 * e
+                P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
+                for i in range(3):
+                    xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
+                Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
+                Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
+                ok_h[slot, b, j] = a
+                sb[b, j, B_PREV_OK] = a
+                sb[b, j, B_PREV_FINAL] = a
+                started = sb[b, j, B_STARTED]
+                for i in range(3):
+                    # nothing accepted yet: the measurement as it is (NaN when missing)
+                    out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
+            _copy2(yprev[b], y[b])
+        clock[0] = tidx + 1
+        clock[1] = tt
