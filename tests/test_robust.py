@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import tobitkf as tk
 from conftest import data_file
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
@@ -438,7 +439,7 @@ def test_kimore_robust_never_jumps_more_than_raw(exercise):
 
 
 # ----------------------------------------------------------------------------- references
-def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None):
+def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None, with_sd=False):
     """The OU-velocity filter (+ RTS) per axis by the package's generic Kalman core.
 
     ``ys (T, J, 3)`` NaN where missing; nothing is rejected; INFERRED samples get
@@ -457,6 +458,7 @@ def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None):
         y[drop] = np.nan
     rs = np.where(states == TrackingState.INFERRED, factor, 1.0)
     means = np.full((T, J, 3), np.nan)
+    sds = np.full((T, J), np.nan)
     for j in range(J):
         f = int(np.argmax(np.isfinite(ys[:, j, 0])))  # the first sample
         s = 0 if offline else f
@@ -471,9 +473,10 @@ def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None):
                                R=np.array([[r]]), x0=x0, P0=P0)  # fmt: skip
         scale = np.broadcast_to(rs[s:, j, None, None], (T - s, 3, 1))
         res = kalman_filter(model, yj[..., None], A_seq=Aj, Q_seq=Qj, R_scale=scale)
-        mj = (rts_smooth(model, res).means if offline else res.means)[..., 0]
-        means[f:, j] = mj[f - s :]
-    return means
+        post = rts_smooth(model, res) if offline else res
+        means[f:, j] = post.means[..., 0][f - s :]
+        sds[f:, j] = np.sqrt(post.variances[:, 0, 0])[f - s :]  # axis x (the axes share it)
+    return (means, sds) if with_sd else means
 
 
 @pytest.mark.parametrize("offline", [True, False])
@@ -490,9 +493,15 @@ def test_ou_smoother_equals_the_generic_kalman_core_when_nothing_is_rejected(off
     params = dict(v_max=1e6, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=0)
     out = robust_smooth(_seq(ys, states), offline=offline, **params)
     assert not out.metadata["diagnostics"]["rejected"].any()
-    ref = _ou_reference(ys, states, tau, 2 * spd**2 / tau, sd**2, 4.0, offline)
+    ref, ref_sd = _ou_reference(
+        ys, states, tau, 2 * spd**2 / tau, sd**2, 4.0, offline, with_sd=True
+    )
     np.testing.assert_array_equal(np.isnan(out.positions), np.isnan(ref))
     np.testing.assert_allclose(out.positions, ref, rtol=0, atol=1e-12, equal_nan=True)
+    # the posterior standard deviation is the core's (filtered online, smoothed offline)
+    np.testing.assert_allclose(out.std, ref_sd, rtol=1e-9, atol=0, equal_nan=True)
+    via_smooth = tk.smooth(_seq(ys, states), "robust" if offline else "robust_online", **params)
+    np.testing.assert_allclose(via_smooth.std, ref_sd, rtol=1e-9, atol=0, equal_nan=True)
 
 
 def test_online_lookback_drops_the_last_frames_before_a_rejection_from_the_state():

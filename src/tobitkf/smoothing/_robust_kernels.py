@@ -641,11 +641,13 @@ def ou_smooth_run(
     steps: np.ndarray,
     pj: np.ndarray,
     tau: float,
+    var: np.ndarray,  # out (T, B, J): smoothed position variance (shared by the axes)
 ) -> np.ndarray:
     """OU-velocity Kalman filter and RTS smoother per axis, ``(T, B, J, 3)``.
 
     Started at frame 0 from the joint's first sample (velocity 0, P = diag(r, v0)); the
     covariances are shared by the three axes (same variances, same missing samples).
+    The smoothed position variance of each sample goes into ``var``.
     """
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
     est = np.empty((T, B, J, 3))
@@ -688,11 +690,24 @@ def ou_smooth_run(
                 for i in range(3):
                     xf[t, i, 0], xf[t, i, 1] = x[i, 0], x[i, 1]
                 Pf[t, 0], Pf[t, 1], Pf[t, 2], Pf[t, 3] = p00, p01, p10, p11
-            # RTS, x becoming the smoothed state: x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1})
+            # RTS, x becoming the smoothed state: x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
+            # S the smoothed covariance: S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ
             for i in range(3):
                 est[T - 1, b, j, i] = x[i, 0]
+            s00, s01, s10, s11 = Pf[T - 1, 0], Pf[T - 1, 1], Pf[T - 1, 2], Pf[T - 1, 3]
+            var[T - 1, b, j] = s00
             for t in range(T - 2, -1, -1):
                 g00, g01, g10, g11 = _rts_gain(Pf, Pp, coef, t)
+                d00, d01 = s00 - Pp[t + 1, 0], s01 - Pp[t + 1, 1]
+                d10, d11 = s10 - Pp[t + 1, 2], s11 - Pp[t + 1, 3]
+                # G = [[g00, g10], [g01, g11]]; M = G D, S = P + M Gᵀ
+                m00, m01 = g00 * d00 + g10 * d10, g00 * d01 + g10 * d11
+                m10, m11 = g01 * d00 + g11 * d10, g01 * d01 + g11 * d11
+                s00 = Pf[t, 0] + m00 * g00 + m01 * g10
+                s01 = Pf[t, 1] + m00 * g01 + m01 * g11
+                s10 = Pf[t, 2] + m10 * g00 + m11 * g10
+                s11 = Pf[t, 3] + m10 * g01 + m11 * g11
+                var[t, b, j] = s00
                 for i in range(3):
                     d0 = x[i, 0] - xp[t + 1, i, 0]
                     d1 = x[i, 1] - xp[t + 1, i, 1]
@@ -722,6 +737,7 @@ def online_frames(
     acc: np.ndarray,  # work (2, B, J)
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
+    var_n: np.ndarray,  # out (n, B, J): filtered position variance (NaN before the start)
 ) -> None:
     """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
@@ -732,7 +748,7 @@ def online_frames(
     for f in range(ys.shape[0]):
         y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
         tt, dt = times[f], steps[f]
-        out, rejected = out_n[f], rejected_n[f]
+        out, rejected, var = out_n[f], rejected_n[f], var_n[f]
         tidx = int(clock[0])
         has_prev = tidx > 0
         dt_prev = tt - clock[1] if has_prev else math.inf
@@ -821,6 +837,7 @@ def online_frames(
                 sb[b, j, B_PREV_OK] = a
                 sb[b, j, B_PREV_FINAL] = a
                 started = sb[b, j, B_STARTED]
+                var[b, j] = p00 if started else np.nan
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
                     out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]

@@ -227,11 +227,12 @@ def _offline(
     setup: _Setup,
     params: dict[str, Any],
     L_fixed: Array,
-) -> tuple[Array, NDArray[np.bool_]]:
+) -> tuple[Array, NDArray[np.bool_], Array]:
     """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
 
     One kernel call per stage for all bodies (compiling them as one would take longer).
-    Returns ``(est (T, B, J, 3), rejected (T, B, J))``.
+    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J))``, ``var`` the
+    smoothed position variance (per axis; the axes share it).
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
@@ -263,12 +264,16 @@ def _offline(
         with np.errstate(invalid="ignore"):
             scale = np.maximum(1.0, (radius / pj[:, k.J_SD]) ** 2)
         rvar = np.where(carried, r * scale, rvar)
-    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]))
+    var = np.empty(missing.shape)
+    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]), var)
     # no estimate before a joint's first valid sample; joints never accepted stay raw
-    est[np.cumsum(~missing, axis=0) == 0] = np.nan
+    before = np.cumsum(~missing, axis=0) == 0
+    est[before] = np.nan
+    var[before] = np.nan
     never = ~acc.any(axis=0)
     est[:, never] = ys[:, never]
-    return est, rejected
+    var[:, never] = np.nan  # raw, not smoothed: no posterior
+    return est, rejected, var
 
 
 def _robust_bodies(
@@ -281,11 +286,11 @@ def _robust_bodies(
     params: dict[str, Any],
     factor: float,
     offline: bool,
-) -> tuple[Array, list[dict[str, Any]], dict[str, Any]]:
+) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any]]:
     """Gate and smooth every body at once: ys (T, B, J, 3) NaN where missing.
 
-    Returns the estimates, one diagnostics dict per body and the resolved per-joint
-    parameters.
+    Returns the estimates, their posterior standard deviations (T, B, J), one
+    diagnostics dict per body and the resolved per-joint parameters.
     """
     T, B, J = missing.shape
     setup = _Setup(topo, params)
@@ -298,12 +303,13 @@ def _robust_bodies(
     rinf = _inferred_scale(states, missing, factor)
     if offline:
         L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
-        est, rejected = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
+        est, rejected, var = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
     else:
         state = k.new_state(B, J, int(params["lookback"]))
         est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
+        var = np.empty((T, B, J))
         k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
-                        *k.new_work(B, J), est, rejected)  # fmt: skip
+                        *k.new_work(B, J), est, rejected, var)  # fmt: skip
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -312,16 +318,16 @@ def _robust_bodies(
         }
         for b in range(B)
     ]
-    return est, diags, setup.resolved
+    return est, np.sqrt(var), diags, setup.resolved
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
     """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
-    est, diags, resolved = _robust_bodies(
+    est, std, diags, resolved = _robust_bodies(
         inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
         inp.inferred_noise_factor, offline,
     )  # fmt: skip
-    return SmoothOutput(est, diagnostics=tuple(diags), params=resolved if diags else {})
+    return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {})
 
 
 class RobustStepper:
@@ -355,13 +361,15 @@ class RobustStepper:
             self._time = self._time + dt  # the batch times: the cumulated steps
         out = np.empty((1, B, J, 3))
         self.rejected = np.zeros((B, J), dtype=bool)
+        self.std = np.empty((B, J))
         k.online_frames(
             np.ascontiguousarray(ys, dtype=float)[None],
             np.ascontiguousarray(missing, dtype=bool)[None],
             _inferred_scale(states, missing, self.factor)[None],
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
-            *self._scratch, out, self.rejected[None],
+            *self._scratch, out, self.rejected[None], self.std[None],
         )  # fmt: skip
+        np.sqrt(self.std, out=self.std)
         return out[0]
 
 
@@ -433,11 +441,11 @@ def robust_smooth(
     states = sequence.tracking_state
     ys, missing = measurements(sequence.positions, states)
     steps = frame_steps(sequence)[0]
-    est, diags, resolved = _robust_bodies(
+    est, std, diags, resolved = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
         frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
     )  # fmt: skip
-    est, diag = est[:, 0], diags[0]
+    est, std, diag = est[:, 0], std[:, 0], diags[0]
     used = {**full, **resolved, "inferred_noise_factor": factor, "offline": offline}
     filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
     diagnostics = {
@@ -448,7 +456,7 @@ def robust_smooth(
         "params": used,
     }
     return sequence.replace(
-        positions=est, metadata={**sequence.metadata, "diagnostics": diagnostics}
+        positions=est, std=std, metadata={**sequence.metadata, "diagnostics": diagnostics}
     )
 
 
