@@ -46,10 +46,11 @@ def test_smooth_folder_writes_outputs_atomically_and_reports_bad_files(tmp_path)
     assert "broken.csv" in res.output
     produced = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     # each output with its sidecar, no temporary files left behind
-    assert produced == ["a.atkf.csv", "a.atkf.json", "sub/b.atkf.csv", "sub/b.atkf.json"]
+    # the default method is robust
+    assert produced == ["a.robust.csv", "a.robust.json", "sub/b.robust.csv", "sub/b.robust.json"]
     # the spike is removed: the output's largest hand jump is far below the input's 0.6 m
     hand = get_topology("kinect_v2").index("HandRight")
-    smoothed = load(out / "a.atkf.csv")[0].positions[:, hand]
+    smoothed = load(out / "a.robust.csv")[0].positions[:, hand]
     raw = load(src / "a.csv")[0].positions[:, hand]
     jump = lambda p: np.nanmax(np.linalg.norm(np.diff(p, axis=0), axis=-1))  # noqa: E731
     assert jump(raw) > 0.55 and jump(smoothed) < 0.5 * jump(raw)

@@ -489,3 +489,13 @@ def test_offline_is_refused_where_there_is_no_rts_pass(method):
     seq = _seq(np.zeros((10, 2, 3)))
     with pytest.raises(ValueError, match="offline=True"):
         smooth(seq, method, offline=True)
+
+
+def test_the_defaults_are_the_robust_pair():
+    import tobitkf as tk
+
+    seq = tk.generate_motion("arms", duration=1.0, seed=0)
+    assert (tk.DEFAULT_METHOD, tk.DEFAULT_LIVE_METHOD) == ("robust", "robust_online")
+    assert tk.smooth(seq).metadata["diagnostics"]["method"] == "robust"
+    assert tk.LiveSmoother(seq.topology).method == "robust_online"
+    assert tk.methods()[tk.DEFAULT_LIVE_METHOD].is_causal()

@@ -49,6 +49,7 @@ _EXPORTS: dict[str, str] = {
     # smoothing and its registry
     "smooth": "tobitkf.smoothing.api",
     "DEFAULT_METHOD": "tobitkf.smoothing.api",
+    "DEFAULT_LIVE_METHOD": "tobitkf.smoothing.api",
     "register_method": "tobitkf.smoothing.api",
     "unregister_method": "tobitkf.smoothing.api",
     "methods": "tobitkf.smoothing.api",

@@ -102,11 +102,12 @@ def app() -> None:
 @click.option(
     "-m",
     "--method",
-    default="atkf",
+    default="robust",
     show_default=True,
     type=_RegistryChoice(_method_names),
-    help="Smoothing method (see `tobitkf methods`). atkf is the 2020 paper's filter; against "
-    "Vicon it does not beat raw Kinect (docs/evaluation.md), our `robust` does.",
+    help="Smoothing method (see `tobitkf methods`). The default, robust, rejects "
+    "physically impossible samples and smooths the rest; atkf is the 2020 paper's filter, "
+    "which does not beat raw Kinect against Vicon (docs/evaluation.md).",
 )
 @click.option(
     "-f",

@@ -4,7 +4,7 @@ Every method is registered (:mod:`tobitkf.smoothing.registry`) in the module tha
 defines it; importing this module loads the built-in ones:
 
 ========================  ================================================================
-``atkf`` (default)        adaptive Tobit KF, 2020 paper (eq. 30–35, Alg. 2): R = 0.01 I,
+``atkf``                  adaptive Tobit KF, 2020 paper (eq. 30–35, Alg. 2): R = 0.01 I,
                           Q = 0.0025 I, c = 0.34 m horizontal / 0.18 m vertical per 1/30 s
 ``atkf2016``              the same filter with the 2016 paper's c = (0.31, 0.18, 0.31),
                           Q = 0.001 I
@@ -15,8 +15,8 @@ defines it; importing this module loads the built-in ones:
 ``one_euro``              1€ filter (Casiez et al. 2012)
 ``kinect``                Kinect SDK double-exponential joint filter (presets)
 ``moving_average``        centred or trailing box filter
-``robust``                ours: physically impossible samples rejected, then RTS-smoothed
-``robust_online``         ours, causal
+``robust`` (default)      ours: physically impossible samples rejected, then RTS-smoothed
+``robust_online``         ours, causal (the default of ``LiveSmoother``)
 ========================  ================================================================
 
 The Kalman-type methods (:mod:`tobitkf.smoothing.kalman_methods`) describe time steps,
@@ -85,6 +85,7 @@ from tobitkf.smoothing.timebase import (
 
 __all__ = [
     "COMMON_KEYWORDS",
+    "DEFAULT_LIVE_METHOD",
     "DEFAULT_METHOD",
     "check_params",
     "get_method",
@@ -98,8 +99,12 @@ __all__ = [
     "unregister_method",
 ]
 
-#: the method :func:`smooth` uses when none is named
-DEFAULT_METHOD = "atkf"
+#: the method :func:`smooth` and ``tobitkf smooth`` use when none is named: the most
+#: accurate offline method against motion capture (docs/evaluation.md)
+DEFAULT_METHOD = "robust"
+#: the method :class:`~tobitkf.smoothing.live.LiveSmoother` uses when none is named: the
+#: most accurate causal one
+DEFAULT_LIVE_METHOD = "robust_online"
 #: keywords of :func:`smooth` accepted next to the method's parameters
 COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor")
 
@@ -234,7 +239,8 @@ def smooth(
         number of frames, time base and topology go to the method together, stacked on
         a body axis.
     method : str
-        A registered method (``tobitkf methods``; default ``"atkf"``).
+        A registered method (``tobitkf methods``; default :data:`DEFAULT_METHOD`,
+        ``"robust"``).
     offline : bool
         Run the RTS smoother after the filter (uses future frames); only for methods
         registered with ``offline_ok`` (the Kalman-type ones), ``ValueError`` otherwise.

@@ -31,7 +31,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from tobitkf.skeleton.sequence import TrackingState
 from tobitkf.skeleton.topology import Topology, get_topology
-from tobitkf.smoothing.api import DEFAULT_METHOD, check_params, get_method, method_names, run_method
+from tobitkf.smoothing.api import (
+    DEFAULT_LIVE_METHOD,
+    check_params,
+    get_method,
+    method_names,
+    run_method,
+)
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
@@ -96,7 +102,8 @@ class LiveSmoother:
     topology : Topology or name
         Skeleton of the stream (its up axis places the vertical limit of ``atkf``).
     method : str
-        A causal registered method (:func:`live_methods`); parameters as for
+        A causal registered method (:func:`live_methods`; default
+        ``DEFAULT_LIVE_METHOD``, ``"robust_online"``); parameters as for
         :func:`tobitkf.smooth`.
     fps : float
         Nominal frame rate, used when no timestamps are given (and for the first step).
@@ -114,7 +121,7 @@ class LiveSmoother:
     def __init__(
         self,
         topology: Topology | str = "kinect_v2",
-        method: str = DEFAULT_METHOD,
+        method: str = DEFAULT_LIVE_METHOD,
         *,
         fps: float = 30.0,
         up_axis: int | None = None,
