@@ -273,27 +273,72 @@ def run_jobs(
     n_jobs: int = 1,
     on_done: Callable[[FileSummary], None] | None = None,
 ) -> list[FileSummary]:
-    """Run every job, in parallel processes when ``n_jobs > 1``; results in input order."""
-    results: dict[int, FileSummary] = {}
-    if n_jobs <= 1 or len(jobs) <= 1:
-        for i, job in enumerate(jobs):
-            results[i] = run_job(job, method, params, offline)
-            if on_done:
-                on_done(results[i])
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+    """Run every job, in parallel processes when ``n_jobs > 1``; results in input order.
 
-        with ProcessPoolExecutor(max_workers=n_jobs) as pool:
-            futures = {
-                pool.submit(_run_job_star, (job, method, params, offline)): i
-                for i, job in enumerate(jobs)
-            }
-            for fut in as_completed(futures):
-                i = futures[fut]
-                results[i] = fut.result()
-                if on_done:
-                    on_done(results[i])
+    Ctrl-C raises :class:`~tobitkf.app.pool.Interrupted` with the summaries finished so
+    far (``done``: job index -> FileSummary). With several processes a job whose worker
+    process dies is retried once alone; if it kills that worker too it is reported as
+    failed and the others go on (:mod:`tobitkf.app.pool`).
+    """
+    args = [(job, method, params, offline) for job in jobs]
+
+    def report(i: int, summary: FileSummary) -> None:
+        if on_done:
+            on_done(summary)
+
+    try:
+        results = _run_all(jobs, args, n_jobs, report)
+    finally:  # a worker killed mid-write (Ctrl-C, a crash) leaves its temporary file
+        remove_partial_outputs(jobs)
     return [results[i] for i in range(len(jobs))]
+
+
+def remove_partial_outputs(jobs: Sequence[Job]) -> list[Path]:
+    """Delete the temporary files of :func:`atomic_save` left by the given jobs (a process
+    killed while writing); returns what was removed. Finished outputs are not touched."""
+    by_dir: dict[Path, set[str]] = {}
+    for job in jobs:
+        by_dir.setdefault(job.output.parent, set()).add(job.output.name)
+    removed = []
+    for folder, names in by_dir.items():
+        if not folder.is_dir():
+            continue
+        for f in folder.glob(".*.part*"):
+            base = f.name[1:].rsplit(".part", 1)[0].rsplit(".", 1)[0]  # .NAME.RANDOM.part...
+            if base in names:
+                f.unlink(missing_ok=True)
+                removed.append(f)
+    return removed
+
+
+def _run_all(
+    jobs: Sequence[Job], args: list[Any], n_jobs: int, report: Callable[[int, Any], None]
+) -> dict[int, FileSummary]:
+    from tobitkf.app.pool import Interrupted, run_in_workers
+
+    if n_jobs <= 1 or len(jobs) <= 1:
+        results: dict[int, FileSummary] = {}
+        try:
+            for i, a in enumerate(args):
+                results[i] = _run_job_star(a)
+                report(i, results[i])
+        except KeyboardInterrupt:
+            raise Interrupted(results) from None
+    else:
+
+        def died(i: int) -> FileSummary:
+            return FileSummary(
+                str(jobs[i].source),
+                None,
+                False,
+                "the worker process died while reading or smoothing it, twice (out of "
+                "memory, or a crash in native code); nothing was written",
+            )
+
+        results = run_in_workers(
+            _run_job_star, args, n_jobs, on_result=report, on_worker_death=died
+        )
+    return results
 
 
 def parse_param(text: str) -> tuple[str, Any]:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import signal
 import sys
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +68,24 @@ def _writable_formats() -> list[str]:
     from tobitkf.io import writable_formats
 
     return writable_formats()
+
+
+@contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM stops a run like Ctrl-C does (workers terminated, summary printed)."""
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. a test runner's thread): leave it
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
@@ -150,6 +169,7 @@ def app() -> None:
 def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs, as_json):
     """Smooth skeleton recordings (files or folders, searched recursively)."""
     from tobitkf.app.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
+    from tobitkf.app.pool import Interrupted
     from tobitkf.io import detect_format
     from tobitkf.smoothing.api import check_params, get_method
 
@@ -166,6 +186,10 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         pairs = discover_inputs(inputs, pattern, skip=not_a_recording, skipped=passed_over)
     except FileNotFoundError as exc:
         _fail(str(exc))
+    from tobitkf.io import is_companion_file
+
+    # files read with a recording (a CSV's sidecar, UI-PRMD angles) need no mention
+    passed_over = [p for p in passed_over if not is_companion_file(p)]
     if passed_over and not as_json:
         names = ", ".join(p.name for p in passed_over[:3])
         more = f" and {len(passed_over) - 3} more" if len(passed_over) > 3 else ""
@@ -195,7 +219,15 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
             frames[0] += summary.frames
             progress.update(task, advance=1, frames=frames[0])
 
-        results = run_jobs(job_list, method, kwargs, offline=offline, n_jobs=jobs, on_done=done)
+        interrupted = None
+        with _sigterm_as_interrupt():
+            try:
+                results = run_jobs(
+                    job_list, method, kwargs, offline=offline, n_jobs=jobs, on_done=done
+                )
+            except Interrupted as stop:  # Ctrl-C / SIGTERM: summarise what was done
+                interrupted = stop
+                results = [stop.done[i] for i in sorted(stop.done)]
     results = list(results) + refused
     failed = [r for r in results if not r.ok]
     if as_json:
@@ -223,6 +255,13 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
             console.print(f"outputs in {Path(outdir).resolve()}")
         for r in failed:
             err_console.print(f"[red]FAILED[/red] {r.source}: {r.error}")
+    if interrupted is not None:
+        left = len(job_list) - len(interrupted.done)
+        err_console.print(
+            f"[yellow]interrupted[/yellow]: {len(interrupted.done)} of {len(job_list)} "
+            f"file(s) done, {left} not started or stopped; every output written is complete"
+        )
+        sys.exit(130)
     if failed:
         sys.exit(1)
 

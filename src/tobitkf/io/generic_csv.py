@@ -631,4 +631,6 @@ register_format(
     "csv", read_csv, write_csv, (".csv",), sniff_csv,
     description="generic skeleton CSV", aliases=("generic_csv",),
     side_outputs=lambda p: [sidecar_path(p)],
+    companion=lambda p: p.suffix.lower() == ".json" and p.with_suffix(".csv").is_file()
+    and _is_sidecar(p),
 )  # fmt: skip
