@@ -582,6 +582,19 @@ def test_lost_joint_velocity_decays_with_tau(tau):
     assert 0.5 * 0.6 * tau < est[-1, 0, 0] - est[29, 0, 0] < 1.1 * 0.6 * tau
 
 
+@pytest.mark.parametrize("method", [*ROBUST, "kf", "atkf"])
+def test_estimates_start_at_each_joints_first_measurement(method):
+    # no estimate before a joint's first valid measurement, one at every frame after it
+    # (later gaps are bridged or predicted), whichever joints start later
+    pos = _arm(40)
+    pos[:7, 1] = np.nan
+    pos[:12, 2] = np.nan
+    pos[20:23, 0] = np.nan
+    est = tk.smooth(_seq(pos), method).positions
+    for j, first in ((0, 0), (1, 7), (2, 12)):
+        assert np.isnan(est[:first, j]).all() and np.isfinite(est[first:, j]).all(), j
+
+
 # ----------------------------------------------------------------------------- states
 def _moving(T=50, J=3, seed=0):
     """J independent joints moving, noisy; joint 0 spikes 0.6 m at frame 20 (clipped by
@@ -793,6 +806,8 @@ def test_robust_reports_the_per_joint_parameters_it_used(method):
     assert p["offline"] == (method == "robust")
     with pytest.raises(ValueError, match="v_max"):
         tk.smooth(_seq(_arm(20)), method, v_max=0.0)
+    with pytest.raises(ValueError, match="tau must be a number"):
+        tk.smooth(_seq(_arm(20)), method, tau="slow")
 
 
 @pytest.mark.xfail(
