@@ -804,6 +804,25 @@ def test_robust_reports_the_per_joint_parameters_it_used(method):
     assert p["speed_sd"] == [0.6, 0.6, 1.0]
     assert p["noise_sd"] == [0.01, 0.01, 0.015]
     assert p["offline"] == (method == "robust")
+    # the documented defaults (docs/robust.md, table of parameters)
+    p = tk.smooth(_seq(_arm(20)), method).metadata["diagnostics"]["params"]
+    assert p["v_max"] == [5.0, 5.0, 8.0]
+    documented = {
+        "margin": 0.05,
+        "bone_tol_abs": 0.03,
+        "bone_tol_rel": 0.15,
+        "tau": 0.15,
+        "max_reject": 2.0,
+        "min_run": 0.1,
+        "lookback": 2,
+        "inferred_noise_factor": 4.0,
+        "bones": True,
+        "two_pass": True,
+        "carry": True,
+    }
+    assert {k: p[k] for k in documented} == documented
+    p = tk.smooth(_seq(_arm(20)), "kf").metadata["diagnostics"]["params"]
+    assert p["inferred_noise_factor"] == 4.0 and p["offline"] is False
     with pytest.raises(ValueError, match="v_max"):
         tk.smooth(_seq(_arm(20)), method, v_max=0.0)
     with pytest.raises(ValueError, match="tau must be a number"):
