@@ -951,6 +951,25 @@ def test_censored_gain_of_the_standard_tobit_filter(side):
         np.testing.assert_allclose(gain, expected, rtol=1e-6, err_msg=f"alpha={alpha}")
 
 
+def test_standard_tobit_gain_in_a_narrow_interval():
+    # limits [a, a + w] standard deviations (of R) above the prediction: v_T -> w² / 12
+    # (uniform), so for w <~ 1e-4 the EPS (P_a + P_b) floor is what bounds the gain
+    P, r = 0.04, 0.01
+    model = _scalar_model(P, r)
+    sr = np.sqrt(r)
+    a = 0.3
+    for w in (1e-3, 1e-4, 1e-5):
+        b = a + w
+        pu = special.ndtr(b) - special.ndtr(a)
+        floor = w * w / 12 + EPS * (special.ndtr(a) + special.ndtr(-b))
+        y1, y2 = (a + 0.2 * w) * sr, (a + 0.7 * w) * sr
+        ys = np.array([[[y1], [y2]]])
+        means = tk.tobit_filter(model, ys, a * sr, b * sr, variant="standard").means
+        gain = (means[0, 1, 0] - means[0, 0, 0]) / (y2 - y1)
+        expected = P * pu / (pu * pu * P + r * floor)
+        np.testing.assert_allclose(gain, expected, rtol=1e-6, err_msg=f"w={w}")
+
+
 def test_censored_gain_of_the_adaptive_filter_in_a_narrow_interval():
     # ATKF step 1: limits x_0 ± c around the prediction m; with beta = c / sqrt(S) the
     # gain is P⁻ P_un / (S (Var f + 2 EPS P_a)).  For a very narrow interval the EPS
