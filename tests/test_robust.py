@@ -505,22 +505,31 @@ def test_ou_smoother_equals_the_generic_kalman_core_when_nothing_is_rejected(off
 
 
 def test_online_lookback_drops_the_last_frames_before_a_rejection_from_the_state():
-    # at the onset of a rejection (here: of a gap) the last `lookback` accepted frames leave
-    # the filter state; the outputs already emitted stay; afterwards the filter continues
-    # as if those frames had never been measured
+    # at the onset of a rejection the last `lookback` accepted frames leave the filter
+    # state; the outputs already emitted stay; while the joint is rejected the filter
+    # predicts as if those frames had never been measured. (At the onset of a plain gap
+    # nothing is dropped: tests/test_policy.py.)
     truth = _skeleton_motion(T=80, seed=10)
     ys = truth + np.random.default_rng(5).normal(scale=0.01, size=truth.shape)
     hand = get_topology("kinect_v2").index("HandLeft")
-    ys[40:50, hand] = np.nan
+    jumped = ys.copy()
+    jumped[40:50, hand] += [0.0, 2.0, 0.0]  # 2 m off: out of the speed gate for 10 frames
     states = np.full(ys.shape[:2], int(TrackingState.TRACKED), dtype=np.int8)
     tau, spd, sd = 0.15, 0.5, 0.01
-    params = dict(v_max=1e6, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=2)
-    out = robust_smooth(_seq(ys), offline=False, **params).positions
+    params = dict(v_max=3.0, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=2,
+                  carry=False, min_run=0.0)  # fmt: skip
+    res = robust_smooth(_seq(jumped), offline=False, **params)
+    assert res.metadata["diagnostics"]["rejected"][:, hand].nonzero()[0].tolist() == list(
+        range(40, 50)
+    )
+    out = res.positions
+    gap = ys.copy()
+    gap[40:50, hand] = np.nan  # what a rejected sample is to the filter
     q, r = 2 * spd**2 / tau, sd**2
-    plain = _ou_reference(ys, states, tau, q, r, 1.0, False)
-    rolled = _ou_reference(ys, states, tau, q, r, 1.0, False, drop=(slice(38, 40), hand))
+    plain = _ou_reference(gap, states, tau, q, r, 1.0, False)
+    rolled = _ou_reference(gap, states, tau, q, r, 1.0, False, drop=(slice(38, 40), hand))
     np.testing.assert_allclose(out[:40, hand], plain[:40, hand], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(out[40:, hand], rolled[40:, hand], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[40:50, hand], rolled[40:50, hand], rtol=0, atol=1e-12)
     assert np.abs(rolled[45, hand] - plain[45, hand]).max() > 1e-4  # it made a difference
     other = [j for j in range(ys.shape[1]) if j != hand]
     np.testing.assert_allclose(out[:, other], plain[:, other], rtol=0, atol=1e-12)

@@ -76,6 +76,26 @@ def test_registry_names_and_defaults():
     assert (d["q"], d["c_horizontal"], d["c_vertical"]) == (0.001, 0.31, 0.18)
     assert method_defaults("tkf")["lower"] == (-3.0, -1.5, 0.5)
     assert method_defaults("tkfc")["upper"] == (3.0, 3.0, 5.0)
+    # every method's defaults smooth a small sequence; the diagnostics name the method
+    # and hold the full parameter set
+    truth, pos = _still(T=40, J=3)
+    seq = _seq(pos, fps=30.0)
+    for name in METHODS:
+        out = smooth(seq, name)
+        assert out.positions.shape == pos.shape
+        assert np.isfinite(out.positions).all(), name
+        # a still joint stays near where it is (no method diverges on its defaults)
+        assert np.abs(out.positions[10:] - truth).max() < 0.05, name
+        diag = out.metadata["diagnostics"]
+        assert diag["method"] == name
+        defaults = method_defaults(name)
+        assert set(defaults) <= set(diag["params"]), name
+        for key, value in defaults.items():
+            if value is not None and not isinstance(value, dict):
+                assert diag["params"][key] == value, (name, key)
+        # the defaults given explicitly pass the validators unchanged
+        explicit = smooth(seq, name, **defaults)
+        np.testing.assert_array_equal(explicit.positions, out.positions)
 
 
 def test_unknown_parameter_lists_valid_ones():
@@ -96,6 +116,8 @@ def test_unknown_parameter_lists_valid_ones():
         ("tkf", {"lower": (0, 0, 0), "upper": (1, -1, 1)}, "below upper"),
         ("sgf", {"window": 4}, "odd"),
         ("sgf", {"window": 5, "polyorder": 5}, "polyorder"),
+        ("savgol", {"window": 5, "polyorder": 5}, "polyorder"),
+        ("moving_average", {"window": 0}, "integer >= 1"),
         ("kinect", {"preset": "fast"}, "preset"),
         ("kinect", {"smoothing": 2.0}, r"\[0, 1\]"),
         ("one_euro", {"mincutoff": 0}, "mincutoff"),
@@ -487,7 +509,7 @@ def test_atkf_keeps_still_feet_still_on_keraal():
 @pytest.mark.parametrize("method", ["sgf", "one_euro", "kinect", "robust", "robust_online"])
 def test_offline_is_refused_where_there_is_no_rts_pass(method):
     seq = _seq(np.zeros((10, 2, 3)))
-    with pytest.raises(ValueError, match="offline=True"):
+    with pytest.raises(ValueError, match=f"offline=True.*{method!r} does not have"):
         smooth(seq, method, offline=True)
 
 

@@ -794,7 +794,14 @@ def online_frames(
                     r = pj[j, J_R] * max(1.0, (radius[j] / pj[j, J_SD]) ** 2)
                 p00, p01, p10, p11 = P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1]
                 # a rejection starts: drop the last `lookback` accepted frames from the state
-                if lookback > 0 and tidx > lookback and started and sb[b, j, B_PREV_OK] and not a:
+                if (
+                    lookback > 0
+                    and tidx > lookback
+                    and started
+                    and sb[b, j, B_PREV_OK]
+                    and not a
+                    and not missing[b, j]
+                ):
                     s0 = (tidx - lookback - 1) % K
                     if ok_h[s0, b, j]:
                         for i in range(3):

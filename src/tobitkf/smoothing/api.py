@@ -139,11 +139,10 @@ def _check_offline(spec: MethodSpec, offline: bool) -> None:
         raise ValueError(
             f"offline=True adds an RTS pass, which method {spec.name!r} does not have; "
             f"methods with one: {', '.join(n for n, s in methods().items() if s.offline_ok)}"
-            + (
-                " (use 'robust' for the offline robust smoother)"
-                if spec.name.startswith("robust")
-                else ""
-            )
+            + {
+                "robust": " ('robust' is offline already)",
+                "robust_online": " ('robust' is the offline robust smoother)",
+            }.get(spec.name, "")
         )
 
 
