@@ -11,12 +11,19 @@ one call each. For each method it prints joint-frames per second and the ratio t
 package's Kalman core, ``tk.kalman_filter`` (3-D random walk per joint, A = H = I, on the
 same positions, all joints of all recordings as one batch), measured in the same run.
 The first call of each method is not timed (it loads, or compiles, the robust kernels).
-Live: the per-frame latency of ``robust_online`` through ``LiveSmoother`` for one body.
+Live: the per-frame latency of the live default (``robust_online``) through
+``LiveSmoother`` for one body, six bodies in one array and six bodies keyed by id, next to
+a minimal numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
+method) over a folder of small recordings, start-up included, with 1 and 2 processes.
+``--markdown`` ends with the README's table (``make bench``).
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -64,7 +71,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2, help="best of N timings (default 2)")
     ap.add_argument("--frames", type=int, default=1500, help="frames per synthetic recording")
     ap.add_argument("--live-frames", type=int, default=2000, help="frames for the live latency")
+    ap.add_argument("--files", type=int, default=1000, help="small recordings for files/s")
+    ap.add_argument("--markdown", action="store_true", help="end with the README's tables")
     args = ap.parse_args()
+    table: list[tuple[str, str, float, float]] = []
     names = args.method or sorted(tk.methods())
     sets: dict[str, list] = {
         f"12 x {args.frames} x 25 synthetic": [synthetic_recordings(12, args.frames)]
@@ -95,25 +105,108 @@ def main() -> None:
         print(f"{'method':>14} {'seconds':>9} {'joint-frames/s':>15} {'/ core':>8}")
         for name, sec, rate in rows:
             print(f"{name:>14} {sec:9.3f} {rate:15,.0f} {rate / base:8.3f}")
-    live_latency(args.live_frames)
+            table.append((label, name, rate, rate / base))
+    live = live_latency(args.live_frames)
+    files = files_per_second(args.files) if args.files > 0 else {}
+    if args.markdown:
+        print_markdown(table, live, files, args.files)
 
 
-def live_latency(n: int) -> None:
-    """Per-frame latency of robust_online through LiveSmoother, one 25-joint body."""
-    if "robust_online" not in tk.methods() or n < 2:
-        return
-    seq = synthetic_recordings(1, n)[0]
-    live = tk.LiveSmoother(seq.topology, "robust_online", fps=30.0)
+def _latencies(live: tk.LiveSmoother, frames: list, states: list | None) -> np.ndarray:
+    lat = np.empty(len(frames))
+    for k, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        live.update(frame, None if states is None else states[k])
+        lat[k] = time.perf_counter() - t0
+    return lat[1:] * 1e6  # microseconds; the first frame allocates the state
+
+
+def minimal_kf_latency(n: int) -> np.ndarray:
+    """A minimal numpy per-frame Kalman update of one 25-joint body (random walk per axis)."""
+    rng = np.random.default_rng(0)
+    ys = rng.normal(size=(n, 25, 3))
+    x, P, q, r = ys[0].copy(), np.full((25, 3), 0.01), 0.0025, 0.01
     lat = np.empty(n)
     for k in range(n):
         t0 = time.perf_counter()
-        live.update(seq.positions[k], seq.tracking_state[k])
+        P = P + q
+        K = P / (P + r)
+        x = x + K * (ys[k] - x)
+        P = (1 - K) * P
         lat[k] = time.perf_counter() - t0
-    lat = lat[1:] * 1e6  # the first frame allocates the state
-    print(
-        f"\nlive robust_online, 1 body x 25 joints, {n} frames: per frame median "
-        f"{np.median(lat):.0f} us, p99 {np.percentile(lat, 99):.0f} us, max {lat.max():.0f} us"
-    )
+    return lat[1:] * 1e6
+
+
+def live_latency(n: int) -> dict[str, np.ndarray]:
+    """Per-frame latency (us) of the live default: one body, six in an array, six keyed."""
+    if n < 2:
+        return {}
+    seqs = synthetic_recordings(6, n)
+    topo = seqs[0].topology
+    one = seqs[0].positions
+    six = np.stack([s.positions for s in seqs], axis=1)  # (n, 6, J, 3)
+    out = {"minimal numpy KF update, 1 body": minimal_kf_latency(n)}
+    live = tk.LiveSmoother(topo, fps=30.0)
+    out[f"LiveSmoother ({live.method}), 1 body"] = _latencies(live, list(one), None)
+    live = tk.LiveSmoother(topo, fps=30.0)
+    out[f"LiveSmoother ({live.method}), 6 bodies in one array"] = _latencies(live, list(six), None)
+    live = tk.LiveSmoother(topo, fps=30.0)
+    keyed = [{b: six[k, b] for b in range(6)} for k in range(n)]
+    out[f"LiveSmoother ({live.method}), 6 bodies keyed by id"] = _latencies(live, keyed, None)
+    print(f"\nlive, 25 joints, {n} frames (us per frame):")
+    for name, lat in out.items():
+        print(f"  {name:55s} median {np.median(lat):7.1f}  p99 {np.percentile(lat, 99):7.1f}")
+    return out
+
+
+def files_per_second(n: int) -> dict[int, float]:
+    """``tobitkf smooth`` (default method) over ``n`` small recordings: files/s by --jobs."""
+    topo = tk.get_topology("kinect_v2")
+    rng = np.random.default_rng(0)
+    out: dict[int, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "in"
+        src.mkdir()
+        for i in range(n):
+            T = int(rng.integers(60, 300))
+            pos = rng.normal(scale=0.01, size=(T, topo.n_joints, 3)).cumsum(0)
+            pos[..., 2] += 2.5
+            seq = tk.SkeletonSequence(positions=pos, topology=topo, fps=30.0)
+            tk.save([seq], src / f"r{i:05d}.skeleton", format="ntu")
+        for jobs in (1, 2):
+            dst = Path(tmp) / f"out{jobs}"
+            cmd = [sys.executable, "-m", "tobitkf", "smooth", str(src), "-o", str(dst),
+                   "-j", str(jobs), "--json"]  # fmt: skip
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True, capture_output=True)
+            out[jobs] = n / (time.perf_counter() - t0)
+            print(f"tobitkf smooth, {n} NTU files, -j {jobs}: {out[jobs]:.1f} files/s")
+    return out
+
+
+def print_markdown(table: list, live: dict, files: dict, n_files: int) -> None:
+    from bench_filters import machine
+
+    print("\x1e")  # docs_results keeps what follows
+    print(f"Measured {machine()}.")
+    print()
+    print("| data | method | joint-frames / s | / `kalman_filter` core |")
+    print("|---|---|---|---|")
+    for label, name, rate, ratio in table:
+        print(f"| {label} | {name} | {rate:.2g} | {ratio:.2f} |")
+    if live:
+        print()
+        print("| live, 25 joints | median µs / frame | p99 µs / frame |")
+        print("|---|---|---|")
+        for name, lat in live.items():
+            print(f"| {name} | {np.median(lat):.0f} | {np.percentile(lat, 99):.0f} |")
+    if files:
+        print()
+        rates = ", ".join(f"{v:.0f} files/s with -j {k}" for k, v in files.items())
+        print(
+            f"`tobitkf smooth` (default method) over {n_files} NTU files of 60–300 frames, "
+            f"start-up included: {rates}."
+        )
 
 
 if __name__ == "__main__":
