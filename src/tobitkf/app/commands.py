@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -38,7 +39,8 @@ def _fmt(value: Any, digits: int = 2) -> str:
 def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: int = 2) -> None:
     table = Table(title=title, title_justify="left")
     for i, col in enumerate(columns):
-        table.add_column(col, justify="left" if i == 0 else "right")
+        # long file names fold onto a second line instead of being cut to "JointPositi…"
+        table.add_column(col, justify="left" if i == 0 else "right", overflow="fold")
     for row in rows:
         table.add_row(*[_fmt(v, digits) for v in row])
     console.print(table)
@@ -254,7 +256,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         if rows:
             console.print(f"outputs in {Path(outdir).resolve()}")
         for r in failed:
-            err_console.print(f"[red]FAILED[/red] {r.source}: {r.error}")
+            err_console.print(f"[red]FAILED[/red] {escape(r.source)}: {escape(str(r.error))}")
     if interrupted is not None:
         left = len(job_list) - len(interrupted.done)
         err_console.print(
@@ -289,9 +291,10 @@ def info(path, input_format, as_json):
         click.echo(dumps(report))
         return
     console.print(f"[bold]{path}[/bold]  format: {report['format']}  bodies: {report['bodies']}")
-    for body in report["sequences"]:
+    for k, body in enumerate(report["sequences"], start=1):
+        label = f"body {k}" + ("" if body["body_id"] is None else f" (id {body['body_id']})")
         console.print(
-            f"body {body['body_id']}: {body['frames']} frames, {body['joints']} joints "
+            f"{escape(label)}: {body['frames']} frames, {body['joints']} joints "
             f"({body['topology']}), rate {_fmt(body['fps'])} Hz, duration "
             f"{_fmt(body['duration_s'])} s, missing {_fmt(body['missing_percent'])} %"
         )
@@ -450,7 +453,7 @@ def evaluate(
                 mocap = _load_one(truths[i], "truth")
                 gt = prepare_truth(track, mocap, pairs=pairs)
                 for warning in gt.notes.get("warnings", []):
-                    err_console.print(f"[yellow]warning[/yellow] {path}: {warning}")
+                    err_console.print(f"[yellow]warning[/yellow] {escape(path)}: {escape(warning)}")
                     warned.append((path, warning))
                 table = evaluate_methods(track, gt, method_specs, fixed_delay=fixed_delay)
                 tables.append(table)
