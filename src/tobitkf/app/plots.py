@@ -284,10 +284,12 @@ def animate_skeletons(
         idx = np.arange(0, T, step)
     colours = _colours(names)
     h, v = _view_axes(up_axis)
-    allpts = np.concatenate([a.reshape(-1, 3) for a in arrays])
+    # the frames drawn set the view, a few wild samples do not (a spike leaves the box
+    # for a frame instead of shrinking every skeleton to a speck)
+    allpts = np.concatenate([a[idx].reshape(-1, 3) for a in arrays])
     finite = allpts[np.all(np.isfinite(allpts), axis=1)]
-    lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
-    hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
+    lo = np.percentile(finite, 0.5, axis=0) - 0.15 if finite.size else np.zeros(3)
+    hi = np.percentile(finite, 99.5, axis=0) + 0.15 if finite.size else np.ones(3)
     fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 3.2), squeeze=False)
     lines = []
     for ax, name in zip(axes[0], names):
