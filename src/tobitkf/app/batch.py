@@ -9,7 +9,9 @@ the inputs and written atomically with it.
 
 from __future__ import annotations
 
+import errno
 import fnmatch
+import json
 import os
 import tempfile
 import time
@@ -31,6 +33,7 @@ class Job:
     source: Path
     output: Path
     output_format: str
+    input_format: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,7 @@ def discover_inputs(
     recursive: bool = True,
     skip: Callable[[Path], bool] | None = None,
     skipped: list[Path] | None = None,
+    problems: list[tuple[Path, str]] | None = None,
 ) -> list[tuple[Path, Path]]:
     """Expand files and folders into ``(file, base)`` pairs.
 
@@ -74,7 +78,9 @@ def discover_inputs(
     and for which ``skip`` (e.g. :func:`tobitkf.io.is_companion_file`) is not true; the
     skipped files are appended to ``skipped`` when given. ``base`` is the folder, so
     outputs can keep the relative layout. A file is taken as given (neither the pattern
-    nor ``skip`` filters explicit files); its base is its own folder.
+    nor ``skip`` filters explicit files); its base is its own folder. What a folder walk
+    cannot enter or follow (an unreadable folder, a symlink loop, a dangling link) is
+    appended to ``problems`` as ``(path, reason)`` instead of vanishing silently.
 
     Raises
     ------
@@ -83,14 +89,15 @@ def discover_inputs(
     """
     found: list[tuple[Path, Path]] = []
     seen: set[Path] = set()
+    if problems is None:
+        problems = []
     for item in inputs:
         path = Path(item)
         if not path.exists():
             raise FileNotFoundError(f"input not found: {path}")
         if path.is_dir():
-            walker = path.rglob("*") if recursive else path.glob("*")
-            for f in sorted(walker):
-                if f.is_file() and fnmatch.fnmatch(f.name, pattern) and not f.name.startswith("."):
+            for f in _walk(path, recursive, problems):
+                if fnmatch.fnmatch(f.name, pattern) and not f.name.startswith("."):
                     if skip is not None and skip(f):
                         if skipped is not None:
                             skipped.append(f)
@@ -102,6 +109,91 @@ def discover_inputs(
             seen.add(path.resolve())
             found.append((path, path.parent))
     return found
+
+
+def _walk(folder: Path, recursive: bool, problems: list[tuple[Path, str]]) -> list[Path]:
+    """Regular files below ``folder`` (sorted, symlinked folders not followed); what cannot
+    be read or followed is recorded in ``problems`` with its reason."""
+    files: list[Path] = []
+    try:
+        entries = sorted(os.scandir(folder), key=lambda e: e.name)
+    except OSError as exc:
+        problems.append((folder, f"cannot read this folder: {_reason(exc)}"))
+        return files
+    for entry in entries:
+        p = Path(entry.path)
+        try:
+            if entry.is_dir(follow_symlinks=False):
+                if recursive and not entry.name.startswith("."):
+                    files.extend(_walk(p, recursive, problems))
+                continue
+            if entry.is_symlink():
+                os.stat(p)  # raises for a dangling link or a loop
+                if p.is_dir():
+                    continue  # symlinked folders are not followed (no cycles)
+            if p.is_file():
+                files.append(p)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                problems.append((p, "symbolic link loop"))
+            elif exc.errno == errno.ENOENT:
+                problems.append((p, f"dangling symbolic link (to {os.readlink(p)})"))
+            else:
+                problems.append((p, _reason(exc)))
+    return files
+
+
+def _reason(exc: OSError) -> str:
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    return exc.strerror or str(exc)
+
+
+def readable_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why ``path`` cannot be opened for reading (permission, ...), or None when it can."""
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        return f"cannot read it: {_reason(exc)}"
+    return None
+
+
+def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
+    """The method that wrote ``path``, when it is a tobitkf smoothing output; else None.
+
+    The rule: the name is ``<name>.<method><ext>`` with a registered method, and the file's
+    provenance (the CSV's sidecar, an NPZ's metadata) names that method. A format that
+    keeps no provenance (NTU) is recognised by its name alone.
+    """
+    from tobitkf.smoothing.api import method_names
+
+    p = Path(path)
+    stem = strip_extension(p.name)
+    if "." not in stem:
+        return None
+    method = stem.rsplit(".", 1)[1]
+    if method not in method_names():
+        return None
+    lower = p.name.lower()
+    if lower.endswith(".csv") or lower.endswith(".csv.gz"):
+        side = p.with_suffix(".json") if lower.endswith(".csv") else None
+        try:
+            if side is None or side.stat().st_size > 1 << 20:
+                return None
+            prov = json.loads(side.read_text(encoding="utf-8")).get("provenance") or {}
+        except (OSError, ValueError, AttributeError):
+            return None
+        return method if isinstance(prov, dict) and prov.get("method") == method else None
+    if lower.endswith(".npz"):
+        from tobitkf.io import load
+
+        try:
+            prov = load(p)[0].metadata.get("provenance") or {}
+        except Exception:
+            return None
+        return method if isinstance(prov, dict) and prov.get("method") == method else None
+    return method  # no provenance kept in the format: the name decides
 
 
 def not_a_recording(path: Path) -> bool:
@@ -131,11 +223,16 @@ def plan_jobs(
     method: str,
     output_format: str = "auto",
     detect: Callable[[Path], str] | None = None,
+    input_format: str = "auto",
+    overwrite: bool = False,
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
     Outputs are ``OUTDIR/<relative folder>/<name>.<method><ext>``. A planned output that
     would be an input file, or the output of an earlier input, is refused for that file.
+    An existing file at an output name is replaced only when it is an earlier tobitkf
+    output (:func:`smoothing_output_method`) or ``overwrite`` is true; any other file
+    there is left alone and the input refused with the reason.
 
     Returns
     -------
@@ -150,8 +247,8 @@ def plan_jobs(
     for src, base in pairs:
         fmt = output_format
         if fmt == "auto":
-            in_fmt = None
-            if detect is not None:
+            in_fmt = None if input_format == "auto" else input_format
+            if in_fmt is None and detect is not None:
                 try:
                     in_fmt = detect(src)
                 except Exception:  # the reader will report the real problem later
@@ -172,13 +269,20 @@ def plan_jobs(
                 reason = f"output {f} would overwrite an input"
             elif f.resolve() in taken:
                 reason = f"output {f} is already the output of {taken[f.resolve()]}"
+            elif f.is_dir():
+                reason = f"output {f} is a folder"
+            elif not overwrite and f.exists() and smoothing_output_method(out) is None:
+                reason = (
+                    f"{f} exists and is not a tobitkf output; it is left alone "
+                    "(--overwrite replaces it)"
+                )
             if reason:
                 break
         if reason:
             refused.append(FileSummary(str(src), None, False, reason))
             continue
         taken.update({f.resolve(): src for f in files})
-        jobs.append(Job(src, out, fmt))
+        jobs.append(Job(src, out, fmt, input_format))
     return jobs, refused
 
 
@@ -196,6 +300,7 @@ def atomic_save(sequences: Sequence[Any], path: Path, output_format: str) -> Non
         dir=path.parent, prefix=f".{path.name}.", suffix=f".part{path.suffix}"
     )
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
     temps = output_files(tmp, output_format)
     try:
         save(list(sequences), tmp, format=output_format)
@@ -208,6 +313,12 @@ def atomic_save(sequences: Sequence[Any], path: Path, output_format: str) -> Non
             if f.exists():
                 f.unlink()
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _percent(values: Iterable[np.ndarray]) -> float:
@@ -225,8 +336,11 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
 
     start = time.perf_counter()
     try:
-        in_fmt = detect_format(job.source)
-        sequences = load(job.source)
+        problem = readable_problem(job.source)
+        if problem:
+            return FileSummary(str(job.source), None, False, problem)
+        in_fmt = detect_format(job.source) if job.input_format == "auto" else job.input_format
+        sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
         smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
+import tempfile
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
@@ -70,6 +72,99 @@ def _writable_formats() -> list[str]:
     from tobitkf.io import writable_formats
 
     return writable_formats()
+
+
+def _readable_formats() -> list[str]:
+    from tobitkf.io import formats
+
+    return sorted(n for n, spec in formats().items() if spec.reader is not None)
+
+
+def _input_format_option(
+    *names: str, dest: str = "input_format", help: str = "Input format of every TRACK/PATH."
+) -> Any:
+    return click.option(
+        *names,
+        dest,
+        default="auto",
+        show_default=True,
+        type=_RegistryChoice(_readable_formats, extra=("auto",)),
+        help=help + " Auto-detected by default.",
+    )
+
+
+def _os_reason(exc: OSError) -> str:
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    if isinstance(exc, FileExistsError):
+        return "a file of that name exists (not a folder)"
+    if isinstance(exc, NotADirectoryError):
+        return "part of the path is a file, not a folder"
+    return exc.strerror or str(exc)
+
+
+def _writable_folder(folder: str | Path, what: str) -> Path:
+    """Create ``folder`` if needed and check that a file can be written in it, before any
+    work is done: one clear message instead of a traceback after minutes of work."""
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=path, prefix=".tobitkf-write-check-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        _fail(f"cannot write {what} in {path}: {_os_reason(exc)}")
+    return path
+
+
+def _writable_file(path: str | Path, what: str) -> Path:
+    """Check that ``path`` can be written (its folder writable, no folder in the way)."""
+    target = Path(path)
+    if target.is_dir():
+        _fail(f"cannot write {what} {target}: it is a folder")
+    _writable_folder(target.parent, what)
+    return target
+
+
+def _need_matplotlib(what: str) -> None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        _fail(f"{what} needs matplotlib, which is not installed: pip install 'tobitkf[plot]'")
+
+
+@contextmanager
+def _progress(quiet: bool = False, field: str = "{task.fields[now]}", transient: bool = True):
+    """A progress display on stderr, shown only on a terminal (pipes and logs get none)."""
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn(field),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=transient,
+        disable=quiet or not err_console.is_terminal,
+    ) as progress:
+        yield progress
+
+
+def _ticking(specs: list[Any], progress: Any, task: Any) -> list[Any]:
+    """Method specs that advance ``task`` after each method has run (name shown)."""
+    from tobitkf.evaluation.evaluate import resolve_method
+
+    wrapped = []
+    for spec in specs:
+        label, fn = resolve_method(spec)
+
+        def run(seq, _fn=fn, _label=label):
+            progress.update(task, now=_label)
+            out = _fn(seq)
+            progress.advance(task)
+            return out
+
+        wrapped.append((label, run))
+    return wrapped
 
 
 @contextmanager
@@ -139,6 +234,15 @@ def app() -> None:
     type=_RegistryChoice(_writable_formats, extra=("auto",)),
     help="Output format; auto keeps NTU as NTU and writes CSV otherwise.",
 )
+@_input_format_option(
+    "-F", "--input-format", help="Input format of every file read (-f is the output's)."
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace files at the output names that are not earlier tobitkf outputs "
+    "(earlier outputs are always replaced).",
+)
 @click.option(
     "-p",
     "--param",
@@ -168,9 +272,27 @@ def app() -> None:
     help="Files processed in parallel.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs, as_json):
+def smooth(
+    inputs,
+    outdir,
+    method,
+    output_format,
+    input_format,
+    overwrite,
+    params,
+    offline,
+    pattern,
+    jobs,
+    as_json,
+):
     """Smooth skeleton recordings (files or folders, searched recursively)."""
-    from tobitkf.app.batch import discover_inputs, not_a_recording, plan_jobs, run_jobs
+    from tobitkf.app.batch import (
+        discover_inputs,
+        not_a_recording,
+        plan_jobs,
+        run_jobs,
+        smoothing_output_method,
+    )
     from tobitkf.app.pool import Interrupted
     from tobitkf.io import detect_format
     from tobitkf.smoothing.api import check_params, get_method
@@ -183,15 +305,37 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
         raise click.BadParameter(str(exc), param_hint="--param") from exc
     if offline and not get_method(method).offline_ok:
         _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
+    _writable_folder(outdir, "the outputs")  # once, before any file is read
     passed_over: list[Path] = []
+    problems: list[tuple[Path, str]] = []
+    ours: list[Path] = []
+
+    def skip(path: Path) -> bool:
+        if not_a_recording(path):
+            return True
+        if smoothing_output_method(path):  # an earlier run's output, e.g. smoothing in place
+            ours.append(path)
+            return True
+        return False
+
     try:
-        pairs = discover_inputs(inputs, pattern, skip=not_a_recording, skipped=passed_over)
+        pairs = discover_inputs(inputs, pattern, skip=skip, skipped=passed_over, problems=problems)
     except FileNotFoundError as exc:
         _fail(str(exc))
     from tobitkf.io import is_companion_file
 
     # files read with a recording (a CSV's sidecar, UI-PRMD angles) need no mention
-    passed_over = [p for p in passed_over if not is_companion_file(p)]
+    passed_over = [p for p in passed_over if not is_companion_file(p) and p not in ours]
+    if not as_json:
+        for path, why in problems:
+            err_console.print(f"[yellow]skipped[/yellow] {escape(str(path))}: {escape(why)}")
+        if ours:
+            names = ", ".join(p.name for p in ours[:3])
+            more = f" and {len(ours) - 3} more" if len(ours) > 3 else ""
+            err_console.print(
+                f"passed over {len(ours)} file(s) that are tobitkf outputs of an earlier "
+                f"run (smoothing them again would write *.{method}.{method}.*): {names}{more}"
+            )
     if passed_over and not as_json:
         names = ", ".join(p.name for p in passed_over[:3])
         more = f" and {len(passed_over) - 3} more" if len(passed_over) > 3 else ""
@@ -202,18 +346,15 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
     if not pairs:
         _fail("no input files found")
     job_list, refused = plan_jobs(
-        pairs, outdir, method=method, output_format=output_format, detect=detect_format
+        pairs,
+        outdir,
+        method=method,
+        output_format=output_format,
+        detect=detect_format,
+        input_format=input_format,
+        overwrite=overwrite,
     )
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[frames]} frames"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=False,
-        disable=as_json or not err_console.is_terminal,
-    ) as progress:
+    with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
         task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
         frames = [0]
 
@@ -271,13 +412,7 @@ def smooth(inputs, outdir, method, output_format, params, offline, pattern, jobs
 # --------------------------------------------------------------------------- info
 @app.command()
 @click.argument("path", type=click.Path(exists=True, dir_okay=False))
-@click.option(
-    "--format",
-    "input_format",
-    default="auto",
-    show_default=True,
-    help="Input format (auto-detected by default).",
-)
+@_input_format_option("--format", help="Input format.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(path, input_format, as_json):
     """Describe what the reader finds in a recording."""
@@ -322,17 +457,53 @@ def methods():
     rows = []
     for name, spec in sorted(registered().items()):
         kind = ("causal" if spec.is_causal() else "offline") + (", +rts" if spec.offline_ok else "")
-        defaults = ", ".join(f"{k}={v}" for k, v in spec.defaults.items())
+        defaults = ", ".join(
+            f"{k}={v}" + (f" {_PARAM_UNITS[k]}" if k in _PARAM_UNITS and v is not None else "")
+            for k, v in spec.defaults.items()
+        )
         rows.append([name, kind, spec.description, defaults])
     _print_table("smoothing methods", ["method", "runs", "what it is", "defaults"], rows)
+    console.print(
+        "units: positions in metres; q, r are variances (m², q per 1/30 s step), c and "
+        "limits in metres, speeds in m/s, times in seconds, windows in frames, cut-offs in Hz"
+    )
+
+
+#: units of the built-in methods' parameters, shown by `tobitkf methods`
+_PARAM_UNITS = {
+    "q": "m²/step",
+    "r": "m²",
+    "c": "m",
+    "c_horizontal": "m",
+    "c_vertical": "m",
+    "lower": "m",
+    "upper": "m",
+    "v_max": "m/s",
+    "speed_sd": "m/s",
+    "noise_sd": "m",
+    "margin": "m",
+    "bone_tol_abs": "m",
+    "tau": "s",
+    "min_run": "s",
+    "window": "frames",
+    "lookback": "frames",
+    "mincutoff": "Hz",
+    "dcutoff": "Hz",
+    "jitter_radius": "m",
+    "max_deviation_radius": "m",
+}
 
 
 # --------------------------------------------------------------------------- evaluate
-def _load_one(path: str, what: str):
+def _load_one(path: str, what: str, input_format: str = "auto"):
+    from tobitkf.app.batch import readable_problem
     from tobitkf.io import load
 
+    problem = readable_problem(path)
+    if problem:
+        _fail(f"{what} {path}: {problem}")
     try:
-        seqs = load(path)
+        seqs = load(path, format=input_format)
     except (ValueError, OSError, ImportError) as exc:
         _fail(f"cannot read {what} {path}: {exc}")
     if not seqs:
@@ -409,8 +580,22 @@ def _method_list(text: str | None) -> list[str] | None:
     default=None,
     help="Also write results.json (and per-recording tables) here.",
 )
+@_input_format_option("--format", help="Input format of every TRACK.")
+@_input_format_option(
+    "--truth-format", dest="truth_format", help="Input format of every --truth file."
+)
 def evaluate(
-    tracks, truths, truth_replace, methods, pairs, fixed_delay, as_json, as_markdown, outdir
+    tracks,
+    truths,
+    truth_replace,
+    methods,
+    pairs,
+    fixed_delay,
+    as_json,
+    as_markdown,
+    outdir,
+    input_format,
+    truth_format,
 ):
     """Score smoothing methods on TRACK against motion capture (or without it).
 
@@ -442,29 +627,37 @@ def evaluate(
         _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
     if as_markdown and not truths:
         _fail("--markdown prints the tables against ground truth: give --truth")
+    if outdir:  # before the work, not after it
+        _writable_folder(outdir, "results.json")
     quiet = as_json or as_markdown
     results: dict[str, Any] = {}
     tables = []
     warned: list[tuple[str, str]] = []
-    for i, path in enumerate(tracks):
-        track = _load_one(path, "track")
-        try:
-            if truths:
-                mocap = _load_one(truths[i], "truth")
-                gt = prepare_truth(track, mocap, pairs=pairs)
-                for warning in gt.notes.get("warnings", []):
-                    err_console.print(f"[yellow]warning[/yellow] {escape(path)}: {escape(warning)}")
-                    warned.append((path, warning))
-                table = evaluate_methods(track, gt, method_specs, fixed_delay=fixed_delay)
-                tables.append(table)
-            else:
-                table = evaluate_without_truth(track, method_specs)
-        except (ValueError, KeyError) as exc:
-            _fail(f"{path}: {exc}")
-        results[path] = table.to_dict()
-        if not quiet:
-            console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
-            console.print(table.to_text(), highlight=False, soft_wrap=True)
+    with _progress() as progress:
+        task = progress.add_task("evaluating", total=len(tracks) * len(method_specs), now="")
+        for i, path in enumerate(tracks):
+            progress.update(task, description=f"{Path(path).name} ({i + 1}/{len(tracks)})")
+            specs = _ticking(method_specs, progress, task)
+            track = _load_one(path, "track", input_format)
+            try:
+                if truths:
+                    mocap = _load_one(truths[i], "truth", truth_format)
+                    gt = prepare_truth(track, mocap, pairs=pairs)
+                    for warning in gt.notes.get("warnings", []):
+                        err_console.print(
+                            f"[yellow]warning[/yellow] {escape(path)}: {escape(warning)}"
+                        )
+                        warned.append((path, warning))
+                    table = evaluate_methods(track, gt, specs, fixed_delay=fixed_delay)
+                    tables.append(table)
+                else:
+                    table = evaluate_without_truth(track, specs)
+            except (ValueError, KeyError) as exc:
+                _fail(f"{path}: {exc}")
+            results[path] = table.to_dict()
+            if not quiet:
+                console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
+                console.print(table.to_text(), highlight=False, soft_wrap=True)
     pooled = pool_scores(tables) if len(tables) > 1 else None
     if pooled is not None:
         results["pooled"] = pooled
@@ -479,7 +672,6 @@ def evaluate(
             )
     if outdir:
         out = Path(outdir)
-        out.mkdir(parents=True, exist_ok=True)
         (out / "results.json").write_text(dumps(results))
         if not quiet:
             console.print(f"wrote {out / 'results.json'}")
@@ -521,14 +713,18 @@ def _scaled(value: Any, factor: float) -> Any:
     help="CSV pairing table for --truth.",
 )
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
-def report(track, truth, output, methods, pairs, no_gif):
+@_input_format_option("--format", help="Input format of TRACK.")
+@_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
+def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
     from tobitkf.app.report import track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
-    raw = _load_one(track, "track")
-    mocap = _load_one(truth, "truth") if truth else None
+    _need_matplotlib("the report's figures")
+    _writable_file(output, "the report")  # before seconds of evaluating and drawing
+    raw = _load_one(track, "track", input_format)
+    mocap = _load_one(truth, "truth", truth_format) if truth else None
     with console.status("evaluating and drawing..."):
         try:
             path, table = track_report(
@@ -577,15 +773,19 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
 
     specs = _method_list(methods) or default_methods()
     tables = []
-    for s in range(seed, seed + seeds):
-        try:
-            tables.append(
-                run_benchmark(
-                    seed=s, methods=specs, motion=motion, source=source, duration=duration
+    with _progress() as progress:
+        task = progress.add_task("benchmark", total=seeds, now="")
+        for s in range(seed, seed + seeds):
+            progress.update(task, now=f"seed {s}")
+            try:
+                tables.append(
+                    run_benchmark(
+                        seed=s, methods=specs, motion=motion, source=source, duration=duration
+                    )
                 )
-            )
-        except (ValueError, OSError) as exc:
-            _fail(str(exc))
+            except (ValueError, OSError) as exc:
+                _fail(str(exc))
+            progress.advance(task)
     if as_json:
         click.echo(dumps([t.to_dict() for t in tables]))
         return
@@ -615,7 +815,11 @@ def reproduce():
 
 @reproduce.command("covariance-example")
 @click.option(
-    "--samples", default=1_000_000, show_default=True, help="Monte Carlo samples for eq. 23."
+    "--samples",
+    default=1_000_000,
+    show_default=True,
+    type=click.IntRange(1),
+    help="Monte Carlo samples for eq. 23.",
 )
 @click.option("--seed", default=0, show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
@@ -630,6 +834,9 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
     """Section 3.4: exact censored covariance vs the standard TKF's vs Monte Carlo."""
     from tobitkf.paper.covariance import covariance_example
 
+    if outdir:
+        _need_matplotlib("--out (the figures)")
+        _writable_folder(outdir, "the figures")
     result = covariance_example(samples=samples, seed=seed)
     if as_json:
         click.echo(dumps(result.to_dict()))
@@ -643,8 +850,12 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
 
 
 @reproduce.command("oscillator")
-@click.option("--runs", default=100, show_default=True, help="Monte Carlo runs.")
-@click.option("--steps", default=1000, show_default=True, help="Time steps per run.")
+@click.option(
+    "--runs", default=100, show_default=True, type=click.IntRange(1), help="Monte Carlo runs."
+)
+@click.option(
+    "--steps", default=1000, show_default=True, type=click.IntRange(2), help="Time steps per run."
+)
 @click.option("--seed", default=0, show_default=True, help="First seed.")
 @click.option(
     "--seeds",
@@ -670,6 +881,9 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
     """Section 4.1: Tables 1 and 2 (RMSE and NCI) for TKF, TKF^c and the KF."""
     from tobitkf.paper.oscillator import oscillator_experiment
 
+    if outdir:
+        _need_matplotlib("--out (the figures)")
+        _writable_folder(outdir, "the figures")
     with (
         console.status(f"{runs} runs x {steps} steps x {seeds} seed(s)...")
         if not as_json
@@ -710,13 +924,16 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
     help="Likelihood: censored with S (corrected), with R (standard), or plain KF.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
-def fit(paths, per_joint, q_structure, fit_r, form, as_json):
-    """Maximum-likelihood estimate of the process noise Q of skeleton recordings."""
+@_input_format_option("--format", help="Input format of every PATH.")
+def fit(paths, per_joint, q_structure, fit_r, form, as_json, input_format):
+    """Maximum-likelihood estimate of the process noise Q of skeleton recordings.
+
+    Q and R are variances of positions in m² (Q per frame step of the recording)."""
     from tobitkf.smoothing.fit import fit_skeleton_noise
 
     results: dict[str, Any] = {}
     for path in paths:
-        seq = _load_one(path, "recording")
+        seq = _load_one(path, "recording", input_format)
         kwargs: dict[str, Any] = {
             "per_joint": per_joint,
             "q_structure": q_structure,
@@ -725,16 +942,32 @@ def fit(paths, per_joint, q_structure, fit_r, form, as_json):
         }
         if form == "gaussian":
             kwargs["c"] = None
-        with console.status(f"fitting {path}...") if not as_json else nullcontext():
-            try:
-                res = fit_skeleton_noise(seq, **kwargs)
-            except ValueError as exc:
-                _fail(f"{path}: {exc}")
+        try:
+            if per_joint:  # one fit per joint, with a progress display on a terminal
+                res = {}
+                with _progress(quiet=as_json) as progress:
+                    task = progress.add_task(f"fitting {path}", total=seq.n_joints, now="")
+                    for j, joint in enumerate(seq.joint_names):
+                        progress.update(task, now=joint)
+                        try:
+                            res.update(fit_skeleton_noise(seq, joints=[j], **kwargs))
+                        except ValueError as exc:  # fewer than two observed frames
+                            if "at least two observed" not in str(exc):
+                                raise
+                        progress.advance(task)
+                if not res:
+                    raise ValueError("no joint has at least two observed frames")
+            else:
+                with console.status(f"fitting {path}...") if not as_json else nullcontext():
+                    res = fit_skeleton_noise(seq, **kwargs)
+        except ValueError as exc:
+            _fail(f"{path}: {exc}")
         results[path] = (
             {k: v.to_dict() for k, v in res.items()} if isinstance(res, dict) else res.to_dict()
         )
         if not as_json:
             console.rule(f"[bold]{path}")
+            console.print("Q and R: position variances in m² (Q per frame step)")
             if isinstance(res, dict):
                 for joint, r in res.items():
                     console.print(f"[bold]{joint}[/bold]")
@@ -762,6 +995,8 @@ def demo(outdir, seed, no_gif):
     """The main job end to end on the built-in synthetic recording (no files needed)."""
     from tobitkf.app.demo import run_demo
 
+    _need_matplotlib("the demo's report")
+    _writable_folder(outdir, "the demo's files")  # before generating and smoothing
     with console.status("generating, smoothing, scoring, drawing..."):
         result = run_demo(outdir, seed=seed, gif=not no_gif)
     console.print("[bold]RMSE against the known truth, by glitch type (cm)[/bold]")

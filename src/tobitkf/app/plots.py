@@ -111,6 +111,7 @@ def plot_joint_traces(
     title: str = "",
     shade: Sequence[tuple[int, int]] = (),
     unit: str = "m",
+    shade_label: str = "glitch",
 ):
     """Per-axis coordinate traces of one joint (like Fig. 1, 2, 4, 6 of the 2020 paper).
 
@@ -121,6 +122,7 @@ def plot_joint_traces(
     title : str
     shade : frame ranges ``(start, stop)`` to shade (glitch episodes)
     unit : axis label unit
+    shade_label : the shading's entry in the legend
 
     Returns
     -------
@@ -146,10 +148,28 @@ def plot_joint_traces(
         ax.set_ylabel(f"{AXIS_NAMES[k]} [{unit}]")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
-    axes[0].legend(loc="upper right", fontsize=8, ncol=min(len(series), 5))
+    # one legend above the plots (never over a curve), the shading included
+    handles, labels = axes[0].get_legend_handles_labels()
+    if shade:
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(color="tab:red", alpha=0.12, lw=0))
+        labels.append(shade_label)
+    ncol = min(len(labels), 8) or 1
+    rows = -(-len(labels) // ncol)
+    top = 1.0 - (0.028 * rows + (0.035 if title else 0.0)) * 6.5 / fig.get_figheight()
     if title:
-        axes[0].set_title(title)
-    fig.tight_layout()
+        fig.suptitle(title, y=0.995)
+    fig.legend(
+        handles,
+        labels,
+        loc="upper center",
+        bbox_to_anchor=(0.5, 1.0 - (0.035 if title else 0.0) * 6.5 / fig.get_figheight()),
+        ncol=ncol,
+        fontsize=8,
+        frameon=False,
+    )
+    fig.tight_layout(rect=(0, 0, 1, top))
     return fig
 
 
@@ -230,6 +250,7 @@ def animate_skeletons(
     up_axis: int = 1,
     step: int = 2,
     max_frames: int = 150,
+    window: tuple[int, int] | None = None,
 ) -> Path:
     """Write an animated GIF with the skeletons of several methods side by side.
 
@@ -242,6 +263,8 @@ def animate_skeletons(
     up_axis : coordinate drawn vertically
     step : draw every ``step``-th frame
     max_frames : at most this many GIF frames (the step grows for long recordings)
+    window : frames ``(start, stop)`` to draw, every one of them (full rate: a one-frame
+        spike is seen); ``step`` and ``max_frames`` then do not apply
 
     Returns
     -------
@@ -253,14 +276,20 @@ def animate_skeletons(
     names = list(frames)
     arrays = [np.asarray(frames[n], dtype=float) for n in names]
     T = arrays[0].shape[0]
-    step = max(step, int(np.ceil(T / max_frames)))
-    idx = np.arange(0, T, step)
+    if window is not None:
+        step = 1
+        idx = np.arange(max(0, window[0]), min(T, window[1]))
+    else:
+        step = max(step, int(np.ceil(T / max_frames)))
+        idx = np.arange(0, T, step)
     colours = _colours(names)
     h, v = _view_axes(up_axis)
-    allpts = np.concatenate([a.reshape(-1, 3) for a in arrays])
+    # the frames drawn set the view, a few wild samples do not (a spike leaves the box
+    # for a frame instead of shrinking every skeleton to a speck)
+    allpts = np.concatenate([a[idx].reshape(-1, 3) for a in arrays])
     finite = allpts[np.all(np.isfinite(allpts), axis=1)]
-    lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
-    hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
+    lo = np.percentile(finite, 0.5, axis=0) - 0.15 if finite.size else np.zeros(3)
+    hi = np.percentile(finite, 99.5, axis=0) + 0.15 if finite.size else np.ones(3)
     fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 3.2), squeeze=False)
     lines = []
     for ax, name in zip(axes[0], names):
@@ -280,7 +309,7 @@ def animate_skeletons(
             p = a[t]
             for seg, (j, par) in zip(segs, bones):
                 seg.set_data([p[par, h], p[j, h]], [p[par, v], p[j, v]])
-        label.set_text(f"t = {t / fps:5.2f} s")
+        label.set_text(f"t = {t / fps:5.2f} s   frame {t}")
         return [s for segs in lines for s in segs]
 
     anim = FuncAnimation(fig, draw, frames=idx, blit=False)

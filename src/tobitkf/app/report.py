@@ -89,6 +89,8 @@ def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
 
 def _table_html(spec: TableSpec) -> str:
     def cell(v: Any) -> str:
+        if v is None:  # not applicable (raw has no clipping) or not measured
+            return "–"
         if isinstance(v, (float, np.floating)):
             return "–" if not np.isfinite(v) else f"{float(v):.2f}"
         return html.escape(str(v))
@@ -99,13 +101,27 @@ def _table_html(spec: TableSpec) -> str:
     )
     note = f"<p class='note'>{html.escape(spec.note)}</p>" if spec.note else ""
     return (
-        f"<h2>{html.escape(spec.title)}</h2><table><thead><tr>{head}</tr></thead>"
-        f"<tbody>{body}</tbody></table>{note}"
+        f"<h2>{html.escape(spec.title)}</h2><div class='table-scroll'><table><thead>"
+        f"<tr>{head}</tr></thead><tbody>{body}</tbody></table></div>{note}"
     )
 
 
-def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> dict[str, bytes]:
-    """Render the report's figures; returns name -> PNG or GIF bytes."""
+#: frames of the animation, all drawn (at full rate) around the worst glitch
+GIF_FRAMES = 120
+
+
+def make_figures(
+    inp: ReportInput,
+    *,
+    gif: bool = True,
+    n_joints: int = 3,
+    captions: dict[str, str] | None = None,
+) -> dict[str, bytes]:
+    """Render the report's figures; returns name -> PNG or GIF bytes.
+
+    ``captions``, when given, is filled with name -> what the figure shows."""
+    if captions is None:
+        captions = {}
     from tobitkf.app import plots
 
     raw = np.asarray(inp.raw.positions, dtype=float)
@@ -119,6 +135,8 @@ def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> di
     times = np.asarray(inp.raw.times(), dtype=float)
     figures: dict[str, bytes] = dict(inp.figures)
     joint_names = list(inp.raw.joint_names)
+    against = "the truth" if inp.truth is not None else f"the {names[0]} output" if names else ""
+    shade_label = f"raw > {100 * GLITCH_THRESHOLD_M:.0f} cm from {against}"
     for j in pick_joints(mask, raw, n_joints):
         series: dict[str, np.ndarray] = {"raw": raw[:, j]}
         for name in [n for n in inp.traces if n in inp.methods] or names:
@@ -126,9 +144,20 @@ def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> di
         if inp.truth is not None and np.isfinite(inp.truth[:, j]).any():
             series["truth"] = inp.truth[:, j]
         fig = plots.plot_joint_traces(
-            times, series, title=f"{joint_names[j]}", shade=plots.episodes(mask[:, j])
+            times,
+            series,
+            title=f"{joint_names[j]}",
+            shade=plots.episodes(mask[:, j]),
+            shade_label=shade_label,
         )
-        figures[f"traces_{joint_names[j]}.png"] = plots.figure_to_png(fig)
+        name = f"traces_{joint_names[j]}.png"
+        figures[name] = plots.figure_to_png(fig)
+        captions[name] = (
+            f"{joint_names[j]}: x, y and z over time, raw track (grey dots) against "
+            f"{', '.join(n for n in series if n != 'raw')}. Shaded: frames where the raw "
+            f"track is more than {100 * GLITCH_THRESHOLD_M:.0f} cm from {against}. "
+            f"{joint_names[j]} is one of the {n_joints} joints with the most such frames."
+        )
 
     # skeletons before, during and after the worst glitch
     err = np.linalg.norm(raw - reference, axis=-1)
@@ -151,23 +180,39 @@ def make_figures(inp: ReportInput, *, gif: bool = True, n_joints: int = 3) -> di
         title="skeletons around the worst glitch",
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
+    captions["skeletons_worst_glitch.png"] = (
+        f"Skeletons seen from the front at frames {', '.join(map(str, cols))}: around frame "
+        f"{worst}, where the raw track is furthest from {against}; one column per method."
+    )
 
     if gif and names:
         shown = [n for n in inp.animate if n in frames] or names[:1]
         anim = {"raw": raw, **{n: frames[n] for n in shown}}
         if inp.truth is not None:
             anim["truth"] = inp.truth
+        # every frame of a window around the worst glitch: a one-frame spike is seen
+        start = int(np.clip(worst - GIF_FRAMES // 2, 0, max(0, T - GIF_FRAMES)))
+        stop = min(T, start + GIF_FRAMES)
+        fps = float(inp.raw.fps or 30.0)
         with tempfile.TemporaryDirectory() as tmp:
             path = plots.animate_skeletons(
-                anim, parents, Path(tmp) / "anim.gif", fps=float(inp.raw.fps or 30.0), up_axis=up
+                anim, parents, Path(tmp) / "anim.gif", fps=fps, up_axis=up, window=(start, stop)
             )
             figures["animation.gif"] = path.read_bytes()
+        captions["animation.gif"] = (
+            f"Animation of frames {start} to {stop - 1} ({(stop - start) / fps:.1f} s, every "
+            f"frame, real time) around the worst glitch at frame {worst}: "
+            f"{', '.join(anim)} side by side."
+        )
     return figures
 
 
 _CSS = """
-body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.5em 0 1em}
+body{font-family:system-ui,sans-serif;max-width:1300px;margin:2em auto;padding:0 1em;
+color:#222}
+.table-scroll{overflow-x:auto;max-width:100%;margin:0.5em 0 1em}
+table{border-collapse:collapse}
+th{vertical-align:bottom}
 th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;font-size:0.9em}
 th:first-child,td:first-child{text-align:left}
 th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
@@ -175,8 +220,14 @@ th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
 """
 
 
-def render_html(inp: ReportInput, figures: Mapping[str, bytes]) -> str:
-    """The report page as one HTML string with embedded figures."""
+def render_html(
+    inp: ReportInput,
+    figures: Mapping[str, bytes],
+    captions: Mapping[str, str] | None = None,
+) -> str:
+    """The report page as one HTML string with embedded figures (``captions``: name ->
+    what the figure shows; the name when missing)."""
+    captions = captions or {}
     from tobitkf.app.plots import png_data_uri
 
     parts = [
@@ -193,7 +244,8 @@ def render_html(inp: ReportInput, figures: Mapping[str, bytes]) -> str:
         mime = "image/gif" if name.endswith(".gif") else "image/png"
         parts.append(
             f"<figure><img alt='{html.escape(name)}' src='{png_data_uri(data, mime)}'>"
-            f"<figcaption class='note'>{html.escape(name)}</figcaption></figure>"
+            f"<figcaption class='note'>{html.escape(captions.get(name, name))}</figcaption>"
+            "</figure>"
         )
     parts.append("</body></html>")
     return "\n".join(parts)
@@ -201,11 +253,12 @@ def render_html(inp: ReportInput, figures: Mapping[str, bytes]) -> str:
 
 def write_report(inp: ReportInput, path: str | Path, *, gif: bool = True) -> Path:
     """Render figures and write the self-contained HTML report to ``path``."""
-    figures = make_figures(inp, gif=gif)
+    captions: dict[str, str] = {}
+    figures = make_figures(inp, gif=gif, captions=captions)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.part")
-    tmp.write_text(render_html(inp, figures), encoding="utf-8")
+    tmp.write_text(render_html(inp, figures, captions), encoding="utf-8")
     tmp.replace(path)
     return path
 
@@ -215,16 +268,57 @@ def _table_from_rows(title: str, rows: Sequence[Mapping[str, Any]], note: str = 
     return TableSpec(title, columns, [[r.get(c) for c in columns] for r in rows], note)
 
 
-def _display_row(row: Mapping[str, Any]) -> dict[str, Any]:
-    """An accuracy row for display: angles dropped (own table), M in 1e-3 m²."""
+#: column headers of the accuracy table (the unit is in the table's title)
+_HEADERS = {
+    "rmse_cm": "RMSE",
+    "hands_cm": "hands",
+    "arms_cm": "arms",
+    "torso_cm": "torso",
+    "legs_cm": "legs",
+    "p95_cm": "p95",
+    "max_cm": "max",
+    "frames_over": "frames > 10 cm",
+    "fine_cm": "fine",
+    "short_glitch_cm": "short glitch",
+    "sustained_cm": "sustained",
+    "lag_frames": "hand lag (frames)",
+}
+
+
+def _angle_header(key: str) -> str:
+    """``right_elbow_best_deg`` -> ``right elbow best``: short enough to fit the page."""
+    for suffix in ("_best_deg", "_fixed_deg", "_delay"):
+        if key.endswith(suffix):
+            return f"{key[: -len(suffix)].replace('_', ' ')} {suffix.split('_')[1]}"
+    return key
+
+
+def _mean_percent(value: Any) -> float | None:
+    if value is None:
+        return None
+    arr = np.asarray(value, dtype=float)
+    return 100.0 * float(np.nanmean(arr)) if arr.size and np.isfinite(arr).any() else None
+
+
+def _display_row(row: Mapping[str, Any], output: Any = None) -> dict[str, Any]:
+    """An accuracy row for display: angles dropped (own table), M in 1e-3 m², readable
+    headers, and what the method did to the measurements: the Tobit filters clip them
+    (clipped %), the robust methods reject impossible ones (rejected %); "–" where a
+    method does neither (raw, the baselines)."""
+    diag = (getattr(output, "metadata", None) or {}).get("diagnostics") or {}
+    rejected = _mean_percent(diag.get("rejected_fraction"))
     out: dict[str, Any] = {}
     for k, v in row.items():
         if k.endswith(("_deg", "_delay")):
             continue
         if k == "M":
             out["M (1e-3 m²)"] = None if v is None else 1e3 * v
+        elif k == "clipped_fraction":
+            clipped = None if v is None or rejected is not None else 100.0 * v
+            out["clipped (%)"] = clipped
+            out["rejected (%)"] = rejected
         else:
-            out[k] = v
+            out[_HEADERS.get(k, k)] = v
     return out
 
 
@@ -276,7 +370,7 @@ def track_report(
         tables = [
             _table_from_rows(
                 "Accuracy against ground truth (cm, lag in frames)",
-                [_display_row(r) for r in table.rows()],
+                [_display_row(r, outputs.get(r["method"])) for r in table.rows()],
                 note="fine / short_glitch / sustained: samples where the RAW track is within "
                 "10 cm of the truth, off for at most 4 frames, or off for longer.",
             )
@@ -288,10 +382,12 @@ def track_report(
             }
             for r in table.rows()
         ]
+        angle_rows = [{_angle_header(k): v for k, v in r.items()} for r in angle_rows]
         if angle_rows and len(angle_rows[0]) > 1:
             tables.append(
                 _table_from_rows(
-                    "Joint angles against ground truth (degrees; best delay and one fixed delay)",
+                    "Joint angles against ground truth: RMSE in degrees at the best delay (best, "
+                    "delay in frames) and at one fixed delay for every method (fixed)",
                     angle_rows,
                 )
             )

@@ -1,0 +1,345 @@
+"""A new user's rough edges (issue 14, points 9-12): clear messages instead of tracebacks,
+outputs that never replace someone else's file, --format for every input, progress, units
+and a report that reads well in a browser."""
+
+from __future__ import annotations
+
+import builtins
+import io
+import os
+import shutil
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+click = pytest.importorskip("click")
+from click.testing import CliRunner  # noqa: E402
+from rich.console import Console  # noqa: E402
+
+from test_cli import _recording  # noqa: E402
+from tobitkf.app import commands  # noqa: E402
+from tobitkf.app.commands import app  # noqa: E402
+from tobitkf.io import save  # noqa: E402
+
+ROOT = os.geteuid() == 0  # permissions do not apply to root
+
+
+def _invoke(*args: str):
+    res = CliRunner().invoke(app, [str(a) for a in args])
+    assert "Traceback" not in res.output, res.output
+    return res
+
+
+def _clean_failure(res, message: str, status: int = 1) -> None:
+    assert res.exit_code == status, res.output
+    assert message in res.output, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+    assert "Errno" not in res.output, res.output
+
+
+def _denies(path: Path) -> bool:
+    """True when chmod really denies access here (not root, not a permissive filesystem)."""
+    try:
+        if path.is_dir():
+            (path / ".probe").write_text("x")
+            (path / ".probe").unlink()
+        else:
+            path.read_bytes()
+    except PermissionError:
+        return True
+    return False
+
+
+# --------------------------------------------------------------------------- point 9
+def test_unwritable_outputs_are_one_message_before_any_work(tmp_path, monkeypatch):
+    track = tmp_path / "a.csv"
+    save([_recording()], track, format="csv")
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a folder")
+
+    def no_work(*args, **kwargs):  # the check must come before the work
+        raise AssertionError("work started before the output was checked")
+
+    monkeypatch.setattr("tobitkf.app.report.track_report", no_work)
+    monkeypatch.setattr("tobitkf.app.demo.run_demo", no_work)
+    monkeypatch.setattr("tobitkf.app.batch.run_jobs", no_work)
+    monkeypatch.setattr("tobitkf.evaluation.evaluate.evaluate_without_truth", no_work)
+    monkeypatch.setattr("tobitkf.paper.oscillator.oscillator_experiment", no_work)
+    sub = blocker / "sub"
+    # -o an existing file: no FileExistsError [Errno 17]; once, not once per input
+    save([_recording(seed=1)], tmp_path / "b.csv", format="csv")
+    res = _invoke("smooth", track, tmp_path / "b.csv", "-o", blocker)
+    _clean_failure(res, "a file of that name exists")
+    assert res.output.count("cannot write") == 1
+    _clean_failure(_invoke("smooth", track, "-o", sub), "part of the path is a file")
+    _clean_failure(_invoke("report", track, "-o", sub / "r.html"), "cannot write the report")
+    _clean_failure(_invoke("evaluate", track, "-o", sub), "cannot write results.json")
+    _clean_failure(_invoke("demo", "-o", sub), "cannot write the demo's files")
+    _clean_failure(
+        _invoke("reproduce", "oscillator", "--runs", "1", "--out", sub), "cannot write the figures"
+    )
+
+
+@pytest.mark.skipif(ROOT, reason="permissions do not apply to root")
+def test_smooth_into_a_read_only_folder_is_one_message(tmp_path):
+    track = tmp_path / "a.csv"
+    save([_recording()], track, format="csv")
+    save([_recording(seed=1)], tmp_path / "b.csv", format="csv")
+    out = tmp_path / "ro"
+    out.mkdir()
+    out.chmod(0o500)
+    try:
+        if not _denies(out):
+            pytest.skip("chmod does not deny writing here")
+        res = _invoke("smooth", track, tmp_path / "b.csv", "-o", out)
+        _clean_failure(res, "permission denied")
+        assert res.output.count("cannot write") == 1 and "a.csv" not in res.output
+    finally:
+        out.chmod(0o700)
+
+
+def test_reproduce_oscillator_zero_runs_is_a_usage_error():
+    res = _invoke("reproduce", "oscillator", "--runs", "0")
+    _clean_failure(res, "--runs", status=2)
+
+
+def test_missing_matplotlib_names_the_extra(tmp_path, monkeypatch):
+    track = tmp_path / "a.csv"
+    save([_recording()], track, format="csv")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    for args in (
+        ["demo", "-o", tmp_path / "d"],
+        ["report", track, "-o", tmp_path / "r.html", "--methods", "raw"],
+        ["reproduce", "oscillator", "--runs", "1", "--steps", "5", "--out", tmp_path / "f"],
+    ):
+        res = _invoke(*args)
+        _clean_failure(res, "pip install 'tobitkf[plot]'")
+
+
+def _deny_open(monkeypatch, target: Path) -> None:
+    """Simulate an unreadable file (root reads everything): open() of it is refused."""
+    real_open = builtins.open
+
+    def fake_open(file, *args, **kwargs):
+        if isinstance(file, (str, os.PathLike)) and Path(file).name == target.name:
+            raise PermissionError(13, "Permission denied", str(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+
+
+def test_unreadable_file_is_reported_as_unreadable(tmp_path, monkeypatch):
+    track = tmp_path / "locked.csv"
+    save([_recording()], track, format="csv")
+    if not ROOT:
+        track.chmod(0)
+        if _denies(track):
+            res = _invoke("evaluate", track, "--methods", "raw")
+            _clean_failure(res, "permission denied")
+        track.chmod(stat.S_IRUSR | stat.S_IWUSR)
+    _deny_open(monkeypatch, track)
+    res = _invoke("evaluate", track, "--methods", "raw")
+    _clean_failure(res, "cannot read it: permission denied")
+    assert "unrecognised content" not in res.output
+    res = _invoke("smooth", track, "-o", tmp_path / "out")
+    _clean_failure(res, "cannot read it: permission denied")
+
+
+def test_folder_walk_names_what_it_cannot_follow(tmp_path, monkeypatch):
+    src = tmp_path / "in"
+    (src / "locked").mkdir(parents=True)
+    save([_recording()], src / "a.csv", format="csv")
+    save([_recording()], src / "locked" / "b.csv", format="csv")
+    (src / "dangling.csv").symlink_to(src / "gone.csv")
+    (src / "loop.csv").symlink_to(src / "loop.csv")
+    real_scandir = os.scandir
+
+    def scandir(path="."):  # simulate an unreadable subfolder (root reads everything)
+        if Path(path).name == "locked":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    res = _invoke("smooth", src, "-o", tmp_path / "out")
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "locked: cannot read this folder: permission denied" in text
+    assert "dangling.csv: dangling symbolic link" in text
+    assert "loop.csv: symbolic link loop" in text
+    assert (tmp_path / "out" / "a.robust.csv").exists()
+
+
+def test_smooth_never_replaces_a_foreign_file_and_skips_its_own_outputs(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    save([_recording()], src / "a.csv", format="csv")
+    foreign = src / "a.robust.csv"
+    foreign.write_text("my own notes\n")
+    res = _invoke("smooth", src / "a.csv", "-o", src)
+    assert res.exit_code == 1 and "not a tobitkf output" in " ".join(res.output.split())
+    assert foreign.read_text() == "my own notes\n"
+    res = _invoke("smooth", src / "a.csv", "-o", src, "--overwrite")
+    assert res.exit_code == 0, res.output
+    assert foreign.read_text() != "my own notes\n"
+    # in place, twice: the first run's output is an input no more (no a.robust.robust.csv)
+    for _ in range(2):
+        res = _invoke("smooth", src, "-o", src)
+        assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in src.iterdir()) == [
+        "a.csv",
+        "a.json",
+        "a.robust.csv",
+        "a.robust.json",
+    ]
+    assert "tobitkf outputs of an earlier run" in " ".join(res.output.split())
+
+
+def test_outputs_get_the_umask_mode(tmp_path):
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    old = os.umask(0o022)
+    try:
+        res = _invoke("smooth", tmp_path / "a.csv", "-o", tmp_path / "out")
+    finally:
+        os.umask(old)
+    assert res.exit_code == 0, res.output
+    for f in (tmp_path / "out").iterdir():
+        assert stat.S_IMODE(f.stat().st_mode) == 0o644, f
+
+
+# --------------------------------------------------------------------------- point 10
+def _terminal(monkeypatch) -> io.StringIO:
+    buf = io.StringIO()
+    console = Console(file=buf, force_terminal=True, width=120)
+    monkeypatch.setattr(commands, "err_console", console)
+    return buf
+
+
+def test_progress_on_a_terminal_for_evaluate_benchmark_and_fit(tmp_path, monkeypatch):
+    track = tmp_path / "a.csv"
+    save([_recording()], track, format="csv")
+    buf = _terminal(monkeypatch)
+    assert _invoke("evaluate", track, "--methods", "raw,kf").exit_code == 0
+    assert "a.csv" in buf.getvalue() and "2/2" in buf.getvalue()
+    buf = _terminal(monkeypatch)
+    res = _invoke("benchmark", "--seeds", "2", "--duration", "2", "--methods", "raw,kf")
+    assert res.exit_code == 0, res.output
+    assert "seed 1" in buf.getvalue() and "2/2" in buf.getvalue()
+    buf = _terminal(monkeypatch)
+    assert _invoke("fit", track, "--per-joint").exit_code == 0
+    assert "25/25" in buf.getvalue()
+
+
+def test_methods_and_fit_print_units(tmp_path):
+    res = _invoke("methods")
+    text = " ".join(res.output.split())
+    assert "q=0.0025 m²/step" in text and "v_max" in text and "units:" in text
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    res = _invoke("fit", tmp_path / "a.csv")
+    assert res.exit_code == 0 and "m²" in res.output
+
+
+# --------------------------------------------------------------------------- point 11
+def test_format_option_for_every_input_command(tmp_path):
+    odd = tmp_path / "recording.txt"  # CSV content under a name no sniffer takes as CSV
+    odd.write_text("time,Head_x,Head_y,Head_q\n0,1,2,3\n")
+    good = tmp_path / "good.dat"
+    save([_recording()], tmp_path / "good.csv", format="csv")
+    shutil.copy(tmp_path / "good.csv", good)
+    for args in (
+        ["evaluate", odd, "--format", "csv"],
+        ["report", odd, "--format", "csv", "-o", tmp_path / "r.html"],
+        ["fit", odd, "--format", "csv"],
+        ["smooth", odd, "-F", "csv", "-o", tmp_path / "out"],
+    ):
+        res = _invoke(*args)
+        assert res.exit_code == 1, (args, res.output)
+        assert "expected columns" in res.output, (args, res.output)
+    res = _invoke("evaluate", good, "--format", "csv", "--methods", "raw")
+    assert res.exit_code == 0, res.output
+    res = _invoke("evaluate", odd, "--format", "nosuch")
+    _clean_failure(res, "nosuch", status=2)
+
+
+# --------------------------------------------------------------------------- point 12
+def _small_report(tmp_path: Path) -> Path:
+    from tobitkf.app.report import track_report
+
+    seq = _recording(T=90)
+    truth = np.asarray(seq.positions).copy()
+    truth[30] = truth[29]  # the hand spike at frame 30 is a glitch against the truth
+    path, _ = track_report(
+        seq, tmp_path / "r.html", truth=truth, methods=["raw", "atkf", "robust"], gif=True
+    )
+    return path
+
+
+def test_report_html_reads_well(tmp_path):
+    page = _small_report(tmp_path).read_text()
+    assert "<td>None</td>" not in page and ">None<" not in page
+    # every table sits in a container that scrolls sideways instead of running off the page
+    assert page.count("<table>") == page.count("<div class='table-scroll'><table>") >= 1
+    assert ".table-scroll{overflow-x:auto" in page
+    # captions say what a figure shows, not its file name
+    captions = [c.split("</figcaption>")[0] for c in page.split("<figcaption class='note'>")[1:]]
+    assert len(captions) >= 3
+    assert not any(c.endswith((".png", ".gif")) for c in captions)
+    assert any("Shaded" in c for c in captions) and any("every frame" in c for c in captions)
+    # robust rejects samples: its rejected % is shown; raw has no clipping: "–"
+    assert "rejected (%)" in page and "clipped (%)" in page
+    row = page.split("<tr><td>robust</td>")[1].split("</tr>")[0]
+    cells = [c.split("</td>")[0] for c in row.split("<td>")[1:]]
+    assert cells[-2] == "–" and float(cells[-1]) > 0
+    raw_row = page.split("<tr><td>raw</td>")[1].split("</tr>")[0]
+    assert raw_row.count("<td>–</td>") >= 2
+
+
+def test_gif_window_draws_every_frame(tmp_path):
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from tobitkf.app import plots
+
+    pos = np.zeros((400, 3, 3))
+    pos[:, 1, 1] = 1.0
+    pos[:, 2, 1] = 2.0
+    pos[201, 2] += 0.5  # a one-frame spike
+    out = plots.animate_skeletons({"raw": pos}, [-1, 0, 1], tmp_path / "a.gif", window=(150, 250))
+    with Image.open(out) as im:
+        assert im.n_frames == 100  # every frame of the window, the spike's included
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
+def test_report_renders_in_chromium(tmp_path):
+    from PIL import Image
+
+    page = _small_report(tmp_path)
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [
+            "chromium",
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=1400,2400",
+            f"--screenshot={shot}",
+            page.resolve().as_uri(),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
+    with Image.open(shot) as im:
+        assert im.size == (1400, 2400)
+        grey = np.asarray(im.convert("L"), dtype=float)
+    assert grey.std() > 10  # a page with tables and figures, not a blank or error page
+    # nothing runs off to the right: the rightmost 40 px are page background
+    assert (grey[:, -40:-20] > 240).mean() > 0.99
