@@ -265,3 +265,13 @@ def test_rts_with_singular_predicted_covariance_matches_joint_posterior():
     ys[3] = np.nan
     res = _check_against_brute_force(model, ys)
     assert np.linalg.matrix_rank(res.predicted_covs[2]) == 1
+
+
+def test_sum_last_equals_numpy_sum_bit_for_bit():
+    # the written-out sum over 3 components used per frame is numpy's own order
+    from tobitkf.core.engine import sum_last
+
+    rng = np.random.default_rng(5)
+    for shape in ((7, 3), (4, 5, 3), (6, 2)):
+        a = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
+        np.testing.assert_array_equal(sum_last(a), a.sum(axis=-1))

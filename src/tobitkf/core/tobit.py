@@ -73,6 +73,7 @@ from tobitkf.core.engine import (
     observed_mask,
     prepare_inputs,
     run_filter,
+    sum_last,
 )
 from tobitkf.core.model import FilterResult, LinearGaussian
 
@@ -100,7 +101,7 @@ _BIG = 1e150  # stands in for an infinite standardised limit (0 * BIG = 0, BIG**
 
 
 def _loglik_sum(terms: Array) -> Array:
-    return terms.sum(axis=-1)
+    return sum_last(terms)
 
 
 def _clipped_flag(y: Array, lower: Any, upper: Any) -> NDArray[np.bool_]:
@@ -303,7 +304,7 @@ def _atkf_update_symmetric(
     terms = np.where(clipped, log_pa, ee)
     x = np.add(xp, K * e, out=out_x)
     v = vp - K * Pxy
-    return UpdateOut(x, v, terms.sum(axis=-1), Pa, Pu, Pa, clipped, K)
+    return UpdateOut(x, v, sum_last(terms), Pa, Pu, Pa, clipped, K)
 
 
 def atkf_update(

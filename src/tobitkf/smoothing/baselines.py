@@ -242,9 +242,8 @@ def moving_average(x: ArrayLike, window: int = 5, centered: bool = True) -> NDAr
     T = arr.shape[0]
     finite = np.isfinite(arr)
     vals = np.where(finite, arr, 0.0)
-    zeros = np.zeros((1, *arr.shape[1:]))
-    csum = np.concatenate([zeros, np.cumsum(vals, axis=0)])
-    ccount = np.concatenate([zeros, np.cumsum(finite, axis=0, dtype=float)])
+    csum = _cumsum0(vals)
+    ccount = _cumsum0(finite.astype(float))
     k = np.arange(T)
     if centered:
         lo = np.clip(k - window // 2, 0, T)
@@ -257,6 +256,19 @@ def moving_average(x: ArrayLike, window: int = 5, centered: bool = True) -> NDAr
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
     return out.reshape(shape)
+
+
+def _cumsum0(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``concatenate([0, cumsum(a, axis=0)])``, the same sums in the same order, frame by
+    frame (numpy's cumsum over a leading axis is several times slower on wide batches)."""
+    out = np.empty((a.shape[0] + 1, *a.shape[1:]))
+    out[0] = 0.0
+    if a[0].size < 256:  # narrow: the frame loop would cost more than it saves
+        np.cumsum(a, axis=0, out=out[1:])
+        return out
+    for k in range(a.shape[0]):
+        np.add(out[k], a[k], out=out[k + 1])
+    return out
 
 
 # --------------------------------------------------------------------------- 1€ filter
@@ -441,6 +453,31 @@ def kinect_double_exponential(
     s, c, pred = p["smoothing"], p["correction"], p["prediction"]
     jitter0 = max(1e-4, p["jitter_radius"])
     maxdev0 = p["max_deviation_radius"]
+    if T and arr.shape[-1] and arr.size:
+        # compiled, joint by joint (numba, imported here: not at import tobitkf)
+        from tobitkf.smoothing._baseline_kernels import kinect_run
+
+        D = arr.shape[-1]
+        flat = np.ascontiguousarray(arr.reshape(T, -1, D))
+        st = np.ascontiguousarray(np.asarray(state).reshape(T, -1), dtype=np.int8)
+        out = kinect_run(flat, st, float(s), float(c), float(pred), float(jitter0), float(maxdev0))
+        return out.reshape(arr.shape)
+    return _kinect_numpy(arr, state, s, c, pred, jitter0, maxdev0)
+
+
+def _kinect_numpy(
+    arr: NDArray[np.float64],
+    state: NDArray[Any],
+    s: float,
+    c: float,
+    pred: float,
+    jitter0: float,
+    maxdev0: float,
+) -> NDArray[np.float64]:
+    """The filter as numpy operations per frame over the batch (the reference form of the
+    compiled kernel; used for empty inputs)."""
+    T = arr.shape[0]
+    batch = arr.shape[1:-1]
 
     out = np.empty_like(arr)
     f_prev = np.zeros(batch + arr.shape[-1:])

@@ -14,6 +14,8 @@ from tobitkf.smoothing.paper import REFERENCE_DT
 
 __all__ = [
     "DEFAULT_INFERRED_NOISE_FACTOR",
+    "all_last",
+    "any_last",
     "elapsed_since_valid",
     "frame_steps",
     "frame_times",
@@ -66,17 +68,31 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
     copy) when nothing has to change: callers must not write into the result.
     """
     ys = np.asarray(positions, dtype=float)
-    missing = np.isnan(ys).any(axis=-1)
+    nan = np.isnan(ys)
+    missing = any_last(nan)
     if states is not None:
         not_tracked = np.asarray(states) == TrackingState.NOT_TRACKED
         if not_tracked.any():
             missing |= not_tracked
-            ys = ys.copy()
-            ys[missing] = np.nan
-    if np.isnan(ys).sum() != 3 * missing.sum():  # a partly-NaN sample: all its axes NaN
-        ys = ys.copy()
-        ys[missing] = np.nan
+            return np.where(missing[..., None], np.nan, ys), missing
+    if not np.array_equal(missing, all_last(nan)):  # a partly-NaN sample: all its axes NaN
+        ys = np.where(missing[..., None], np.nan, ys)
     return ys, missing
+
+
+def any_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``a.any(axis=-1)``, written out for 3 axes (a reduction over a short last axis is
+    slow in numpy)."""
+    if a.shape[-1] == 3:
+        return (a[..., 0] | a[..., 1]) | a[..., 2]
+    return a.any(axis=-1)
+
+
+def all_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``a.all(axis=-1)``, written out for 3 axes."""
+    if a.shape[-1] == 3:
+        return (a[..., 0] & a[..., 1]) & a[..., 2]
+    return a.all(axis=-1)
 
 
 def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
