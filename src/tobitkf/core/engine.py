@@ -158,7 +158,9 @@ def sum_last(a: Array) -> Array:
     order, ``(a0 + a1) + a2``, which written out is several times faster than the
     reduction over a short last axis (a per-frame cost in every filter)."""
     if a.shape[-1] == 3:
-        return (a[..., 0] + a[..., 1]) + a[..., 2]
+        out = a[..., 0] + a[..., 1]
+        out += a[..., 2]
+        return out
     return a.sum(axis=-1)
 
 

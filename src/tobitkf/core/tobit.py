@@ -51,6 +51,7 @@ ATKF (eq. 27). The first ATKF step (a KF step) uses the KF's Gaussian log densit
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -246,6 +247,42 @@ def _pu_vt_symmetric(beta: Array, Pu: Array, phi: Array) -> Array:
     return out
 
 
+class _LastCall:
+    """One-entry memo of an elementwise function of a frame's standardised limits.
+
+    In the adaptive filter β = c / s depends on the variances only, and those converge:
+    from frame to frame most elements repeat the previous frame's β exactly, so only the
+    changed elements are evaluated (the same numbers: the function is elementwise and
+    evaluated element by element). The memo keeps private copies (callers may write into
+    what they get) and is replaced as one tuple, so concurrent filters stay correct.
+    """
+
+    def __init__(self, f: Callable[[Array], Array]) -> None:
+        self.f = f
+        self.last: tuple[Array, Array] | None = None
+
+    def __call__(self, x: Array) -> Array:
+        last = self.last
+        if last is not None and last[0].shape == x.shape:
+            old_x, old_y = last
+            changed = x != old_x
+            n = int(np.count_nonzero(changed))
+            if n == 0:
+                return old_y.copy()
+            if 4 * n < x.size:
+                y = old_y.copy()
+                y[changed] = self.f(x[changed])
+                self.last = (x.copy(), y.copy())
+                return y
+        y = self.f(x)
+        self.last = (x.copy(), y.copy())
+        return y
+
+
+_log_ndtr_memo = _LastCall(special.log_ndtr)
+_erf_memo = _LastCall(special.erf)
+
+
 def _atkf_update_symmetric(
     xp: Array,
     vp: Array,
@@ -278,9 +315,9 @@ def _atkf_update_symmetric(
         S = sm.H * Pxy0 + r
     s = np.sqrt(S)
     beta = np.minimum(c / s, _BIG)
-    log_pa = special.log_ndtr(-beta)
+    log_pa = _log_ndtr_memo(-beta)
     Pa = np.exp(log_pa)
-    Pu = special.erf(beta * _SQRT_HALF)
+    Pu = _erf_memo(beta * _SQRT_HALF)
     phi = np.exp(-0.5 * beta * beta) * _INV_SQRT_2PI
     Vf = _pu_vt_symmetric(beta, Pu, phi) + 2.0 * Pa * beta * beta
     Pxy = Pxy0 * Pu

@@ -356,7 +356,9 @@ def _smooth_group(
     sample = sample_states(missing, rejected, finite, spec.is_causal(params) and not offline)
     std = None
     if result.std is not None:
-        std = np.where(finite, np.asarray(result.std, dtype=float), np.nan)
+        std = np.asarray(result.std, dtype=float)
+        if (~finite & ~np.isnan(std)).any():  # as a rule the method's NaN are there already
+            std = np.where(finite, std, np.nan)
     T = max(ref.n_frames, 1)
     used = {
         **params,

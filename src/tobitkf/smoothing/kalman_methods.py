@@ -135,9 +135,15 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
             **kwargs,
         )
     final = rts_smooth(model, result) if inp.offline else result
-    est = np.array(final.means, dtype=float)
+    est = final.means
+    try:  # the run's own buffer, read-only in the result, which is dropped here: no copy
+        est.flags.writeable = True
+    except ValueError:
+        est = np.array(est, dtype=float)
     # position sd: root-mean-square over the axes of the per-axis posterior sd
-    std = np.sqrt(sum_last(final.variances) / 3)  # = np.mean(..., axis=-1), faster
+    std = sum_last(final.variances)  # np.mean(..., axis=-1), faster and in place
+    std /= 3
+    np.sqrt(std, out=std)
     # nothing observed yet: no estimate before a joint's first valid measurement
     before = np.arange(T).reshape((T,) + (1,) * len(bshape)) < first[None]
     before |= ~has_any[None]

@@ -116,12 +116,19 @@ def elapsed_since_valid(steps: Array, valid: NDArray[np.bool_]) -> Array:
     gap it is the whole time since the last measurement.
     """
     T = steps.shape[0]
-    times = np.cumsum(steps)
     shape = (T,) + (1,) * (valid.ndim - 1)
-    idx = np.where(valid, np.arange(T).reshape(shape), -1)
+    if valid.all():  # no gap anywhere: the frame steps, without (T, *batch) work arrays
+        return np.broadcast_to(steps.reshape(shape), valid.shape)
+    times = np.cumsum(steps)
+    index_type = np.int32 if T < 2**31 - 1 else np.int64
+    idx = np.where(valid, np.arange(T, dtype=index_type).reshape(shape), index_type(-1))
     last = np.maximum.accumulate(idx, axis=0)  # last valid index <= k
-    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1), last[:-1]], axis=0)
+    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1, dtype=index_type), last[:-1]])
     t_k = np.broadcast_to(times.reshape(shape), valid.shape)
     st_k = np.broadcast_to(steps.reshape(shape), valid.shape)
     t_prev = times[np.maximum(prev, 0)]
-    return np.where(prev >= 0, t_k - t_prev, st_k)
+    # frame k-1 valid (or nothing valid yet): exactly steps[k], not the difference of the
+    # cumulated times, which differs from it by round-off (and made every joint's limits
+    # differ from the per-frame ones, a full (T, *batch, 3) array of c in the filter)
+    one_step = (prev < 0) | (prev == np.arange(T).reshape(shape) - 1)
+    return np.where(one_step, st_k, t_k - t_prev)
