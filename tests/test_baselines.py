@@ -352,9 +352,9 @@ def test_kinect_compiled_kernel_equals_numpy_form_wide_batch():
 
 
 def test_moving_average_wide_batch_matches_brute_force():
-    # wide batches take the frame-by-frame running sum: the same sums as np.cumsum
+    # wide batches run frame by frame over a ring of cumulated rows
     rng = np.random.default_rng(4)
-    x = rng.normal(size=(40, 30, 3))
+    x = rng.normal(size=(40, 100, 3))
     x[rng.random(x.shape) < 0.1] = np.nan
     for window, centered in ((5, True), (4, False)):
         out = moving_average(x, window=window, centered=centered)
@@ -364,3 +364,22 @@ def test_moving_average_wide_batch_matches_brute_force():
             with np.errstate(invalid="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 np.testing.assert_allclose(out[k], np.nanmean(seg, axis=0), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize(("window", "centered"), [(1, True), (5, True), (4, False), (7, False)])
+def test_moving_average_frame_loop_equals_the_vectorised_form(window, centered):
+    # wide batches run frame by frame over a ring of cumulated rows: bit for bit the
+    # vectorised form (which narrow batches use), also with windows longer than T
+    from tobitkf.smoothing import baselines
+
+    rng = np.random.default_rng(9)
+    for T in (1, 3, 30):
+        x = rng.normal(size=(T, 120, 3))
+        x[rng.random(x.shape[:-1]) < 0.2] = np.nan
+        wide = moving_average(x, window=window, centered=centered)
+        narrow = np.stack(
+            [moving_average(x[:, j], window=window, centered=centered) for j in range(120)],
+            axis=1,
+        )
+        assert x[0].size >= baselines._WIDE > x[:, 0][0].size
+        np.testing.assert_array_equal(wide, narrow)
