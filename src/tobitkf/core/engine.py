@@ -644,13 +644,19 @@ class _Store:
 # the batch run loop
 # --------------------------------------------------------------------------------------
 def run_filter(
-    model: LinearGaussian, method: Method, inp: RunInputs, *, keep_probabilities: bool = True
+    model: LinearGaussian,
+    method: Method,
+    inp: RunInputs,
+    *,
+    keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Run ``method`` over all frames of validated inputs; returns a FilterResult.
 
     Every frame goes through :func:`filter_step`, exactly as in the streaming filter.
     ``keep_probabilities=False`` leaves the censoring probabilities out of the result
-    (NaN views): three arrays the size of ``ys`` less.
+    (NaN views): three arrays the size of ``ys`` less. ``keep_predicted=False`` does the
+    same for the predicted covariances (which only the RTS smoother reads).
     """
     T, batch, diagonal = inp.T, inp.batch, inp.diagonal
     n, p = model.n, model.p
@@ -704,7 +710,8 @@ def run_filter(
         x, P = out_x, u.P
         if not shared:
             pmeans[t] = st.x_pred
-        pcovs.put(t, st.P_pred)
+        if keep_predicted:
+            pcovs.put(t, st.P_pred)
         covs.put(t, P)
         loglik[t] = u.loglik
         if censoring:
@@ -745,7 +752,9 @@ def run_filter(
         means=means,
         predicted_means=pmeans,
         cov_data=covs.get(),
-        predicted_cov_data=pcovs.get(),
+        predicted_cov_data=pcovs.get()
+        if keep_predicted
+        else np.broadcast_to(np.nan, (T, *cov_full)),
         diagonal=diagonal,
         loglik=loglik,
         p_lower=p_lower,

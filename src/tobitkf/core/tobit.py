@@ -387,6 +387,7 @@ def tobit_filter(
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
     keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Tobit Kalman filter with fixed censoring limits (Algorithm 1, 2020 paper).
 
@@ -407,6 +408,9 @@ def tobit_filter(
     keep_probabilities : bool
         False: the censoring probabilities ``p_lower``, ``p_uncensored``, ``p_upper``
         are not kept (read-only NaN views), which saves three arrays the size of ``ys``.
+    keep_predicted : bool
+        False: the predicted covariances are not kept (a read-only NaN view; only
+        :func:`~tobitkf.core.kalman.rts_smooth` needs them).
 
     Returns
     -------
@@ -429,8 +433,9 @@ def tobit_filter(
         upper_seq=upper_seq,
         diagonal=diagonal,
     )
+    method = TKFC if variant == "corrected" else TKF
     return run_filter(
-        model, TKFC if variant == "corrected" else TKF, inp, keep_probabilities=keep_probabilities
+        model, method, inp, keep_probabilities=keep_probabilities, keep_predicted=keep_predicted
     )
 
 
@@ -446,6 +451,7 @@ def adaptive_tobit_filter(
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
     keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Adaptive Tobit Kalman filter ATKF (2020 paper, Algorithm 2, eq. 31-34).
 
@@ -487,4 +493,6 @@ def adaptive_tobit_filter(
         c_seq=c_seq,
         diagonal=diagonal,
     )
-    return run_filter(model, ATKF, inp, keep_probabilities=keep_probabilities)
+    return run_filter(
+        model, ATKF, inp, keep_probabilities=keep_probabilities, keep_predicted=keep_predicted
+    )

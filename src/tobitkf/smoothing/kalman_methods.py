@@ -100,7 +100,8 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     Q = _diag3(params["q"])
     R = _diag3(params["r"])
     model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=Q, R=R, x0=x0, P0=R)
-    kwargs: dict[str, Any] = {}
+    # the predicted covariances are read by the RTS pass only
+    kwargs: dict[str, Any] = {"keep_predicted": inp.offline}
     ratio = inp.steps / paper.REFERENCE_DT  # (T,)
     if not inp.is_reference:
         kwargs["Q_seq"] = Q[None] * ratio[:, None, None]
