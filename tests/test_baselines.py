@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tobitkf.smoothing.baselines import (
+    KINECT_PRESETS,
     kinect_double_exponential,
     moving_average,
     one_euro,
@@ -325,3 +327,59 @@ def test_kinect_errors():
         kinect_double_exponential(x, tracking_state=np.ones((5, 3)))
     with pytest.raises(ValueError, match="smoothing"):
         kinect_double_exponential(x, smoothing=1.5)
+
+
+def test_kinect_compiled_kernel_equals_numpy_form_wide_batch():
+    # the compiled kernel (joint by joint) and the numpy form (frame by frame over the
+    # batch) are the same arithmetic: bit for bit, on a batch with bodies and NaN / states
+    from tobitkf.smoothing.baselines import _kinect_numpy
+
+    rng = np.random.default_rng(3)
+    T, B, J = 60, 3, 25
+    x = np.cumsum(rng.normal(scale=0.03, size=(T, B, J, 3)), axis=0)
+    x[rng.random((T, B, J)) < 0.05] = np.nan
+    states = rng.choice([0, 1, 2], p=[0.05, 0.25, 0.7], size=(T, B, J))
+    for preset, params in KINECT_PRESETS.items():
+        out = kinect_double_exponential(x, tracking_state=states, preset=preset)
+        args = [params[k] for k in ("smoothing", "correction", "prediction")]
+        ref = _kinect_numpy(x, states, *args, max(1e-4, params["jitter_radius"]),
+                            params["max_deviation_radius"])  # fmt: skip
+        np.testing.assert_array_equal(out, ref)
+        b = 1
+        for j in (0, 7, 24):
+            sdk = _kinect_ref(list(x[:, b, j]), list(states[:, b, j]), *params.values())
+            np.testing.assert_allclose(out[:, b, j], sdk, rtol=1e-10, atol=1e-12, equal_nan=True)
+
+
+def test_moving_average_wide_batch_matches_brute_force():
+    # wide batches run frame by frame over a ring of cumulated rows
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(40, 100, 3))
+    x[rng.random(x.shape) < 0.1] = np.nan
+    for window, centered in ((5, True), (4, False)):
+        out = moving_average(x, window=window, centered=centered)
+        for k in range(x.shape[0]):
+            lo, hi = (k - window // 2, k + window // 2 + 1) if centered else (k - window + 1, k + 1)
+            seg = x[max(lo, 0) : hi]
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                np.testing.assert_allclose(out[k], np.nanmean(seg, axis=0), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize(("window", "centered"), [(1, True), (5, True), (4, False), (7, False)])
+def test_moving_average_frame_loop_equals_the_vectorised_form(window, centered):
+    # wide batches run frame by frame over a ring of cumulated rows: bit for bit the
+    # vectorised form (which narrow batches use), also with windows longer than T
+    from tobitkf.smoothing import baselines
+
+    rng = np.random.default_rng(9)
+    for T in (1, 3, 30):
+        x = rng.normal(size=(T, 120, 3))
+        x[rng.random(x.shape[:-1]) < 0.2] = np.nan
+        wide = moving_average(x, window=window, centered=centered)
+        narrow = np.stack(
+            [moving_average(x[:, j], window=window, centered=centered) for j in range(120)],
+            axis=1,
+        )
+        assert x[0].size >= baselines._WIDE > x[:, 0][0].size
+        np.testing.assert_array_equal(wide, narrow)

@@ -265,3 +265,39 @@ def test_rts_with_singular_predicted_covariance_matches_joint_posterior():
     ys[3] = np.nan
     res = _check_against_brute_force(model, ys)
     assert np.linalg.matrix_rank(res.predicted_covs[2]) == 1
+
+
+def test_sum_last_equals_numpy_sum_bit_for_bit():
+    # the written-out sum over 3 components used per frame is numpy's own order
+    from tobitkf.core.engine import sum_last
+
+    rng = np.random.default_rng(5)
+    for shape in ((7, 3), (4, 5, 3), (6, 2)):
+        a = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
+        np.testing.assert_array_equal(sum_last(a), a.sum(axis=-1))
+
+
+def test_keep_predicted_false_leaves_the_rest_unchanged():
+    # without the predicted covariances (read by the RTS pass only) every other output
+    # of the filters is the same, bit for bit
+    from tobitkf.core.model import LinearGaussian
+    from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
+
+    rng = np.random.default_rng(10)
+    ys = np.cumsum(rng.normal(scale=0.1, size=(30, 4, 3)), axis=0)
+    ys[rng.random((30, 4)) < 0.2] = np.nan
+    model = LinearGaussian(
+        A=np.eye(3), H=np.eye(3), Q=0.01 * np.eye(3), R=0.04 * np.eye(3), x0=np.zeros((4, 3)),
+        P0=np.eye(3),
+    )  # fmt: skip
+    scale = rng.choice([1.0, 4.0], size=(30, 4, 3))
+    runs = [
+        lambda **k: kalman_filter(model, ys, R_scale=scale, **k),
+        lambda **k: tobit_filter(model, ys, -0.5, 0.5, keep_probabilities=False, **k),
+        lambda **k: adaptive_tobit_filter(model, ys, 0.3, **k),
+    ]
+    for run in runs:
+        a, b = run(), run(keep_predicted=False)
+        for name in ("means", "cov_data", "loglik", "clipped"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert np.isnan(b.predicted_cov_data).all()

@@ -521,3 +521,39 @@ def test_the_defaults_are_the_robust_pair():
     assert tk.smooth(seq).metadata["diagnostics"]["method"] == "robust"
     assert tk.LiveSmoother(seq.topology).method == "robust_online"
     assert tk.methods()[tk.DEFAULT_LIVE_METHOD].is_causal()
+
+
+def test_elapsed_since_valid_is_the_frame_step_unless_after_a_gap():
+    # independent reference: walk each joint's frames, remembering its last valid time
+    from tobitkf.smoothing.timebase import elapsed_since_valid
+
+    rng = np.random.default_rng(6)
+    T = 50
+    steps = np.full(T, 1 / 30.0)
+    steps[1:] += rng.uniform(0, 0.01, T - 1)
+    valid = rng.random((T, 4, 3)) > 0.3
+    got = elapsed_since_valid(steps, valid)
+    times = np.cumsum(steps)
+    for idx in np.ndindex(valid.shape[1:]):
+        last = None
+        for k in range(T):
+            if last is None or last == k - 1:
+                assert got[(k, *idx)] == steps[k]  # exactly the step, no round-off
+            else:
+                assert got[(k, *idx)] == times[k] - times[last]
+            if valid[(k, *idx)]:
+                last = k
+    full = elapsed_since_valid(steps, np.ones((T, 2), dtype=bool))
+    np.testing.assert_array_equal(full, np.broadcast_to(steps[:, None], (T, 2)))
+
+
+def test_smooth_kalman_positions_are_writable_and_std_nan_where_no_estimate():
+    rng = np.random.default_rng(7)
+    pos = np.cumsum(rng.normal(scale=0.01, size=(40, 6, 3)), axis=0)
+    pos[:5, 3] = np.nan
+    for method in ("kf", "atkf"):
+        for offline in (False, True):
+            out = smooth(_seq(pos, fps=30.0), method, offline=offline)
+            out.positions[0, 0, 0] = 1.0  # the output is the caller's to change
+            assert np.array_equal(np.isnan(out.std), np.isnan(out.positions).any(axis=-1))
+            assert np.isnan(out.positions[:5, 3]).all()

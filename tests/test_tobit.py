@@ -509,3 +509,22 @@ def test_atkf_on_real_kinect_glitches():
     for t in range(ys.shape[0]):
         mean, _ = f.step(ys[t])
         np.testing.assert_array_equal(mean, at.means[t])
+
+
+def test_last_call_memo_equals_the_function():
+    # the ATKF's memo of log_ndtr / erf: same numbers as calling the function, whatever
+    # part of the argument repeats; and what it returns is the caller's to change
+    from scipy import special
+
+    from tobitkf.core.tobit import _LastCall
+
+    memo = _LastCall(special.log_ndtr)
+    rng = np.random.default_rng(8)
+    x = rng.uniform(-40, 5, size=(6, 5, 3))
+    for _ in range(6):
+        got = memo(x)
+        np.testing.assert_array_equal(got, special.log_ndtr(x))
+        got[...] = 0.0
+        x = x.copy()
+        x[rng.random(x.shape) < 0.1] = rng.uniform(-40, 5)
+    np.testing.assert_array_equal(memo(x[:2]), special.log_ndtr(x[:2]))  # other shape

@@ -55,6 +55,7 @@ __all__ = [
     "predict",
     "prepare_inputs",
     "run_filter",
+    "sum_last",
 ]
 
 Array = NDArray[np.float64]
@@ -150,6 +151,17 @@ def predict(x: Array, P: Array, sm: StepModel) -> tuple[Array, Array]:
     xp = x @ sm.A.T
     Pp = sm.A @ P @ sm.A.T + sm.Q
     return xp, 0.5 * (Pp + np.swapaxes(Pp, -1, -2))
+
+
+def sum_last(a: Array) -> Array:
+    """``a.sum(axis=-1)`` with the same numbers: for 3 components numpy adds them in
+    order, ``(a0 + a1) + a2``, which written out is several times faster than the
+    reduction over a short last axis (a per-frame cost in every filter)."""
+    if a.shape[-1] == 3:
+        out = a[..., 0] + a[..., 1]
+        out += a[..., 2]
+        return out
+    return a.sum(axis=-1)
 
 
 def observed_mask(y: Array, full: bool | None = None) -> tuple[NDArray[np.bool_] | None, bool]:
@@ -264,11 +276,11 @@ def _kf_update_diag(
     inv_S = 1.0 / S
     if not full:
         terms = np.where(obs, np.log(S) + e * e * inv_S + _LOG_2PI, 0.0)
-        ll = -0.5 * terms.sum(axis=-1)
+        ll = -0.5 * sum_last(terms)
     elif S.ndim == 1:
         ll = -0.5 * ((e * e) @ inv_S + (np.sum(np.log(S)) + S.shape[0] * _LOG_2PI))
     else:
-        ll = -0.5 * ((e * e * inv_S).sum(axis=-1) + np.log(S).sum(axis=-1) + S.shape[-1] * _LOG_2PI)
+        ll = -0.5 * (sum_last(e * e * inv_S) + sum_last(np.log(S)) + S.shape[-1] * _LOG_2PI)
     return UpdateOut(x, v, ll, None, None, None, None, K)
 
 
@@ -632,13 +644,19 @@ class _Store:
 # the batch run loop
 # --------------------------------------------------------------------------------------
 def run_filter(
-    model: LinearGaussian, method: Method, inp: RunInputs, *, keep_probabilities: bool = True
+    model: LinearGaussian,
+    method: Method,
+    inp: RunInputs,
+    *,
+    keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Run ``method`` over all frames of validated inputs; returns a FilterResult.
 
     Every frame goes through :func:`filter_step`, exactly as in the streaming filter.
     ``keep_probabilities=False`` leaves the censoring probabilities out of the result
-    (NaN views): three arrays the size of ``ys`` less.
+    (NaN views): three arrays the size of ``ys`` less. ``keep_predicted=False`` does the
+    same for the predicted covariances (which only the RTS smoother reads).
     """
     T, batch, diagonal = inp.T, inp.batch, inp.diagonal
     n, p = model.n, model.p
@@ -657,9 +675,12 @@ def run_filter(
     constant_model = inp.A_seq is None and inp.Q_seq is None and inp.R_seq is None
     constant_model = constant_model and inp.R_scale is None
     sm = make_step_model(model, diagonal) if constant_model else None
+    step_model = None if constant_model else _step_models(model, inp)
     x, P = initial_state(model, batch, diagonal)
     # with A = I throughout, x⁻_t = x_{t-1}: one buffer holds both means
-    shared = sm is not None and sm.a_identity
+    shared = (sm is not None and sm.a_identity) or (
+        inp.A_seq is None and bool(np.array_equal(model.A, np.eye(n)))
+    )
     # adaptive limits of the diagonal A = I path: computed from the means when asked for
     deferred = method.adaptive and shared and diagonal
     if method.adaptive and not deferred:
@@ -673,15 +694,8 @@ def run_filter(
         means = np.empty((T, *batch, n))
         pmeans = np.empty((T, *batch, n))
     for t in range(T):
-        if not constant_model:
-            sm = make_step_model(
-                model,
-                diagonal,
-                A=None if inp.A_seq is None else inp.A_seq[t],
-                Q=None if inp.Q_seq is None else inp.Q_seq[t],
-                R=None if inp.R_seq is None else inp.R_seq[t],
-                R_scale=None if inp.R_scale is None else inp.R_scale[t],
-            )
+        if step_model is not None:
+            sm = step_model(t)
         lo = inp.lower[t] if inp.limits_seq else inp.lower
         up = inp.upper[t] if inp.limits_seq else inp.upper
         c = None if inp.c is None else (inp.c[t] if inp.c_seq else inp.c)
@@ -696,7 +710,8 @@ def run_filter(
         x, P = out_x, u.P
         if not shared:
             pmeans[t] = st.x_pred
-        pcovs.put(t, st.P_pred)
+        if keep_predicted:
+            pcovs.put(t, st.P_pred)
         covs.put(t, P)
         loglik[t] = u.loglik
         if censoring:
@@ -737,7 +752,9 @@ def run_filter(
         means=means,
         predicted_means=pmeans,
         cov_data=covs.get(),
-        predicted_cov_data=pcovs.get(),
+        predicted_cov_data=pcovs.get()
+        if keep_predicted
+        else np.broadcast_to(np.nan, (T, *cov_full)),
         diagonal=diagonal,
         loglik=loglik,
         p_lower=p_lower,
@@ -748,6 +765,35 @@ def run_filter(
         A_seq=inp.A_seq,
         method=method.name,
     )
+
+
+def _step_models(model: LinearGaussian, inp: RunInputs) -> Callable[[int], StepModel]:
+    """The StepModel of frame t for per-step A, Q, R or R_scale: what
+    :func:`make_step_model` gives, with the per-run work (diagonals, identity checks)
+    done once on the diagonal path without A_seq / R_seq (the same numbers)."""
+    if not (inp.diagonal and inp.A_seq is None and inp.R_seq is None):
+
+        def general(t: int) -> StepModel:
+            return make_step_model(
+                model,
+                inp.diagonal,
+                A=None if inp.A_seq is None else inp.A_seq[t],
+                Q=None if inp.Q_seq is None else inp.Q_seq[t],
+                R=None if inp.R_seq is None else inp.R_seq[t],
+                R_scale=None if inp.R_scale is None else inp.R_scale[t],
+            )
+
+        return general
+    base = make_step_model(model, True)
+    q_all = None if inp.Q_seq is None else diagonal_of(inp.Q_seq)
+    r_scale = inp.R_scale
+
+    def diag(t: int) -> StepModel:
+        q = base.Q if q_all is None else q_all[t]
+        r = base.R if r_scale is None else base.R * r_scale[t]
+        return StepModel(base.A, q, base.H, r, True, base.a_identity, base.h_identity)
+
+    return diag
 
 
 def _deferred_limits(

@@ -26,6 +26,7 @@ def kalman_filter(
     R_seq: ArrayLike | None = None,
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Plain Kalman filter over a time-first batch (Algorithm 1 with the KF moments).
 
@@ -43,6 +44,10 @@ def kalman_filter(
         D = diag(sqrt(R_scale))), e.g. > 1 for Kinect "inferred" joints.
     diagonal : bool, optional
         Force (True) or forbid (False) the per-axis path; default: used when possible.
+    keep_predicted : bool
+        False: the predicted covariances are not kept (a read-only NaN view), which saves
+        an array the size of ``ys`` when the variances vary over the batch; only
+        :func:`rts_smooth` needs them.
 
     Returns
     -------
@@ -54,7 +59,7 @@ def kalman_filter(
     inp = prepare_inputs(
         model, ys, A_seq=A_seq, Q_seq=Q_seq, R_seq=R_seq, R_scale=R_scale, diagonal=diagonal
     )
-    return run_filter(model, KF, inp)
+    return run_filter(model, KF, inp, keep_predicted=keep_predicted)
 
 
 # --------------------------------------------------------------------------------------

@@ -51,6 +51,7 @@ ATKF (eq. 27). The first ATKF step (a KF step) uses the KF's Gaussian log densit
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -73,6 +74,7 @@ from tobitkf.core.engine import (
     observed_mask,
     prepare_inputs,
     run_filter,
+    sum_last,
 )
 from tobitkf.core.model import FilterResult, LinearGaussian
 
@@ -100,7 +102,7 @@ _BIG = 1e150  # stands in for an infinite standardised limit (0 * BIG = 0, BIG**
 
 
 def _loglik_sum(terms: Array) -> Array:
-    return terms.sum(axis=-1)
+    return sum_last(terms)
 
 
 def _clipped_flag(y: Array, lower: Any, upper: Any) -> NDArray[np.bool_]:
@@ -245,6 +247,42 @@ def _pu_vt_symmetric(beta: Array, Pu: Array, phi: Array) -> Array:
     return out
 
 
+class _LastCall:
+    """One-entry memo of an elementwise function of a frame's standardised limits.
+
+    In the adaptive filter β = c / s depends on the variances only, and those converge:
+    from frame to frame most elements repeat the previous frame's β exactly, so only the
+    changed elements are evaluated (the same numbers: the function is elementwise and
+    evaluated element by element). The memo keeps private copies (callers may write into
+    what they get) and is replaced as one tuple, so concurrent filters stay correct.
+    """
+
+    def __init__(self, f: Callable[[Array], Array]) -> None:
+        self.f = f
+        self.last: tuple[Array, Array] | None = None
+
+    def __call__(self, x: Array) -> Array:
+        last = self.last
+        if last is not None and last[0].shape == x.shape:
+            old_x, old_y = last
+            changed = x != old_x
+            n = int(np.count_nonzero(changed))
+            if n == 0:
+                return old_y.copy()
+            if 4 * n < x.size:
+                y = old_y.copy()
+                y[changed] = self.f(x[changed])
+                self.last = (x.copy(), y.copy())
+                return y
+        y = self.f(x)
+        self.last = (x.copy(), y.copy())
+        return y
+
+
+_log_ndtr_memo = _LastCall(special.log_ndtr)
+_erf_memo = _LastCall(special.erf)
+
+
 def _atkf_update_symmetric(
     xp: Array,
     vp: Array,
@@ -277,15 +315,15 @@ def _atkf_update_symmetric(
         S = sm.H * Pxy0 + r
     s = np.sqrt(S)
     beta = np.minimum(c / s, _BIG)
-    log_pa = special.log_ndtr(-beta)
+    log_pa = _log_ndtr_memo(-beta)
     Pa = np.exp(log_pa)
-    Pu = special.erf(beta * _SQRT_HALF)
+    Pu = _erf_memo(beta * _SQRT_HALF)
     phi = np.exp(-0.5 * beta * beta) * _INV_SQRT_2PI
     Vf = _pu_vt_symmetric(beta, Pu, phi) + 2.0 * Pa * beta * beta
     Pxy = Pxy0 * Pu
     K = Pxy / (S * (Vf + (2.0 * EPS_CENSORED) * Pa))
     d = y - m
-    e = np.clip(d, -c, c)
+    e = np.minimum(np.maximum(d, -c), c)  # np.clip, without its wrapper's cost per frame
     clipped = np.abs(d) >= c
     # log-likelihood terms: log Φ(-β) when censored, log N(e; 0, S) otherwise
     inv_S = -0.5 / S
@@ -297,13 +335,13 @@ def _atkf_update_symmetric(
     if not full:
         K = np.where(obs, K, 0.0)
         e = np.where(obs, e, 0.0)
-        clipped &= obs
+        # unobserved components: d is NaN, so clipped is False there already and their
+        # term comes from ee
         ee = np.where(obs, ee, 0.0)
-        log_pa = np.where(obs, log_pa, 0.0)
     terms = np.where(clipped, log_pa, ee)
     x = np.add(xp, K * e, out=out_x)
     v = vp - K * Pxy
-    return UpdateOut(x, v, terms.sum(axis=-1), Pa, Pu, Pa, clipped, K)
+    return UpdateOut(x, v, sum_last(terms), Pa, Pu, Pa, clipped, K)
 
 
 def atkf_update(
@@ -349,6 +387,7 @@ def tobit_filter(
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
     keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Tobit Kalman filter with fixed censoring limits (Algorithm 1, 2020 paper).
 
@@ -369,6 +408,9 @@ def tobit_filter(
     keep_probabilities : bool
         False: the censoring probabilities ``p_lower``, ``p_uncensored``, ``p_upper``
         are not kept (read-only NaN views), which saves three arrays the size of ``ys``.
+    keep_predicted : bool
+        False: the predicted covariances are not kept (a read-only NaN view; only
+        :func:`~tobitkf.core.kalman.rts_smooth` needs them).
 
     Returns
     -------
@@ -391,8 +433,9 @@ def tobit_filter(
         upper_seq=upper_seq,
         diagonal=diagonal,
     )
+    method = TKFC if variant == "corrected" else TKF
     return run_filter(
-        model, TKFC if variant == "corrected" else TKF, inp, keep_probabilities=keep_probabilities
+        model, method, inp, keep_probabilities=keep_probabilities, keep_predicted=keep_predicted
     )
 
 
@@ -408,6 +451,7 @@ def adaptive_tobit_filter(
     R_scale: ArrayLike | None = None,
     diagonal: bool | None = None,
     keep_probabilities: bool = True,
+    keep_predicted: bool = True,
 ) -> FilterResult:
     """Adaptive Tobit Kalman filter ATKF (2020 paper, Algorithm 2, eq. 31-34).
 
@@ -449,4 +493,6 @@ def adaptive_tobit_filter(
         c_seq=c_seq,
         diagonal=diagonal,
     )
-    return run_filter(model, ATKF, inp, keep_probabilities=keep_probabilities)
+    return run_filter(
+        model, ATKF, inp, keep_probabilities=keep_probabilities, keep_predicted=keep_predicted
+    )

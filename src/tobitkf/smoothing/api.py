@@ -78,6 +78,7 @@ from tobitkf.smoothing.registry import (
 )
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
+    all_last,
     frame_steps,
     frame_times,
     measurements,
@@ -351,11 +352,13 @@ def _smooth_group(
          for d in extra],
         axis=1,
     )  # fmt: skip
-    finite = np.isfinite(est).all(axis=-1)
+    finite = all_last(np.isfinite(est))
     sample = sample_states(missing, rejected, finite, spec.is_causal(params) and not offline)
     std = None
     if result.std is not None:
-        std = np.where(finite, np.asarray(result.std, dtype=float), np.nan)
+        std = np.asarray(result.std, dtype=float)
+        if (~finite & ~np.isnan(std)).any():  # as a rule the method's NaN are there already
+            std = np.where(finite, std, np.nan)
     T = max(ref.n_frames, 1)
     used = {
         **params,

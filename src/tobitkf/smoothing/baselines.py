@@ -240,23 +240,76 @@ def moving_average(x: ArrayLike, window: int = 5, centered: bool = True) -> NDAr
     if centered and window % 2 == 0:
         raise ValueError(f"a centred moving average needs an odd window, got {window}")
     T = arr.shape[0]
-    finite = np.isfinite(arr)
-    vals = np.where(finite, arr, 0.0)
-    zeros = np.zeros((1, *arr.shape[1:]))
-    csum = np.concatenate([zeros, np.cumsum(vals, axis=0)])
-    ccount = np.concatenate([zeros, np.cumsum(finite, axis=0, dtype=float)])
     k = np.arange(T)
-    if centered:
-        lo = np.clip(k - window // 2, 0, T)
-        hi = np.clip(k + window // 2 + 1, 0, T)
-    else:
-        lo = np.clip(k - window + 1, 0, T)
-        hi = k + 1
-    total = csum[hi] - csum[lo]
-    count = ccount[hi] - ccount[lo]
+    # window of frame k: cumulated rows lo[k] .. hi[k]; lo[k] = max(k - back, 0)
+    back = window // 2 if centered else window - 1
+    hi = np.clip(k + window // 2 + 1, 0, T) if centered else k + 1
+    if arr[0].size >= _WIDE:
+        return _moving_average_frames(arr, hi, back).reshape(shape)
+    finite = np.isfinite(arr)
+    # sums and counts, each formed in place from its cumulated array (peak memory: two
+    # arrays of the input's size besides it; the same operations as total = c[hi] - c[lo])
+    total = _window_diff(_cumsum0(np.where(finite, arr, 0.0)), hi, back)
+    count = _window_diff(_cumsum0(finite.astype(float)), hi, back)
+    empty = count <= 0
+    np.maximum(count, 1.0, out=count)
     with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
-    return out.reshape(shape)
+        np.divide(total, count, out=total)
+    total[empty] = np.nan
+    return total.reshape(shape)
+
+
+def _moving_average_frames(
+    arr: NDArray[np.float64], hi: NDArray[np.intp], back: int
+) -> NDArray[np.float64]:
+    """:func:`moving_average` frame by frame for wide batches: the same cumulated sums,
+    differences and quotient, with only the cumulated rows a window spans kept (a ring),
+    so the memory is the output's."""
+    T = arr.shape[0]
+    lo_all = np.maximum(np.arange(T) - back, 0)
+    width = min(int(np.max(hi - lo_all)) + 2, T + 1)  # rows one window spans, + 1
+    ring_v = np.empty((width, *arr.shape[1:]))
+    ring_c = np.empty((width, *arr.shape[1:]))
+    ring_v[0] = 0.0
+    ring_c[0] = 0.0
+    out = np.empty(arr.shape)
+    done = 0  # cumulated rows 0 .. done are formed
+    for k in range(T):
+        while done < hi[k]:
+            prev, row = done % width, (done + 1) % width
+            finite = np.isfinite(arr[done])
+            np.add(ring_v[prev], np.where(finite, arr[done], 0.0), out=ring_v[row])
+            np.add(ring_c[prev], finite, out=ring_c[row], casting="unsafe")
+            done += 1
+        h, lo = hi[k] % width, max(k - back, 0) % width
+        total = ring_v[h] - ring_v[lo]
+        count = ring_c[h] - ring_c[lo]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[k] = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
+    return out
+
+
+def _window_diff(csum: NDArray[np.float64], hi: NDArray[np.intp], back: int) -> NDArray[np.float64]:
+    """``csum[hi] - csum[lo]`` with ``lo[k] = max(k - back, 0)``, subtracted in place."""
+    T = hi.shape[0]
+    out = csum[hi]
+    if back < T:
+        out[back:] -= csum[: T - back]
+    out[: min(back, T)] -= csum[0]
+    return out
+
+
+#: batch width (values per frame) from which frame-by-frame loops beat numpy's
+#: reductions over the leading axis
+_WIDE = 256
+
+
+def _cumsum0(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``concatenate([0, cumsum(a, axis=0)])``."""
+    out = np.empty((a.shape[0] + 1, *a.shape[1:]))
+    out[0] = 0.0
+    np.cumsum(a, axis=0, out=out[1:])
+    return out
 
 
 # --------------------------------------------------------------------------- 1€ filter
@@ -441,6 +494,31 @@ def kinect_double_exponential(
     s, c, pred = p["smoothing"], p["correction"], p["prediction"]
     jitter0 = max(1e-4, p["jitter_radius"])
     maxdev0 = p["max_deviation_radius"]
+    if T and arr.shape[-1] and arr.size:
+        # compiled, joint by joint (numba, imported here: not at import tobitkf)
+        from tobitkf.smoothing._baseline_kernels import kinect_run
+
+        D = arr.shape[-1]
+        flat = np.ascontiguousarray(arr.reshape(T, -1, D))
+        st = np.ascontiguousarray(np.asarray(state).reshape(T, -1), dtype=np.int8)
+        out = kinect_run(flat, st, float(s), float(c), float(pred), float(jitter0), float(maxdev0))
+        return out.reshape(arr.shape)
+    return _kinect_numpy(arr, state, s, c, pred, jitter0, maxdev0)
+
+
+def _kinect_numpy(
+    arr: NDArray[np.float64],
+    state: NDArray[Any],
+    s: float,
+    c: float,
+    pred: float,
+    jitter0: float,
+    maxdev0: float,
+) -> NDArray[np.float64]:
+    """The filter as numpy operations per frame over the batch (the reference form of the
+    compiled kernel; used for empty inputs)."""
+    T = arr.shape[0]
+    batch = arr.shape[1:-1]
 
     out = np.empty_like(arr)
     f_prev = np.zeros(batch + arr.shape[-1:])

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.core.engine import sum_last
 from tobitkf.core.kalman import kalman_filter, rts_smooth
 from tobitkf.core.model import LinearGaussian
 from tobitkf.core.streaming import StreamingFilter
@@ -99,7 +100,8 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     Q = _diag3(params["q"])
     R = _diag3(params["r"])
     model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=Q, R=R, x0=x0, P0=R)
-    kwargs: dict[str, Any] = {}
+    # the predicted covariances are read by the RTS pass only
+    kwargs: dict[str, Any] = {"keep_predicted": inp.offline}
     ratio = inp.steps / paper.REFERENCE_DT  # (T,)
     if not inp.is_reference:
         kwargs["Q_seq"] = Q[None] * ratio[:, None, None]
@@ -134,9 +136,15 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
             **kwargs,
         )
     final = rts_smooth(model, result) if inp.offline else result
-    est = np.array(final.means, dtype=float)
+    est = final.means
+    try:  # the run's own buffer, read-only in the result, which is dropped here: no copy
+        est.flags.writeable = True
+    except ValueError:
+        est = np.array(est, dtype=float)
     # position sd: root-mean-square over the axes of the per-axis posterior sd
-    std = np.sqrt(np.mean(final.variances, axis=-1))
+    std = sum_last(final.variances)  # np.mean(..., axis=-1), faster and in place
+    std /= 3
+    np.sqrt(std, out=std)
     # nothing observed yet: no estimate before a joint's first valid measurement
     before = np.arange(T).reshape((T,) + (1,) * len(bshape)) < first[None]
     before |= ~has_any[None]

@@ -14,6 +14,8 @@ from tobitkf.smoothing.paper import REFERENCE_DT
 
 __all__ = [
     "DEFAULT_INFERRED_NOISE_FACTOR",
+    "all_last",
+    "any_last",
     "elapsed_since_valid",
     "frame_steps",
     "frame_times",
@@ -66,17 +68,31 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
     copy) when nothing has to change: callers must not write into the result.
     """
     ys = np.asarray(positions, dtype=float)
-    missing = np.isnan(ys).any(axis=-1)
+    nan = np.isnan(ys)
+    missing = any_last(nan)
     if states is not None:
         not_tracked = np.asarray(states) == TrackingState.NOT_TRACKED
         if not_tracked.any():
             missing |= not_tracked
-            ys = ys.copy()
-            ys[missing] = np.nan
-    if np.isnan(ys).sum() != 3 * missing.sum():  # a partly-NaN sample: all its axes NaN
-        ys = ys.copy()
-        ys[missing] = np.nan
+            return np.where(missing[..., None], np.nan, ys), missing
+    if not np.array_equal(missing, all_last(nan)):  # a partly-NaN sample: all its axes NaN
+        ys = np.where(missing[..., None], np.nan, ys)
     return ys, missing
+
+
+def any_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``a.any(axis=-1)``, written out for 3 axes (a reduction over a short last axis is
+    slow in numpy)."""
+    if a.shape[-1] == 3:
+        return (a[..., 0] | a[..., 1]) | a[..., 2]
+    return a.any(axis=-1)
+
+
+def all_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``a.all(axis=-1)``, written out for 3 axes."""
+    if a.shape[-1] == 3:
+        return (a[..., 0] & a[..., 1]) & a[..., 2]
+    return a.all(axis=-1)
 
 
 def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
@@ -100,12 +116,19 @@ def elapsed_since_valid(steps: Array, valid: NDArray[np.bool_]) -> Array:
     gap it is the whole time since the last measurement.
     """
     T = steps.shape[0]
-    times = np.cumsum(steps)
     shape = (T,) + (1,) * (valid.ndim - 1)
-    idx = np.where(valid, np.arange(T).reshape(shape), -1)
+    if valid.all():  # no gap anywhere: the frame steps, without (T, *batch) work arrays
+        return np.broadcast_to(steps.reshape(shape), valid.shape)
+    times = np.cumsum(steps)
+    index_type = np.int32 if T < 2**31 - 1 else np.int64
+    idx = np.where(valid, np.arange(T, dtype=index_type).reshape(shape), index_type(-1))
     last = np.maximum.accumulate(idx, axis=0)  # last valid index <= k
-    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1), last[:-1]], axis=0)
+    prev = np.concatenate([np.full((1, *valid.shape[1:]), -1, dtype=index_type), last[:-1]])
     t_k = np.broadcast_to(times.reshape(shape), valid.shape)
     st_k = np.broadcast_to(steps.reshape(shape), valid.shape)
     t_prev = times[np.maximum(prev, 0)]
-    return np.where(prev >= 0, t_k - t_prev, st_k)
+    # frame k-1 valid (or nothing valid yet): exactly steps[k], not the difference of the
+    # cumulated times, which differs from it by round-off (and made every joint's limits
+    # differ from the per-frame ones, a full (T, *batch, 3) array of c in the filter)
+    one_step = (prev < 0) | (prev == np.arange(T).reshape(shape) - 1)
+    return np.where(one_step, st_k, t_k - t_prev)
