@@ -221,6 +221,7 @@ def app() -> None:
     default="robust",
     show_default=True,
     type=_RegistryChoice(_method_names),
+    metavar="NAME",
     help="Smoothing method (see `tobitkf methods`). The default, robust, rejects "
     "physically impossible samples and smooths the rest; atkf is the 2020 paper's filter, "
     "which does not beat raw Kinect against Vicon (docs/evaluation.md).",
