@@ -814,6 +814,19 @@ def reproduce():
     """Regenerate the 2020 paper's synthetic results, next to what the paper printed."""
 
 
+def _show_paper_result(result: Any, as_json: bool, outdir: Any, figures: str) -> None:
+    """Print a reproduction result (text or JSON) and write its figures when asked."""
+    if as_json:
+        click.echo(dumps(result.to_dict()))
+    else:
+        console.print(result.format_text(), highlight=False, soft_wrap=True)
+    if outdir:
+        from tobitkf.paper import figures as paper_figures
+
+        for p in getattr(paper_figures, figures)(result, outdir):
+            err_console.print(f"wrote {p}")
+
+
 @reproduce.command("covariance-example")
 @click.option(
     "--samples",
@@ -839,15 +852,7 @@ def covariance_example_cmd(samples, seed, as_json, outdir):
         _need_matplotlib("--out (the figures)")
         _writable_folder(outdir, "the figures")
     result = covariance_example(samples=samples, seed=seed)
-    if as_json:
-        click.echo(dumps(result.to_dict()))
-    else:
-        console.print(result.format_text(), highlight=False, soft_wrap=True)
-    if outdir:
-        from tobitkf.paper.figures import covariance_example_figure
-
-        for p in covariance_example_figure(result, outdir):
-            err_console.print(f"wrote {p}")
+    _show_paper_result(result, as_json, outdir, "covariance_example_figure")
 
 
 @reproduce.command("oscillator")
@@ -893,15 +898,7 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, outdir, random_x0):
         result = oscillator_experiment(
             runs=runs, steps=steps, seed=seed, seeds=seeds, random_x0=random_x0
         )
-    if as_json:
-        click.echo(dumps(result.to_dict()))
-    else:
-        console.print(result.format_text(), highlight=False, soft_wrap=True)
-    if outdir:
-        from tobitkf.paper.figures import oscillator_figures
-
-        for p in oscillator_figures(result, outdir):
-            err_console.print(f"wrote {p}")
+    _show_paper_result(result, as_json, outdir, "oscillator_figures")
 
 
 # --------------------------------------------------------------------------- fit
