@@ -557,3 +557,14 @@ def test_smooth_kalman_positions_are_writable_and_std_nan_where_no_estimate():
             out.positions[0, 0, 0] = 1.0  # the output is the caller's to change
             assert np.array_equal(np.isnan(out.std), np.isnan(out.positions).any(axis=-1))
             assert np.isnan(out.positions[:5, 3]).all()
+
+
+@pytest.mark.parametrize(("method", "window"), [("sgf", 1001), ("moving_average", 301)])
+def test_a_window_longer_than_the_recording_is_refused(method, window):
+    # issue 14: sgf window=1001 on a 193-frame recording replaced the data by a global fit
+    seq = _seq(np.random.default_rng(0).normal(size=(193, 2, 3)))
+    with pytest.raises(ValueError, match=r"window \d+ frames is longer than the recording"):
+        smooth(seq, method, window=window)
+    smooth(seq, method, window=191)  # fits: accepted
+    short = _seq(np.random.default_rng(0).normal(size=(4, 2, 3)))
+    smooth(short, method)  # shorter than the default window: shrinks, as documented
