@@ -101,10 +101,6 @@ _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 _BIG = 1e150  # stands in for an infinite standardised limit (0 * BIG = 0, BIG**2 finite)
 
 
-def _loglik_sum(terms: Array) -> Array:
-    return sum_last(terms)
-
-
 def _clipped_flag(y: Array, lower: Any, upper: Any) -> NDArray[np.bool_]:
     return (y <= lower) | (y >= upper)
 
@@ -165,7 +161,7 @@ def tkf_update(
         idx = np.arange(Pyy.shape[-1])
         Pyy[..., idx, idx] += floor
         x, P, K, _ = gain_update_general(xp, Pp, Pxy, Pyy, e, obs, full)
-    ll = _loglik_sum(censored_logpdf(y, m, r, lower, upper))
+    ll = sum_last(censored_logpdf(y, m, r, lower, upper))
     return UpdateOut(x, P, ll, Pa, Pu, Pb, _clipped_flag(y, lower, upper), K)
 
 
@@ -218,7 +214,7 @@ def tkfc_update(
         Pyy[..., idx, idx] += EPS_CENSORED * s2 * (Pa + Pb)
         e = y - cm.mean
         x, P, K, _ = gain_update_general(xp, Pp, Pxy, Pyy, e, obs, full)
-    ll = _loglik_sum(censored_logpdf(y, m, s2, lower, upper))
+    ll = sum_last(censored_logpdf(y, m, s2, lower, upper))
     return UpdateOut(x, P, ll, Pa, Pu, Pb, _clipped_flag(y, lower, upper), K)
 
 
@@ -471,7 +467,7 @@ def adaptive_tobit_filter(
         Time-varying half-widths (instead of ``c``), e.g. scaled by the frame interval.
     A_seq, Q_seq, R_seq, R_scale, diagonal
         As in :func:`tobitkf.core.kalman.kalman_filter`.
-    keep_probabilities : bool
+    keep_probabilities, keep_predicted : bool
         As in :func:`tobit_filter`.
 
     Returns

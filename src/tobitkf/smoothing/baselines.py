@@ -61,8 +61,6 @@ KINECT_PRESETS: dict[str, dict[str, float]] = {
     },
 }
 
-_INFERRED = 1  # TrackingState.INFERRED
-_NOT_TRACKED = 0  # TrackingState.NOT_TRACKED
 
 
 # --------------------------------------------------------------------------- helpers
@@ -494,71 +492,16 @@ def kinect_double_exponential(
     s, c, pred = p["smoothing"], p["correction"], p["prediction"]
     jitter0 = max(1e-4, p["jitter_radius"])
     maxdev0 = p["max_deviation_radius"]
-    if T and arr.shape[-1] and arr.size:
-        # compiled, joint by joint (numba, imported here: not at import tobitkf)
-        from tobitkf.smoothing._baseline_kernels import kinect_run
+    if not arr.size:  # nothing to filter
+        return arr.copy()
+    # compiled, joint by joint (numba, imported here: not at import tobitkf)
+    from tobitkf.smoothing._baseline_kernels import kinect_run
 
-        D = arr.shape[-1]
-        flat = np.ascontiguousarray(arr.reshape(T, -1, D))
-        st = np.ascontiguousarray(np.asarray(state).reshape(T, -1), dtype=np.int8)
-        out = kinect_run(flat, st, float(s), float(c), float(pred), float(jitter0), float(maxdev0))
-        return out.reshape(arr.shape)
-    return _kinect_numpy(arr, state, s, c, pred, jitter0, maxdev0)
-
-
-def _kinect_numpy(
-    arr: NDArray[np.float64],
-    state: NDArray[Any],
-    s: float,
-    c: float,
-    pred: float,
-    jitter0: float,
-    maxdev0: float,
-) -> NDArray[np.float64]:
-    """The filter as numpy operations per frame over the batch (the reference form of the
-    compiled kernel; used for empty inputs)."""
-    T = arr.shape[0]
-    batch = arr.shape[1:-1]
-
-    out = np.empty_like(arr)
-    f_prev = np.zeros(batch + arr.shape[-1:])
-    b_prev = np.zeros_like(f_prev)
-    r_prev = np.zeros_like(f_prev)
-    count = np.zeros(batch, dtype=np.int64)
-    for k in range(T):
-        r = arr[k]
-        valid = np.all(np.isfinite(r), axis=-1) & (state[k] != _NOT_TRACKED)
-        inferred = state[k] == _INFERRED
-        jit = np.where(inferred, 2.0 * jitter0, jitter0)[..., None]
-        mdev = np.where(inferred, 2.0 * maxdev0, maxdev0)
-        rr = np.where(valid[..., None], r, 0.0)
-        # frame 1: start
-        f0 = rr
-        b0 = np.zeros_like(rr)
-        # frame 2
-        f1 = 0.5 * (rr + r_prev)
-        b1 = c * (f1 - f_prev) + (1.0 - c) * b_prev
-        # later frames: jitter filter then double exponential
-        d = np.linalg.norm(rr - f_prev, axis=-1, keepdims=True)
-        w = d / jit
-        fj = np.where(d <= jit, w * rr + (1.0 - w) * f_prev, rr)
-        f2 = (1.0 - s) * fj + s * (f_prev + b_prev)
-        b2 = c * (f2 - f_prev) + (1.0 - c) * b_prev
-        c0 = (count == 0)[..., None]
-        c1 = (count == 1)[..., None]
-        f = np.where(c0, f0, np.where(c1, f1, f2))
-        b = np.where(c0, b0, np.where(c1, b1, b2))
-        pk = f + pred * b
-        e = np.linalg.norm(pk - rr, axis=-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(e > mdev, mdev / np.where(e > 0, e, 1.0), 1.0)[..., None]
-        pk = np.where(ratio < 1.0, ratio * pk + (1.0 - ratio) * rr, pk)
-        out[k] = np.where(valid[..., None], pk, r)
-        r_prev = np.where(valid[..., None], rr, r_prev)
-        f_prev = np.where(valid[..., None], f, f_prev)
-        b_prev = np.where(valid[..., None], b, b_prev)
-        count = np.where(valid, count + 1, 0)
-    return out
+    D = arr.shape[-1]
+    flat = np.ascontiguousarray(arr.reshape(T, -1, D))
+    st = np.ascontiguousarray(np.asarray(state).reshape(T, -1), dtype=np.int8)
+    out = kinect_run(flat, st, float(s), float(c), float(pred), float(jitter0), float(maxdev0))
+    return out.reshape(arr.shape)
 
 
 # --------------------------------------------------------------------------- registration
