@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import errno
 import fnmatch
-import json
 import os
 import tempfile
 import time
@@ -176,15 +175,13 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
     if method not in method_names():
         return None
     lower = p.name.lower()
-    if lower.endswith(".csv") or lower.endswith(".csv.gz"):
-        side = p.with_suffix(".json") if lower.endswith(".csv") else None
-        try:
-            if side is None or side.stat().st_size > 1 << 20:
-                return None
-            prov = json.loads(side.read_text(encoding="utf-8")).get("provenance") or {}
-        except (OSError, ValueError, AttributeError):
-            return None
-        return method if isinstance(prov, dict) and prov.get("method") == method else None
+    if lower.endswith(".csv.gz"):  # never written by tobitkf
+        return None
+    if lower.endswith(".csv"):
+        from tobitkf.io.generic_csv import sidecar_provenance
+
+        prov = sidecar_provenance(p) or {}
+        return method if prov.get("method") == method else None
     if lower.endswith(".npz"):
         from tobitkf.io import load
 

@@ -69,7 +69,14 @@ from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
 
-__all__ = ["SIDECAR_FORMAT", "read_csv", "sidecar_path", "sniff_csv", "write_csv"]
+__all__ = [
+    "SIDECAR_FORMAT",
+    "read_csv",
+    "sidecar_path",
+    "sidecar_provenance",
+    "sniff_csv",
+    "write_csv",
+]
 
 _TIME = ("time", "timestamp", "t")
 _AXES = ("_x", "_y", "_z")
@@ -427,6 +434,16 @@ def _read_sidecar(path) -> dict[str, Any]:
         bodies[e.get("body")] = entry
     out["bodies"] = bodies
     return out
+
+
+def sidecar_provenance(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The provenance recorded in a CSV's sidecar (method, parameters, version), or None
+    when there is no tobitkf sidecar or it cannot be read."""
+    try:
+        prov = _read_sidecar(path).get("provenance")
+    except (ReadError, OSError):
+        return None
+    return prov if isinstance(prov, dict) else None
 
 
 def write_csv(
