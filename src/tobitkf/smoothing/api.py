@@ -65,6 +65,7 @@ from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingSta
 from tobitkf.smoothing import baselines as _baselines  # noqa: F401
 from tobitkf.smoothing import kalman_methods as _kalman_methods  # noqa: F401
 from tobitkf.smoothing import robust as _robust  # noqa: F401
+from tobitkf.smoothing.arrays import sequence_from_array
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
@@ -232,16 +233,21 @@ def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any
 
 
 def smooth(
-    sequence: SkeletonSequence | Sequence[SkeletonSequence],
+    sequence: SkeletonSequence | Sequence[SkeletonSequence] | np.ndarray,
     method: str = DEFAULT_METHOD,
     *,
     offline: bool = False,
     up_axis: int | None = None,
     inferred_noise_factor: float = DEFAULT_INFERRED_NOISE_FACTOR,
     min_confidence: float = DEFAULT_MIN_CONFIDENCE,
+    fps: float | None = None,
+    confidence: Any = None,
+    units: str | None = None,
+    topology: Any = None,
     **params: Any,
 ) -> Any:
-    """Smooth every joint of a skeleton sequence (or a list of them, one per body).
+    """Smooth every joint of a skeleton sequence (or a list of them, one per body), or
+    the keypoint tracks of a NumPy array.
 
     Any sequence: 2-D or 3-D, in any ``units``, with or without ``confidence``
     (:mod:`tobitkf.smoothing.keypoints`: lengths are converted to metres for the method
@@ -250,10 +256,15 @@ def smooth(
 
     Parameters
     ----------
-    sequence : SkeletonSequence or list of SkeletonSequence
+    sequence : SkeletonSequence, list of SkeletonSequence, or ndarray
         A list is smoothed body by body and a list is returned; bodies with the same
         number of frames, time base and topology go to the method together, stacked on
-        a body axis.
+        a body axis. An array ``(T, J, D)`` (frames, keypoints, coordinates, D = 2 or 3)
+        or ``(T, D)`` (one point), NaN where missing, gives an array of the same shape,
+        like :func:`scipy.signal.savgol_filter`; ``fps``, ``confidence``, ``units`` and
+        ``topology`` describe it (:func:`tobitkf.smoothing.arrays.sequence_from_array`:
+        by default 30 fps, no confidence, unknown units, keypoints without bones) and
+        are refused for sequences, which carry their own.
     method : str
         A registered method (``tobitkf methods``; default :data:`DEFAULT_METHOD`,
         ``"robust"``).
@@ -286,18 +297,30 @@ def smooth(
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
     opts = (offline, up_axis, factor, min_conf)
+    described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology}
+    if isinstance(sequence, np.ndarray):
+        seq, single = sequence_from_array(sequence, **described)
+        est = _smooth_group([seq], spec, full, *opts)[0].positions
+        return est[:, 0] if single else est
+    given = [k for k, v in described.items() if v is not None]
+    if given:
+        raise TypeError(
+            f"{', '.join(given)}: only for an array; a SkeletonSequence carries its own "
+            "(use sequence.replace(...) to change them)"
+        )
     if isinstance(sequence, SkeletonSequence):
         return _smooth_group([sequence], spec, full, *opts)[0]
     if isinstance(sequence, (str, bytes)) or not isinstance(sequence, Sequence):
         raise TypeError(
-            f"smooth expects a SkeletonSequence or a list of them, got {type(sequence).__name__}"
+            "smooth expects a SkeletonSequence, a list of them or a NumPy array, got "
+            f"{type(sequence).__name__}"
         )
     seqs = list(sequence)
     for i, s in enumerate(seqs):
         if not isinstance(s, SkeletonSequence):
             raise TypeError(
-                f"smooth expects a SkeletonSequence or a list of them; item {i} is "
-                f"{type(s).__name__}"
+                f"smooth expects a SkeletonSequence, a list of them or a NumPy array; item "
+                f"{i} is {type(s).__name__}"
             )
     out: list[Any] = [None] * len(seqs)
     groups: dict[Any, list[int]] = {}
