@@ -767,8 +767,19 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
 @click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @click.option("--markdown", "as_markdown", is_flag=True, help="Print a Markdown table.")
-def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
+@click.option(
+    "--kind",
+    default="kinect",
+    show_default=True,
+    type=click.Choice(["kinect", "pose2d"]),
+    help="kinect: 3-D Kinect-like corruption (cm); pose2d: two people's 2-D keypoints "
+    "in pixels with confidence, glitches and identity / left-right swaps (px).",
+)
+def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
+    if kind == "pose2d":
+        _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown)
+        return
     from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
     from tobitkf.evaluation.evaluate import default_methods
 
@@ -805,6 +816,47 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
     ]
     _print_table(
         f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}", ["method", *keys], rows
+    )
+
+
+def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
+    """``benchmark --kind pose2d``: the 2-D pose-estimator benchmark (docs/pose.md)."""
+    from tobitkf.evaluation.pose2d import (
+        POSE2D_METHODS,
+        pose2d_markdown,
+        pose2d_spread,
+        run_pose2d_benchmark,
+    )
+
+    if str(source) != "generator":
+        _fail("--kind pose2d projects the built-in motions; --source must be 'generator'")
+    specs = _method_list(methods) or list(POSE2D_METHODS)
+    tables = []
+    with _progress() as progress:
+        task = progress.add_task("pose2d benchmark", total=seeds, now="")
+        for s in range(seed, seed + seeds):
+            progress.update(task, now=f"seed {s}")
+            try:
+                tables.append(
+                    run_pose2d_benchmark(seed=s, methods=specs, motion=motion, duration=duration)
+                )
+            except (ValueError, OSError) as exc:
+                _fail(str(exc))
+            progress.advance(task)
+    if as_json:
+        click.echo(dumps([t.to_dict() for t in tables]))
+        return
+    spread = pose2d_spread(tables)
+    seed_list = list(range(seed, seed + seeds))
+    if as_markdown:
+        click.echo(pose2d_markdown(spread, seed_list), nl=False)
+        return
+    keys = [k for k in spread[0] if k != "method"]
+    rows = [[r["method"], *[f"{r[k][0]:.2f} ± {r[k][1]:.2f}" for k in keys]] for r in spread]
+    _print_table(
+        f"RMSE (px), mean ± sd over seeds {seed}..{seed + seeds - 1}",
+        ["method", *(k.removesuffix("_px") for k in keys)],
+        rows,
     )
 
 

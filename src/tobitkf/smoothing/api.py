@@ -92,6 +92,7 @@ from tobitkf.smoothing.timebase import (
     frame_times,
     measurements,
 )
+from tobitkf.smoothing.untangle import untangle_sequences
 
 __all__ = [
     "COMMON_KEYWORDS",
@@ -116,7 +117,7 @@ DEFAULT_METHOD = "robust"
 #: most accurate causal one
 DEFAULT_LIVE_METHOD = "robust_online"
 #: keywords of :func:`smooth` accepted next to the method's parameters
-COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor", "min_confidence")
+COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor", "min_confidence", "untangle")
 
 
 def method_defaults(method: str) -> dict[str, Any]:
@@ -142,7 +143,15 @@ def check_params(method: str, params: Mapping[str, Any]) -> dict[str, Any]:
         check_inferred_factor(params["inferred_noise_factor"])
     if "min_confidence" in params:
         check_min_confidence(params["min_confidence"])
+    if "untangle" in params:
+        _check_untangle(params["untangle"])
     return full
+
+
+def _check_untangle(value: Any) -> Any:
+    if value == "auto" or isinstance(value, bool):
+        return value
+    raise ValueError(f"untangle must be 'auto', True or False, got {value!r}")
 
 
 def _check_offline(spec: MethodSpec, offline: bool) -> None:
@@ -240,6 +249,7 @@ def smooth(
     up_axis: int | None = None,
     inferred_noise_factor: float = DEFAULT_INFERRED_NOISE_FACTOR,
     min_confidence: float = DEFAULT_MIN_CONFIDENCE,
+    untangle: Any = "auto",
     fps: float | None = None,
     confidence: Any = None,
     units: str | None = None,
@@ -279,6 +289,11 @@ def smooth(
         Samples whose ``confidence`` is below this are missing (default
         :data:`~tobitkf.smoothing.keypoints.DEFAULT_MIN_CONFIDENCE`, 0.1); no effect on
         sequences without confidence.
+    untangle : ``"auto"`` (default), True or False
+        Undo identity swaps between the bodies of a list and left/right swaps within a
+        body before smoothing (:mod:`tobitkf.smoothing.untangle`); ``"auto"``: for
+        sequences in pixels or unknown units (pose-estimator output), not for tracks in
+        metres.
     **params
         Method parameters; :func:`method_defaults` lists them.
 
@@ -294,9 +309,10 @@ def smooth(
         up_axis = check_up_axis(up_axis)
     factor = check_inferred_factor(inferred_noise_factor)
     min_conf = check_min_confidence(min_confidence)
+    untangle = _check_untangle(untangle)
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
-    opts = (offline, up_axis, factor, min_conf)
+    opts = (offline, up_axis, factor, min_conf, untangle)
     described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology}
     if isinstance(sequence, np.ndarray):
         seq, single = sequence_from_array(sequence, **described)
@@ -357,9 +373,13 @@ def _smooth_group(
     up_axis: int | None,
     factor: float,
     min_conf: float = DEFAULT_MIN_CONFIDENCE,
+    untangle: Any = "auto",
 ) -> list[SkeletonSequence]:
     """Smooth bodies sharing frames, topology, time base, dimension and units, stacked
     on a body axis."""
+    untangled = None
+    if untangle is True or (untangle == "auto" and length_scale(seqs[0].units) is None):
+        seqs, untangled = untangle_sequences(seqs)
     ref = seqs[0]
     steps, _, is_reference = frame_steps(ref)
     # (T, B, J, D); one body is a view, not a copy
@@ -438,6 +458,8 @@ def _smooth_group(
     }
     if confidence is not None:
         used["min_confidence"] = min_conf
+    if untangled is not None:
+        used["untangle"] = True
     out = []
     for b, s in enumerate(seqs):
         filled = (missing[:, b] | rejected[:, b]) & finite[:, b]
@@ -447,6 +469,7 @@ def _smooth_group(
             "filled_fraction": filled.sum(axis=0) / T,
             "method": spec.name,
             "params": dict(used),
+            **({} if untangled is None else untangled[b]),
         }
         meta = dict(s.metadata)
         meta["diagnostics"] = diagnostics

@@ -330,11 +330,15 @@ def _robust_bodies(
     """
     T, B, J = missing.shape
     derived: dict[str, Any] = {}
+    centre = None
     if use_recording_gates(params, units):
         derived = recording_gates(ys, steps, topo.parents, n_dims)
+        centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
     setup = _Setup(topo, params)
-    L = bone_lengths(ys, topo.parents) if params["bones"] else None  # (B, J)
+    L = None
+    if params["bones"]:  # (B, J)
+        L = bone_lengths(ys, topo.parents) if centre is None else centre
     k = kernels()
     ys = np.ascontiguousarray(ys, dtype=float)
     missing = np.ascontiguousarray(missing, dtype=bool)

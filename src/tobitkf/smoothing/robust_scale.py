@@ -8,18 +8,20 @@ bodies of one call pooled, joint by joint; see docs/robust.md, "Keypoints in any
 * ``noise_sd`` (per joint): ``1.4826 · median |Δ²y| / √6`` over the axes and the frames
   with three consecutive samples — the second difference of white noise of standard
   deviation σ has standard deviation σ√6, and smooth motion adds little to it;
-* ``speed_sd`` (per joint): root-mean-square velocity per axis over the steps up to the
-  joint's 90th percentile of speed (glitches, a few per cent of the steps, are above it),
-  with the noise's share ``2 σ² / dt²`` taken off (at least a tenth of it is kept);
+* ``speed_sd`` (per joint): root-mean-square velocity per axis of the 5-frame running
+  median of the positions (a glitch of up to two frames does not move it, nor does most
+  of the jitter), over the steps up to the joint's 98th percentile of that speed;
 * ``v_max`` (per joint): ``V_MAX_FACTOR`` (4) times the joint's 90th percentile of
   frame-to-frame speed, and at least the median of that over the joints (a joint that
   hardly moved in the recording may still move as fast as the others);
 * ``margin`` and ``bone_tol_abs``: ``MARGIN_SDS`` (3) standard deviations of the
   distance between two noisy samples, ``3 σ √(2 D)`` with σ the median ``noise_sd``;
-* ``bone_tol_rel``: ``BONE_TOL_SPREAD`` (4) times the median over the bones of the
-  relative robust spread (``1.4826 · MAD / median``) of the bone's length over time — a
-  2-D bone is foreshortened as the limb turns out of the image plane, so its length varies
-  by as much as the recording shows, not by a fixed 15 %.
+* the bone gate, 3-D: ``bone_tol_rel`` = ``BONE_TOL_SPREAD`` (4) times the median over
+  the bones of the relative robust spread (``1.4826 · MAD / median``) of the bone's
+  length over time; 2-D: one-sided — a projected bone is foreshortened as the limb turns
+  out of the image plane, anywhere between 0 and its full length, but never longer: a
+  length is accepted up to ``BONE_MAX_FACTOR`` (1.1) times the bone's 95th percentile
+  (plus ``bone_tol_abs``), and any shorter one is (``bone_centre``, ``bone_tol_rel = 1``).
 
 These statistics read the whole recording, so ``robust_online`` with them is causal in
 its estimates but not in its parameters; live smoothing needs ``gates="physical"`` and
@@ -36,7 +38,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BONE_TOL_SPREAD", "MARGIN_SDS", "V_MAX_FACTOR", "recording_gates"]
+__all__ = [
+    "BONE_MAX_FACTOR",
+    "BONE_TOL_SPREAD",
+    "MARGIN_SDS",
+    "MEDIAN_WINDOW",
+    "V_MAX_FACTOR",
+    "noise_scale",
+    "recording_gates",
+]
 
 Array = NDArray[np.float64]
 
@@ -47,6 +57,10 @@ V_MAX_FACTOR = 4.0
 MARGIN_SDS = 3.0
 #: bone_tol_rel = BONE_TOL_SPREAD x the median relative spread of the bone lengths
 BONE_TOL_SPREAD = 4.0
+#: the longest plausible 2-D bone: this times the 95th percentile of its lengths
+BONE_MAX_FACTOR = 1.1
+#: frames of the running median the typical speed is measured on
+MEDIAN_WINDOW = 5
 #: consistency factor of the median absolute deviation for a normal distribution
 _MAD = 1.4826
 
@@ -69,12 +83,53 @@ def _fill(values: Array, fallback: float) -> Array:
     return np.where(np.isfinite(values) & (values > 0), values, fallback)
 
 
+def _running_median(y: Array, window: int) -> Array:
+    """Centred running median over time (axis 0), NaN-aware; shorter at the ends."""
+    T = y.shape[0]
+    if T < window:
+        return y
+    h = window // 2
+    pad = np.concatenate([np.full((h, *y.shape[1:]), np.nan), y,
+                          np.full((h, *y.shape[1:]), np.nan)])  # fmt: skip
+    win = np.lib.stride_tricks.sliding_window_view(pad, window, axis=0)
+    return _nanmedian(win, axis=-1)
+
+
+def _projected_bone_centres(y: Array, parents: Any) -> Array:
+    """(B, J) half the longest plausible projected length of each bone: a 2-D bone is
+    never longer than the limb itself (foreshortening only shortens it), so the bone gate
+    becomes one-sided, ``0 - tol_abs <= length <= 2 * centre + tol_abs`` (``bone_tol_rel``
+    = 1). The longest plausible length is ``BONE_MAX_FACTOR`` (1.1) times the 95th
+    percentile of the recorded lengths (a few per cent of glitches do not reach it)."""
+    B, J = y.shape[1], y.shape[2]
+    out = np.full((B, J), np.nan)
+    for j, p in enumerate(parents):
+        if p < 0:
+            continue
+        length = np.sqrt(np.sum((y[:, :, j] - y[:, :, p]) ** 2, axis=-1))  # (T, B)
+        with _quiet():
+            out[:, j] = BONE_MAX_FACTOR * np.nanpercentile(length, 95, axis=0) / 2
+    return out
+
+
+def noise_scale(ys: Array) -> float:
+    """The recording's measurement noise standard deviation per axis: the median over
+    joints of ``noise_sd`` (``1.4826 · median |Δ²y| / √6``), > 0."""
+    y = np.asarray(ys, dtype=float)
+    if y.shape[0] < 3:
+        return 1e-9
+    dd = np.abs(y[2:] - 2 * y[1:-1] + y[:-2])
+    sigma = _MAD * _nanmedian(dd.reshape(-1)) / np.sqrt(6.0)
+    return float(sigma) if np.isfinite(sigma) and sigma > 0 else 1e-9
+
+
 def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[str, Any]:
     """Metric parameters of the robust methods from the recording (module docstring).
 
     ``ys`` (T, B, J, >= n_dims) with NaN where missing; ``steps`` (T,) seconds before
     each frame; ``parents`` (J,). Returns ``noise_sd``, ``speed_sd``, ``v_max`` (J,) and
-    ``margin``, ``bone_tol_abs``, ``bone_tol_rel`` (floats), all positive.
+    ``margin``, ``bone_tol_abs``, ``bone_tol_rel`` (floats), all positive, and for 2-D
+    ``bone_centre`` (B, J), the bone lengths the offline gate compares with.
     """
     y = np.asarray(ys, dtype=float)[..., :n_dims]
     T, J = y.shape[0], y.shape[2]
@@ -93,16 +148,19 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
         dt = steps[1:, None, None]
         v = (y[1:] - y[:-1]) / dt[..., None]  # (T-1, B, J, D)
         speed = np.sqrt(np.sum(v * v, axis=-1))  # NaN where a sample is missing
-        flat_speed = speed.transpose(2, 0, 1).reshape(J, -1)
         with _quiet():
-            q90 = np.nanpercentile(flat_speed, 90, axis=1)
-        inner = flat_speed <= q90[:, None]
-        v2 = np.where(inner[..., None], (v * v).transpose(2, 0, 1, 3).reshape(J, -1, n_dims),
-                      np.nan)  # fmt: skip
+            q90 = np.nanpercentile(speed.transpose(2, 0, 1).reshape(J, -1), 90, axis=1)
+        # the typical speed from the running median of the positions, which a glitch of
+        # up to MEDIAN_WINDOW // 2 frames does not move, and without its top 2 %
+        ym = _running_median(y, MEDIAN_WINDOW)
+        vm = (ym[1:] - ym[:-1]) / dt[..., None]
+        flat = vm.transpose(2, 0, 1, 3).reshape(J, -1, n_dims)
+        sm = np.sqrt(np.sum(flat * flat, axis=-1))
         with _quiet():
-            ms = np.nanmean(v2.reshape(J, -1), axis=1)
-        noise_v = 2 * sigma**2 / float(np.median(steps)) ** 2
-        speed_sd = np.sqrt(np.maximum(ms - noise_v, 0.01 * ms))
+            q98 = np.nanpercentile(sm, 98, axis=1)
+            ms = np.nanmean(np.where((sm <= q98[:, None])[..., None], flat * flat, np.nan),
+                            axis=(1, 2))  # fmt: skip
+        speed_sd = np.sqrt(ms)
         vmax = V_MAX_FACTOR * q90
         vmax = np.maximum(_fill(vmax, np.nan), _nanmedian(_fill(vmax, np.nan)))
     else:
@@ -111,6 +169,16 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
     speed_sd = _fill(_fill(speed_sd, _nanmedian(_fill(speed_sd, np.nan))), fallback_speed)
     vmax = _fill(vmax, V_MAX_FACTOR * fallback_speed)
     dist_sd = float(np.median(sigma)) * np.sqrt(2.0 * n_dims)
+    if n_dims == 2:
+        return {
+            "noise_sd": sigma,
+            "speed_sd": speed_sd,
+            "v_max": vmax,
+            "margin": MARGIN_SDS * dist_sd,
+            "bone_tol_abs": MARGIN_SDS * dist_sd,
+            "bone_tol_rel": 1.0,
+            "bone_centre": _projected_bone_centres(y, parents),
+        }
     rel = []
     for j, p in enumerate(parents):
         if p < 0:
