@@ -141,3 +141,18 @@ def test_robust_smooth_direct_form_takes_2d():
 
     a = robust_smooth(s)
     np.testing.assert_allclose(a.positions, tk.smooth(s).positions, atol=1e-9)
+
+
+def test_live_2d_equals_batch_online():
+    """A 2-D stream gives the batch robust_online result (same parameters)."""
+    _, y = _track(T=90)
+    params = {"v_max": 400.0, "margin": 10.0, "noise_sd": 2.0, "speed_sd": 60.0,
+              "bone_tol_abs": 10.0, "gates": "physical"}  # fmt: skip
+    batch = tk.smooth(SkeletonSequence(y, TOPO, fps=30.0, units="px"), "robust_online",
+                      untangle=False, **params)  # fmt: skip
+    live = tk.LiveSmoother(TOPO, "robust_online", fps=30.0, **params)
+    out = np.stack([live.update(frame) for frame in y])
+    assert out.shape == y.shape
+    np.testing.assert_allclose(out, batch.positions, atol=1e-9)
+    with pytest.raises(ValueError, match="2 coordinates"):
+        live.update(np.zeros((len(NAMES), 3)))

@@ -356,18 +356,26 @@ class NoTruthTable:
 
     rows: tuple[dict[str, Any], ...]
     n_frames: int
+    #: the track's units: rows in metres (``"m"``, the keys' ``_m``) or, for pixels and
+    #: unknown units, in the track's own units
+    units: str | None = "m"
 
     def to_dict(self) -> dict:
-        return to_jsonable({"rows": list(self.rows), "n_frames": self.n_frames})
+        return to_jsonable(
+            {"rows": list(self.rows), "n_frames": self.n_frames, "units": self.units}
+        )
 
     def to_text(self) -> str:
-        lines = [f"{'method':>14}  {'M (1e-3 m²)':>12}  {'max jump cm':>11}  largest jump at"]
+        metric = self.units == "m"
+        unit = "px" if self.units == "px" else "units"
+        head_m = "M (1e-3 m²)" if metric else f"M ({unit}²)"
+        head_j = "max jump cm" if metric else f"max jump {unit}"
+        lines = [f"{'method':>14}  {head_m:>12}  {head_j:>11}  largest jump at"]
         for r in self.rows:
             j = r["jumps"][0] if r["jumps"] else None
             where = f"{j['joint']} frame {j['frame']}" if j else "-"
-            lines.append(
-                f"{r['method']:>14}  {r['M'] * 1e3:12.3f}  {r['max_jump_m'] * 100:11.1f}  {where}"
-            )
+            m, jump = (r["M"] * 1e3, r["max_jump_m"] * 100) if metric else (r["M"], r["max_jump_m"])
+            lines.append(f"{r['method']:>14}  {m:12.3f}  {jump:11.1f}  {where}")
         return "\n".join(lines)
 
 
@@ -405,7 +413,15 @@ def evaluate_without_truth(
                 "jumps": jumps,
             }
         )
-    return NoTruthTable(tuple(rows), track.n_frames)
+    # lengths in metres when the track has a length unit (converted), else its own units
+    scale = track.metres_per_unit
+    if scale not in (None, 1.0):
+        for r in rows:
+            r["M"] *= scale**2
+            r["max_jump_m"] *= scale
+            for j in r["jumps"]:
+                j["jump_m"] *= scale
+    return NoTruthTable(tuple(rows), track.n_frames, "m" if scale is not None else track.units)
 
 
 def evaluate_paths(

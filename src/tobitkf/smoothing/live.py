@@ -38,6 +38,7 @@ from tobitkf.smoothing.api import (
     method_names,
     run_method,
 )
+from tobitkf.smoothing.keypoints import drop_third_axis, pad_third_axis
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
@@ -96,6 +97,11 @@ class _Body:
 
 class LiveSmoother:
     """Smooth a live skeleton stream frame by frame.
+
+    Frames are ``(J, 3)`` (or ``(B, J, 3)``), or ``(J, 2)`` image keypoints (the first
+    frame fixes it). Live, nothing of the recording is known in advance: the methods'
+    parameters apply as given, in metres for 3-D tracks; for pixels give them in pixels
+    (``robust_online``: ``v_max``, ``margin``, ``noise_sd``, ... and ``bones``).
 
     Parameters
     ----------
@@ -275,11 +281,14 @@ class LiveSmoother:
         single = pos.ndim == 2
         batch_pos = pos[None] if single else pos
         batch_states = None if states is None else (states[None] if single else states)
+        dims = batch_pos.shape[-1]
+        batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
         if isinstance(stepper, _HistoryStepper):
             out = stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
         else:
             out = stepper.step(ys, missing, batch_states, dt)
+        out = drop_third_axis(np.asarray(out), dims)
         return out[0] if single else out
 
     def _update_bodies(
@@ -307,7 +316,7 @@ class LiveSmoother:
         if self._bodies is None:
             self._bodies = {}
         self._clock += dt
-        nan_frame = np.full((self.topology.n_joints, 3), np.nan)
+        nan_frame = np.full((self.topology.n_joints, getattr(self, "_dims", 3)), np.nan)
         out: dict[Any, Array] = {}
         for body, (pos, st) in checked.items():
             entry = self._bodies.get(body)
@@ -333,8 +342,14 @@ class LiveSmoother:
         except (TypeError, ValueError):
             raise ValueError("positions: expected numbers of shape (J, 3) or (B, J, 3)") from None
         shape = pos.shape
-        if len(shape) not in (2, 3) or shape[-1] != 3:
-            raise ValueError(f"positions: expected shape (J, 3) or (B, J, 3), found {shape}")
+        if len(shape) not in (2, 3) or shape[-1] not in (2, 3):
+            raise ValueError(
+                f"positions: expected shape (J, D) or (B, J, D) with D = 3 or 2, found {shape}"
+            )
+        dims = getattr(self, "_dims", None)
+        if dims is not None and shape[-1] != dims:
+            raise ValueError(f"positions: this stream has {dims} coordinates, found {shape[-1]}")
+        self._dims = shape[-1]
         if shape[-2] != self.topology.n_joints:
             raise ValueError(
                 f"positions: {shape[-2]} joints, but topology {self.topology.name!r} has "
