@@ -784,20 +784,14 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
-    tables = []
-    with _progress() as progress:
-        task = progress.add_task("benchmark", total=seeds, now="")
-        for s in range(seed, seed + seeds):
-            progress.update(task, now=f"seed {s}")
-            try:
-                tables.append(
-                    run_benchmark(
-                        seed=s, methods=specs, motion=motion, source=source, duration=duration
-                    )
-                )
-            except (ValueError, OSError) as exc:
-                _fail(str(exc))
-            progress.advance(task)
+    tables = _over_seeds(
+        "benchmark",
+        seed,
+        seeds,
+        lambda s: run_benchmark(
+            seed=s, methods=specs, motion=motion, source=source, duration=duration
+        ),
+    )
     if as_json:
         click.echo(dumps([t.to_dict() for t in tables]))
         return
@@ -819,6 +813,21 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
     )
 
 
+def _over_seeds(label: str, seed: int, seeds: int, run: Any) -> list[Any]:
+    """``run(s)`` for the consecutive seeds, with progress; a bad input fails cleanly."""
+    tables = []
+    with _progress() as progress:
+        task = progress.add_task(label, total=seeds, now="")
+        for s in range(seed, seed + seeds):
+            progress.update(task, now=f"seed {s}")
+            try:
+                tables.append(run(s))
+            except (ValueError, OSError) as exc:
+                _fail(str(exc))
+            progress.advance(task)
+    return tables
+
+
 def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
     """``benchmark --kind pose2d``: the 2-D pose-estimator benchmark (docs/pose.md)."""
     from tobitkf.evaluation.pose2d import (
@@ -831,18 +840,12 @@ def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, a
     if str(source) != "generator":
         _fail("--kind pose2d projects the built-in motions; --source must be 'generator'")
     specs = _method_list(methods) or list(POSE2D_METHODS)
-    tables = []
-    with _progress() as progress:
-        task = progress.add_task("pose2d benchmark", total=seeds, now="")
-        for s in range(seed, seed + seeds):
-            progress.update(task, now=f"seed {s}")
-            try:
-                tables.append(
-                    run_pose2d_benchmark(seed=s, methods=specs, motion=motion, duration=duration)
-                )
-            except (ValueError, OSError) as exc:
-                _fail(str(exc))
-            progress.advance(task)
+    tables = _over_seeds(
+        "pose2d benchmark",
+        seed,
+        seeds,
+        lambda s: run_pose2d_benchmark(seed=s, methods=specs, motion=motion, duration=duration),
+    )
     if as_json:
         click.echo(dumps([t.to_dict() for t in tables]))
         return

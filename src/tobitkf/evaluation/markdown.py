@@ -106,18 +106,37 @@ def evaluation_markdown(
 def benchmark_markdown(spread: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
     """Markdown of :func:`~tobitkf.evaluation.benchmark.seed_spread`: RMSE in cm, mean ±
     standard deviation over the seeds, overall and by glitch label."""
-    keys = [k for k in spread[0] if k != "method"]
-    raw = next((r["rmse"][0] for r in spread if r["method"] == "raw"), float("nan"))
+    return spread_markdown(spread, seeds, total="rmse", unit="cm", scale=100.0)
+
+
+def spread_markdown(
+    spread: Sequence[dict[str, Any]],
+    seeds: Sequence[int],
+    *,
+    total: str,
+    unit: str,
+    scale: float = 1.0,
+    suffix: str = "",
+) -> str:
+    """RMSE table of a seed spread (``method`` and ``(mean, sd)`` pairs): the ``total``
+    column as mean ± sd with its change against ``raw``, every other column's mean;
+    values times ``scale``, in ``unit``; ``suffix`` is cut from the column names."""
+    keys = [k for k in spread[0] if k not in ("method", total)]
+    raw = next((r[total][0] for r in spread if r["method"] == "raw"), float("nan"))
     rows = [
         [
             r["method"],
-            f"{_num(100 * r['rmse'][0])} ± {_num(100 * r['rmse'][1])}",
-            _change(r["rmse"][0], raw) if r["method"] != "raw" else "",
-            *(_num(100 * r[k][0]) for k in keys if k != "rmse"),
+            f"{_num(scale * r[total][0])} ± {_num(scale * r[total][1])}",
+            _change(r[total][0], raw) if r["method"] != "raw" else "",
+            *(_num(scale * r[k][0]) for k in keys),
         ]
         for r in spread
     ]
     seed_text = f"seeds {seeds[0]}–{seeds[-1]}" if len(seeds) > 1 else f"seed {seeds[0]}"
-    out = [f"RMSE against the known truth, cm (mean ± sd over {seed_text}; by label: mean):", ""]
-    out += _table(["method", "RMSE", "vs raw", *(k for k in keys if k != "rmse")], rows)
+    out = [
+        f"RMSE against the known truth, {unit} (mean ± sd over {seed_text}; by label: mean):",
+        "",
+    ]
+    names = [k[: -len(suffix)] if suffix and k.endswith(suffix) else k for k in keys]
+    out += _table(["method", "RMSE", "vs raw", *names], rows)
     return "\n".join(out) + "\n"

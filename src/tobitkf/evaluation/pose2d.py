@@ -316,23 +316,6 @@ def pose2d_spread(tables: Sequence[Pose2DTable]) -> list[dict[str, Any]]:
 def pose2d_markdown(spread: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
     """Markdown of :func:`pose2d_spread`: RMSE in px, mean ± sd over the seeds, overall
     and by label (mean)."""
-    from tobitkf.evaluation.markdown import _change, _num, _table
+    from tobitkf.evaluation.markdown import spread_markdown
 
-    keys = [k for k in spread[0] if k not in ("method", "rmse_px")]
-    raw = next((r["rmse_px"][0] for r in spread if r["method"] == "raw"), float("nan"))
-    rows = [
-        [
-            r["method"],
-            f"{_num(r['rmse_px'][0])} ± {_num(r['rmse_px'][1])}",
-            _change(r["rmse_px"][0], raw) if r["method"] != "raw" else "",
-            *(_num(r[k][0]) for k in keys),
-        ]
-        for r in spread
-    ]
-    seed_text = f"seeds {seeds[0]}–{seeds[-1]}" if len(seeds) > 1 else f"seed {seeds[0]}"
-    out = [
-        f"RMSE against the known truth, pixels (mean ± sd over {seed_text}; by label: mean):",
-        "",
-    ]
-    out += _table(["method", "RMSE", "vs raw", *(k[:-3] for k in keys)], rows)
-    return "\n".join(out) + "\n"
+    return spread_markdown(spread, seeds, total="rmse_px", unit="pixels", suffix="_px")

@@ -322,9 +322,11 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                         path, nos[k], f"expected a state 0, 1 or 2 for {joints[j]}, found {col[k]}"
                     )
                 state[:, j] = col
-        std = _std_columns(path, d, nos, extra["_sd"], joints)
+        std = _float_columns(path, d, nos, extra["_sd"], joints, "a standard deviation >= 0", 0.0)
         sample = _sample_columns(path, d, nos, extra["_sample"], joints)
-        confidence = _confidence_columns(path, d, nos, extra["_confidence"], joints)
+        confidence = _float_columns(
+            path, d, nos, extra["_confidence"], joints, "a confidence in [0, 1]", 0.0, 1.0
+        )
         check_positions(path, positions, nos, implausible, names=joints, state=state, units=units)
         timestamps = None
         if time_col is not None:
@@ -360,44 +362,24 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     return out
 
 
-def _confidence_columns(
-    path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]
-):
-    """(T, J) confidences from the ``_confidence`` columns (NaN where none); None when the
-    file has none or this body's are all empty."""
+def _float_columns(
+    path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str],
+    what: str, lo: float, hi: float = np.inf,
+):  # fmt: skip
+    """(T, J) values in [lo, hi] from one kind of per-joint column (NaN where none); None
+    when the file has none or this body's are all empty (a body written without them)."""
     if not cols:
         return None
-    conf = np.full((len(d), len(joints)), np.nan)
+    v = np.full((len(d), len(joints)), np.nan)
     for j, c in cols.items():
-        conf[:, j] = d[:, c]
-    if np.isnan(conf).all():
+        v[:, j] = d[:, c]
+    if np.isnan(v).all():
         return None
-    bad = (conf < 0) | (conf > 1)
+    bad = (v < lo) | (v > hi)
     if bad.any():
-        k, j = (int(v[0]) for v in np.nonzero(bad))
-        raise ReadError(
-            path, nos[k], f"expected a confidence in [0, 1] for {joints[j]}, found {conf[k, j]}"
-        )
-    return conf
-
-
-def _std_columns(path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]):
-    """(T, J) standard deviations from the ``_sd`` columns (NaN where none); None when the
-    file has none or this body's are all empty (a body written without them)."""
-    if not cols:
-        return None
-    std = np.full((len(d), len(joints)), np.nan)
-    for j, c in cols.items():
-        std[:, j] = d[:, c]
-    if np.isnan(std).all():
-        return None
-    bad = std < 0
-    if bad.any():
-        k, j = (int(v[0]) for v in np.nonzero(bad))
-        raise ReadError(
-            path, nos[k], f"expected a standard deviation >= 0 for {joints[j]}, found {std[k, j]}"
-        )
-    return std
+        k, j = (int(x[0]) for x in np.nonzero(bad))
+        raise ReadError(path, nos[k], f"expected {what} for {joints[j]}, found {v[k, j]}")
+    return v
 
 
 def _sample_columns(path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]):

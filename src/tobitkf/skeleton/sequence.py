@@ -167,29 +167,9 @@ class SkeletonSequence:
             if not np.isfinite(fps) or fps <= 0:
                 raise ValueError(f"fps must be a positive number, found {self.fps!r}")
             object.__setattr__(self, "fps", fps)
-        if self.std is not None:
-            try:
-                sd = np.asarray(self.std, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"std must be numeric, found {exc}") from None
-            if sd.shape != (T, J):
-                raise ValueError(f"std must have shape (T, J) = {(T, J)}, found {sd.shape}")
-            if np.isinf(sd).any() or (sd < 0).any():
-                raise ValueError("std values must be >= 0 and finite, or NaN (no estimate)")
-            object.__setattr__(self, "std", sd)
+        self._set_floats("std", np.inf, ">= 0 and finite, or NaN (no estimate)", copy=False)
         self._set_codes("sample_state", SampleState, "0 to 4")
-        if self.confidence is not None:
-            try:
-                conf = np.array(self.confidence, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"confidence must be numeric, found {exc}") from None
-            if conf.shape != (T, J):
-                raise ValueError(
-                    f"confidence must have shape (T, J) = {(T, J)}, found {conf.shape}"
-                )
-            if np.any((conf < 0) | (conf > 1)):
-                raise ValueError("confidence values must be in [0, 1] or NaN")
-            object.__setattr__(self, "confidence", conf)
+        self._set_floats("confidence", 1.0, "in [0, 1] or NaN", copy=True)
         units = self.units
         if units is _DEFAULT:
             units = "m" if pos.shape[2] == 3 else None
@@ -204,6 +184,23 @@ class SkeletonSequence:
             object.__setattr__(self, "metadata", {})
         elif not isinstance(self.metadata, dict):
             raise TypeError(f"metadata must be a dict, found {type(self.metadata).__name__}")
+
+    def _set_floats(self, name: str, hi: float, allowed: str, *, copy: bool) -> None:
+        """Check a (T, J) float field (values in [0, hi], finite, or NaN) or None, and
+        store it as float (a copy with ``copy``)."""
+        value = getattr(self, name)
+        if value is None:
+            return
+        try:
+            a = (np.array if copy else np.asarray)(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name} must be numeric, found {exc}") from None
+        shape = self.positions.shape[:2]
+        if a.shape != shape:
+            raise ValueError(f"{name} must have shape (T, J) = {shape}, found {a.shape}")
+        if np.isinf(a).any() or (a < 0).any() or (a > hi).any():
+            raise ValueError(f"{name} values must be {allowed}")
+        object.__setattr__(self, name, a)
 
     def _set_codes(self, name: str, codes: type[IntEnum], allowed: str) -> None:
         """Check a (T, J) field of ``codes`` values (or None) and store it as int8."""

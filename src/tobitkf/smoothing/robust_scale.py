@@ -169,16 +169,17 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
     speed_sd = _fill(_fill(speed_sd, _nanmedian(_fill(speed_sd, np.nan))), fallback_speed)
     vmax = _fill(vmax, V_MAX_FACTOR * fallback_speed)
     dist_sd = float(np.median(sigma)) * np.sqrt(2.0 * n_dims)
+    out: dict[str, Any] = {
+        "noise_sd": sigma,
+        "speed_sd": speed_sd,
+        "v_max": vmax,
+        "margin": MARGIN_SDS * dist_sd,
+        "bone_tol_abs": MARGIN_SDS * dist_sd,
+    }
     if n_dims == 2:
-        return {
-            "noise_sd": sigma,
-            "speed_sd": speed_sd,
-            "v_max": vmax,
-            "margin": MARGIN_SDS * dist_sd,
-            "bone_tol_abs": MARGIN_SDS * dist_sd,
-            "bone_tol_rel": 1.0,
-            "bone_centre": _projected_bone_centres(y, parents),
-        }
+        out["bone_tol_rel"] = 1.0
+        out["bone_centre"] = _projected_bone_centres(y, parents)
+        return out
     rel = []
     for j, p in enumerate(parents):
         if p < 0:
@@ -189,12 +190,5 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
             med = float(np.median(length))
             if med > 0:
                 rel.append(_MAD * float(np.median(np.abs(length - med))) / med)
-    tol_rel = BONE_TOL_SPREAD * float(np.median(rel)) if rel else np.inf
-    return {
-        "noise_sd": sigma,
-        "speed_sd": speed_sd,
-        "v_max": vmax,
-        "margin": MARGIN_SDS * dist_sd,
-        "bone_tol_abs": MARGIN_SDS * dist_sd,
-        "bone_tol_rel": tol_rel,
-    }
+    out["bone_tol_rel"] = BONE_TOL_SPREAD * float(np.median(rel)) if rel else np.inf
+    return out
