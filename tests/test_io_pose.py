@@ -218,3 +218,22 @@ def test_deeplabcut_csv_fuzz(tmp_path, body):
         return
     for s in seqs:
         assert s.n_dims == 2
+
+
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    body=st.binary(max_size=200),
+    hdf5=st.booleans(),
+    fmt=st.sampled_from(["deeplabcut", "sleap_analysis", "movement", "slp", "lightningpose"]),
+)
+def test_binary_pose_readers_fuzz(tmp_path, body, hdf5, fmt):
+    """Arbitrary bytes (with or without the HDF5 signature) named as a pose file: a
+    ReadError naming the file, never another exception."""
+    path = tmp_path / ("f.slp" if fmt == "slp" else "f.csv" if fmt == "lightningpose" else "f.h5")
+    path.write_bytes((b"\x89HDF\r\n\x1a\n" if hdf5 else b"") + body)
+    try:
+        tk.load(path, format=fmt)
+    except ReadError as exc:
+        assert str(path) in str(exc)
