@@ -165,8 +165,6 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "gates": one_of("auto", "physical", "recording"),
 }
 
-#: the parameters :func:`tobitkf.smoothing.robust_scale.recording_gates` derives
-RECORDING_PARAMS = ("noise_sd", "speed_sd", "v_max", "margin", "bone_tol_abs", "bone_tol_rel")
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
 
@@ -336,9 +334,10 @@ def _robust_bodies(
         centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
     setup = _Setup(topo, params)
-    L = None
-    if params["bones"]:  # (B, J)
-        L = bone_lengths(ys, topo.parents) if centre is None else centre
+    # (B, J): the median bone lengths (reported), and what the offline bone gate compares
+    # with (2-D from the recording: the centre of the one-sided range)
+    L = bone_lengths(ys, topo.parents) if params["bones"] else None
+    L_gate = L if centre is None else centre
     k = kernels()
     ys = np.ascontiguousarray(ys, dtype=float)
     missing = np.ascontiguousarray(missing, dtype=bool)
@@ -346,7 +345,7 @@ def _robust_bodies(
     steps = np.ascontiguousarray(steps, dtype=float)
     rinf = _inferred_scale(states, missing, factor, confidence)
     if offline:
-        L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
+        L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
         est, rejected, var = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
     else:
         state = k.new_state(B, J, int(params["lookback"]))
