@@ -14,6 +14,7 @@ import fnmatch
 import os
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,6 +52,8 @@ class FileSummary:
     seconds: float = 0.0
     input_format: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: warnings the method gave for this file (e.g. limits the data contradict), once each
+    warnings: tuple[str, ...] = ()
 
 
 def strip_extension(name: str) -> str:
@@ -340,7 +343,10 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
-        smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        said = tuple(dict.fromkeys(str(w.message) for w in caught))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
             s.metadata["provenance"]["source"] = {"path": str(job.source), "format": in_fmt}
         atomic_save(smoothed, job.output, job.output_format)
@@ -368,6 +374,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         missing_percent=_percent(missing),
         seconds=time.perf_counter() - start,
         input_format=in_fmt,
+        warnings=said,
     )
 
 

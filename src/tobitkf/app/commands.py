@@ -397,6 +397,9 @@ def smooth(
         )
         if rows:
             console.print(f"outputs in {Path(outdir).resolve()}")
+        for r in results:
+            for w in r.warnings:
+                err_console.print(f"[yellow]warning[/yellow] {escape(r.source)}: {escape(w)}")
         for r in failed:
             err_console.print(f"[red]FAILED[/red] {escape(r.source)}: {escape(str(r.error))}")
     if interrupted is not None:
