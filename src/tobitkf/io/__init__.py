@@ -26,14 +26,17 @@ Bad input raises :class:`ReadError` (a ``ValueError``) naming the file and line.
 from __future__ import annotations
 
 # each format module registers itself when imported
+from tobitkf.io import azure_kinect as _azure_kinect  # noqa: F401
 from tobitkf.io import bvh as _bvh  # noqa: F401
 from tobitkf.io import c3d as _c3d  # noqa: F401
 from tobitkf.io import generic_csv as _csv  # noqa: F401
 from tobitkf.io import keraal as _keraal  # noqa: F401
 from tobitkf.io import kimore as _kimore  # noqa: F401
 from tobitkf.io import krajjat as _krajjat  # noqa: F401
+from tobitkf.io import mediapipe as _mediapipe  # noqa: F401
 from tobitkf.io import npz as _npz  # noqa: F401
 from tobitkf.io import ntu as _ntu  # noqa: F401
+from tobitkf.io import openpose as _openpose  # noqa: F401
 from tobitkf.io import qualisys as _qualisys  # noqa: F401
 from tobitkf.io import uiprmd as _uiprmd  # noqa: F401
 from tobitkf.io.errors import OptionError, ReadError

@@ -97,7 +97,8 @@ def number_array(
         arr = np.zeros(0)
     if not ok or (shape is not None and arr.shape != shape):
         found = "nested arrays of unequal lengths" if not ok else f"shape {arr.shape}"
-        raise ReadError(path, None, f"expected {where} of shape {shape}, found {found}")
+        want = f"of shape {shape}" if shape is not None else "to be a rectangular array"
+        raise ReadError(path, None, f"expected {where} {want}, found {found}")
     if np.isinf(arr).any():
         raise ReadError(path, None, f"expected finite numbers in {where}, found a huge number")
     return arr
