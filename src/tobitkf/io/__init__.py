@@ -29,6 +29,7 @@ from __future__ import annotations
 from tobitkf.io import azure_kinect as _azure_kinect  # noqa: F401
 from tobitkf.io import bvh as _bvh  # noqa: F401
 from tobitkf.io import c3d as _c3d  # noqa: F401
+from tobitkf.io import c3d_write as _c3d_write  # noqa: F401
 from tobitkf.io import generic_csv as _csv  # noqa: F401
 from tobitkf.io import keraal as _keraal  # noqa: F401
 from tobitkf.io import kimore as _kimore  # noqa: F401
@@ -38,6 +39,7 @@ from tobitkf.io import npz as _npz  # noqa: F401
 from tobitkf.io import ntu as _ntu  # noqa: F401
 from tobitkf.io import openpose as _openpose  # noqa: F401
 from tobitkf.io import qualisys as _qualisys  # noqa: F401
+from tobitkf.io import trc as _trc  # noqa: F401
 from tobitkf.io import uiprmd as _uiprmd  # noqa: F401
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import (
