@@ -49,7 +49,12 @@ def _azure_doc(rng, T=4, levels=False):
             truth[(bid, t)] = (pos, ori)
             bodies.append(body)
         frames.append(
-            {"bodies": bodies, "frame_id": t, "num_bodies": len(bodies), "timestamp_usec": 133322 + 33333 * t}
+            {
+                "bodies": bodies,
+                "frame_id": t,
+                "num_bodies": len(bodies),
+                "timestamp_usec": 133322 + 33333 * t,
+            }
         )
     doc = {
         "bone_list": [list(b) for b in BONES],
@@ -96,7 +101,12 @@ def test_azure_custom_joint_names_use_the_declared_bones(tmp_path):
     doc = {
         "bone_list": [["B", "A"], ["B", "C"]],
         "joint_names": ["A", "B", "C"],
-        "frames": [{"bodies": [{"body_id": 5, "joint_positions": [[1, 2, 3], [4, 5, 6], [7, 8, 9]]}], "timestamp_usec": 0}],
+        "frames": [
+            {
+                "bodies": [{"body_id": 5, "joint_positions": [[1, 2, 3], [4, 5, 6], [7, 8, 9]]}],
+                "timestamp_usec": 0,
+            }
+        ],
     }
     (s,) = read_azure_kinect(_write_azure(tmp_path / "k.json", doc))
     assert s.joint_names == ("A", "B", "C")
@@ -115,8 +125,14 @@ def test_azure_custom_joint_names_use_the_declared_bones(tmp_path):
         (lambda d: d["frames"][0]["bodies"][0].__setitem__("body_id", "x"), "body_id"),
         (lambda d: d["frames"][1]["bodies"][0]["joint_positions"].pop(), "31 joints"),
         (lambda d: d["frames"][0]["bodies"][0]["joint_positions"][3].append(1), "rectangular"),
-        (lambda d: d["frames"][0]["bodies"][0].__setitem__("joint_confidence_levels", [5] * 32), "0, 1, 2 or 3"),
-        (lambda d: d["frames"][0]["bodies"][0]["joint_positions"][0].__setitem__(0, 1e12), "implausible"),
+        (
+            lambda d: d["frames"][0]["bodies"][0].__setitem__("joint_confidence_levels", [5] * 32),
+            "0, 1, 2 or 3",
+        ),
+        (
+            lambda d: d["frames"][0]["bodies"][0]["joint_positions"][0].__setitem__(0, 1e12),
+            "implausible",
+        ),
     ],
 )
 def test_azure_bad_content(tmp_path, mutate, match):
@@ -179,7 +195,7 @@ def test_mediapipe_json_world_and_image(tmp_path):
     assert a.joint_names == MEDIAPIPE_POSE_JOINTS
     np.testing.assert_array_equal(a.timestamps, 33 * np.arange(5) * 1e-3)
     for t, people in enumerate(frames):
-        im, w = people[1] if t % 2 and t != 2 else people[0]  # person A (left) is body 0
+        _im, w = people[1] if t % 2 and t != 2 else people[0]  # person A (left) is body 0
         np.testing.assert_array_equal(a.positions[t], _array(w, "xyz"))
         np.testing.assert_array_equal(a.confidence[t], _array(w, ["visibility"])[:, 0])
         np.testing.assert_array_equal(a.metadata["presence"][t], _array(w, ["presence"])[:, 0])
@@ -200,11 +216,11 @@ def test_mediapipe_csv_from_pandas_matches_json(tmp_path):
     for t, people in enumerate(frames):
         for k, (im, w) in enumerate(people):
             for j, (li, lw) in enumerate(zip(im, w)):
-                rows.append(
-                    {"frame": t, "timestamp_ms": 33 * t, "pose": k, "landmark": MEDIAPIPE_POSE_JOINTS[j],
-                     "x": li["x"], "y": li["y"], "z": li["z"], "visibility": li["visibility"],
-                     "presence": li["presence"], "world_x": lw["x"], "world_y": lw["y"], "world_z": lw["z"]}
-                )  # fmt: skip
+                row = {"frame": t, "timestamp_ms": 33 * t, "pose": k}
+                row["landmark"] = MEDIAPIPE_POSE_JOINTS[j]
+                row.update({k_: li[k_] for k_ in ("x", "y", "z", "visibility", "presence")})
+                row.update({f"world_{c}": lw[c] for c in "xyz"})
+                rows.append(row)
     df = pd.DataFrame(rows).sample(frac=1.0, random_state=0)  # any row order
     csv_path = tmp_path / "pose.csv"
     df.to_csv(csv_path)  # with pandas' default index column

@@ -31,7 +31,10 @@ def _g(x: float) -> str:
 
 def _person(kp: np.ndarray, person_id: int = -1, kp3=None) -> str:
     """One person as OpenPose writes it; ``kp`` (J, 3) x, y, c."""
-    fields = [f'"person_id":[{person_id}]', '"pose_keypoints_2d":[' + ",".join(map(_g, kp.ravel())) + "]"]
+    fields = [
+        f'"person_id":[{person_id}]',
+        '"pose_keypoints_2d":[' + ",".join(map(_g, kp.ravel())) + "]",
+    ]
     for key in EMPTY:
         if key == "pose_keypoints_3d" and kp3 is not None:
             fields.append('"pose_keypoints_3d":[' + ",".join(map(_g, kp3.ravel())) + "]")
@@ -89,7 +92,9 @@ def test_association_is_needed(tmp_path):
     rng = np.random.default_rng(1)
     a = [_pose(rng, 25, np.array([100.0, 100.0])) for _ in range(2)]
     b = [_pose(rng, 25, np.array([800.0, 100.0])) for _ in range(2)]
-    folder = _write_folder(tmp_path / "j", [[_person(a[0]), _person(b[0])], [_person(b[1]), _person(a[1])]])
+    folder = _write_folder(
+        tmp_path / "j", [[_person(a[0]), _person(b[0])], [_person(b[1]), _person(a[1])]]
+    )
     sa, sb = read_openpose(folder)
     np.testing.assert_array_equal(sa.positions[1], a[1][:, :2])
     np.testing.assert_array_equal(sb.positions[1], b[1][:, :2])
@@ -99,7 +104,11 @@ def test_person_ids_are_the_bodies_and_absence_is_nan(tmp_path):
     rng = np.random.default_rng(2)
     p = [_pose(rng, 18, np.array([300.0, 300.0])) for _ in range(3)]
     q = [_pose(rng, 18, np.array([310.0, 300.0])) for _ in range(3)]
-    frames = [[_person(p[0], 7), _person(q[0], 3)], [_person(q[1], 3)], [_person(p[2], 7), _person(q[2], 3)]]
+    frames = [
+        [_person(p[0], 7), _person(q[0], 3)],
+        [_person(q[1], 3)],
+        [_person(p[2], 7), _person(q[2], 3)],
+    ]
     s3, s7 = read_openpose(_write_folder(tmp_path / "j", frames))
     assert (s3.body_id, s7.body_id) == (3, 7)
     assert s7.joint_names == COCO18_JOINTS and s7.topology.name == "openpose_coco18"
@@ -169,7 +178,47 @@ def test_json_dump_of_the_same_data_reads_the_same(tmp_path):
     kp[:, 2] = 0.5
     kp[0] = 0.0
     f = tmp_path / "x_000000000000_keypoints.json"
-    f.write_text(json.dumps({"version": 1.3, "people": [{"person_id": [-1], "pose_keypoints_2d": kp.ravel().tolist()}]}, indent=2))
+    f.write_text(
+        json.dumps(
+            {
+                "version": 1.3,
+                "people": [{"person_id": [-1], "pose_keypoints_2d": kp.ravel().tolist()}],
+            },
+            indent=2,
+        )
+    )
     (s,) = read_openpose(f)
     np.testing.assert_array_equal(s.positions[0, 1:], kp[1:, :2])
     assert np.isnan(s.positions[0, 0]).all()  # 0 0 0 is missing
+
+
+def test_a_person_far_from_every_track_starts_a_new_body(tmp_path):
+    """A leaves after frame 0 and B enters far away in frame 1: two bodies, not one that
+    jumps across the image; a gate wider than the jump links them."""
+    rng = np.random.default_rng(5)
+    a = _pose(rng, 25, np.array([100.0, 300.0]))
+    b = _pose(rng, 25, np.array([900.0, 300.0]))
+    folder = _write_folder(tmp_path / "j", [[_person(a)], [_person(b)]])
+    sa, sb = read_openpose(folder)
+    assert np.isnan(sa.positions[1]).all() and np.isnan(sb.positions[0]).all()
+    (one,) = read_openpose(folder, max_distance=5000.0)
+    np.testing.assert_array_equal(one.positions[1], b[:, :2])
+
+
+def test_batch_takes_an_openpose_folder_as_one_recording(tmp_path):
+    from tobitkf.app.batch import discover_inputs, not_a_recording, readable_problem
+
+    rng = np.random.default_rng(6)
+    root = tmp_path / "videos"
+    root.mkdir()
+    folder = _write_folder(
+        root / "clip_json", [[_person(_pose(rng, 25, np.array([9.0, 9.0])))]] * 3
+    )
+    (root / "notes").mkdir()
+    (root / "notes" / "a.csv").write_text("x")
+    for given in (root, folder):
+        found = discover_inputs([given], skip=not_a_recording)
+        assert folder in [f for f, _ in found]
+        assert not any(f.parent == folder for f, _ in found)  # its frames are not inputs
+    assert (root / "notes" / "a.csv") in [f for f, _ in discover_inputs([root])]
+    assert readable_problem(folder) is None

@@ -55,7 +55,19 @@ def _seq(names, T=5, fps=50.0, units="m", seed=0):
     return SkeletonSequence(pos, Topology.from_names(names), fps=fps, units=units)
 
 
-HOSTILE = ["Head,L", 'say "hi"', "#hash", "ünïçødé", "名前", "emoji\U0001f600", "a b", "1.5", "Frame#", "X1", ";"]
+HOSTILE = [
+    "Head,L",
+    'say "hi"',
+    "#hash",
+    "ünïçødé",
+    "名前",
+    "emoji\U0001f600",
+    "a b",
+    "1.5",
+    "Frame#",
+    "X1",
+    ";",
+]
 TRC_REFUSED = ["tab\tname", "new\nline", "cr\rname", "", " ", " lead", "trail ", "nul\x00"]
 
 

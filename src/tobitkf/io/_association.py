@@ -63,7 +63,10 @@ def associate(
         if tracks and n_det:
             cost = np.array([[_distance(last[k], d) for d in dets] for k in range(len(tracks))])
             gate = np.array(
-                [_size(last[k]) if max_distance is None else max_distance for k in range(len(tracks))]
+                [
+                    _size(last[k]) if max_distance is None else max_distance
+                    for k in range(len(tracks))
+                ]
             )
             allowed = np.isfinite(cost) & (cost <= gate[:, None])
             big = (np.nanmax(np.where(allowed, cost, 0.0)) + 1.0) * (n_det + len(tracks) + 1)

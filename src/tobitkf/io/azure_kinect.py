@@ -125,7 +125,9 @@ def read_azure_kinect(
             if n_joints is None:
                 n_joints = pos.shape[0]
             if pos.shape[0] != n_joints:
-                raise ReadError(p, None, f"{bw} has {pos.shape[0]} joints, earlier bodies {n_joints}")
+                raise ReadError(
+                    p, None, f"{bw} has {pos.shape[0]} joints, earlier bodies {n_joints}"
+                )
             entry: dict[str, Any] = {"positions": pos}
             if "joint_orientations" in body:
                 entry["orientations"] = number_array(
@@ -146,7 +148,9 @@ def read_azure_kinect(
         raise ReadError(p, None, f"frames[{k}].timestamp_usec goes backwards")
     if not found:
         raise ReadError(p, None, "no body in any frame")
-    check_output_size(p, len(found) * T * n_joints * 8 * 8, p.stat().st_size, f"{len(found)} bodies")
+    check_output_size(
+        p, len(found) * T * n_joints * 8 * 8, p.stat().st_size, f"{len(found)} bodies"
+    )
     topo = _topology(p, doc, n_joints)
     out = []
     for bid, per_frame in found.items():

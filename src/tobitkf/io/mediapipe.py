@@ -180,7 +180,7 @@ def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[s
                     raise ReadError(path, line, f"expected a non-negative integer {what}")
             name = row[col["landmark"]].strip()
             j = _INDEX.get(name)
-            if j is None and name.isdigit() and int(name) < N:
+            if j is None and name.isascii() and name.isdigit() and int(name) < N:
                 j = int(name)
             if j is None:
                 raise ReadError(path, line, f"unknown MediaPipe Pose landmark {name[:40]!r}")
@@ -194,7 +194,9 @@ def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[s
                 key, {"image": np.full((N, 5), np.nan), "world": np.full((N, 5), np.nan)}
             )
             if not np.isnan(person["image"][j, 0]) or not np.isnan(person["world"][j, 0]):
-                raise ReadError(path, line, f"landmark {name!r} twice in frame {key[0]}, pose {key[1]}")
+                raise ReadError(
+                    path, line, f"landmark {name!r} twice in frame {key[0]}, pose {key[1]}"
+                )
             person["image"][j] = [vals.get(k, np.nan) for k in _FIELDS]
             person["world"][j, :3] = [vals.get(f"world_{k}", np.nan) for k in "xyz"]
             person["world"][j, 3:] = person["image"][j, 3:]

@@ -109,9 +109,7 @@ def _person_id(path: Path, person: dict[str, Any], i: int) -> int:
     if "person_id" not in person:
         return -1
     ids = number_array(path, person["person_id"], f"people[{i}].person_id")
-    if ids.ndim == 0:
-        ids = ids.reshape(1)
-    if ids.size != 1 or ids[0] != np.round(ids[0]) or abs(ids[0]) > 2**53:
+    if ids.shape != (1,) or ids[0] != np.round(ids[0]) or abs(ids[0]) > 2**53:
         raise ReadError(path, None, f"expected people[{i}].person_id to be [an integer]")
     return int(ids[0])
 
@@ -174,9 +172,7 @@ def read_openpose(
     labelled = all(i != -1 for pids in ids for i in pids)
     if labelled:
         bodies = sorted({i for pids in ids for i in pids})
-        tracks = [
-            {t: pids.index(b) for t, pids in enumerate(ids) if b in pids} for b in bodies
-        ]
+        tracks = [{t: pids.index(b) for t, pids in enumerate(ids) if b in pids} for b in bodies]
         if any(len(set(pids)) != len(pids) for pids in ids):
             raise ReadError(p, None, "a person_id appears twice in one frame")
     else:

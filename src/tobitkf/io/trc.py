@@ -3,8 +3,8 @@
 Layout (tab-separated)::
 
     PathFileType  4  (X/Y/Z)  walk.trc
-    DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  OrigNumFrames
-    60  60  120  3  mm  60  1  120
+    DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  ...
+    60        60          120        3           mm     60            1                   ...
     Frame#  Time  RASI        LASI        ...
                   X1  Y1  Z1  X2  Y2  Z2  ...
     1  0.0  ...
@@ -30,6 +30,7 @@ refused with a ValueError. Confidence and tracking states have no place in a TRC
 from __future__ import annotations
 
 import os
+import re
 import unicodedata
 from collections.abc import Sequence
 from pathlib import Path
@@ -103,7 +104,7 @@ def read_trc(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     if not rows:
         raise ReadError(path, None, "no frames after the header")
     fixed = []
-    for row, line in zip(rows, numbers):
+    for row in rows:
         fields = row.split("\t")
         if len(fields) > ncols and not any(f.strip() for f in fields[ncols:]):
             fields = fields[:ncols]  # trailing tabs
@@ -153,6 +154,18 @@ def _check_name(name: str) -> str:
             f"cannot write the marker name {name!r} to TRC: names are read with surrounding "
             "white space removed and must not be empty; rename it"
         )
+    return name
+
+
+def _label(name: str) -> str:
+    """The file name shown on line 1 (information only): a batch run's temporary name
+    ``.NAME.RANDOM.partEXT`` shows as NAME; a name with control characters as
+    ``tobitkf.trc``."""
+    m = re.fullmatch(r"\.(.+)\.[^.]+\.part(\.trc)?", name, flags=re.IGNORECASE)
+    if m:
+        name = m.group(1)
+    if any(unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp") for c in name):
+        return "tobitkf.trc"
     return name
 
 
@@ -208,9 +221,7 @@ def write_trc(
     T, M = seq.n_frames, seq.n_joints
     pos = seq.positions * scale if scale != 1.0 else seq.positions
     times = seq.times()
-    label = Path(path).name
-    if any(unicodedata.category(c) in ("Cc", "Cs", "Zl", "Zp") for c in label):
-        label = "tobitkf.trc"
+    label = _label(Path(path).name)
     r = fmt_float(rate)
     out = [
         f"PathFileType\t4\t(X/Y/Z)\t{label}",
