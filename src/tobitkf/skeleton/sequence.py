@@ -318,6 +318,14 @@ class SkeletonSequence:
             confidence=None if self.confidence is None else self.confidence[:, idx],
         )
 
+    def to_dataframe(self, layout: str = "long") -> Any:
+        """A pandas DataFrame of the sequence, ``layout`` ``"long"`` (a row per frame and
+        keypoint) or ``"wide"`` (a row per frame); see :mod:`tobitkf.skeleton.dataframe`,
+        and :func:`tobitkf.from_dataframe` for the way back."""
+        from tobitkf.skeleton.to_frame import to_dataframe
+
+        return to_dataframe(self, layout)
+
     def largest_jumps(self) -> tuple[np.ndarray, np.ndarray]:
         """Largest frame-to-frame displacement of each joint.
 
