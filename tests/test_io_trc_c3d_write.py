@@ -192,3 +192,10 @@ def test_c3d_units_option(tmp_path):
     np.testing.assert_array_equal(back.positions, expected)
     with pytest.raises(ValueError, match="one set of points"):
         save([seq, seq], tmp_path / "two.c3d")
+
+
+def test_new_formats_are_registered():
+    from tobitkf.io import formats, writable_formats
+
+    assert {"openpose", "mediapipe", "azure_kinect", "trc", "c3d"} <= set(formats())
+    assert {"trc", "c3d"} <= set(writable_formats())

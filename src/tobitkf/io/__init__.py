@@ -14,10 +14,14 @@ name                content                                                read 
 ``uiprmd_vicon``    UI-PRMD Vicon (39 Plug-in Gait markers, mm)             yes
 ``krajjat``         Kinect TSV with timestamps (krajjat)                    yes
 ``qualisys``        Qualisys QTM TSV (mm)                                   yes
-``c3d``             C3D (optional ``c3d`` package)                          yes
+``c3d``             C3D (optional ``c3d`` package)                          yes     yes
 ``bvh``             BVH hierarchy + motion (forward kinematics)             yes
 ``csv``             generic CSV (time, <joint>_x/_y/_z, <joint>_state)      yes     yes
 ``npz``             lossless NumPy archive                                  yes     yes
+``openpose``        OpenPose JSON output folder (BODY_25 / COCO-18)         yes
+``mediapipe``       MediaPipe Pose landmarks (JSON / CSV layout, docs)      yes
+``azure_kinect``    Azure Kinect Body Tracking JSON (offline_processor)     yes
+``trc``             OpenSim marker trajectories                             yes     yes
 ==================  =====================================================  ======  ======
 
 Bad input raises :class:`ReadError` (a ``ValueError``) naming the file and line.
