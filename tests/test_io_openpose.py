@@ -222,3 +222,23 @@ def test_batch_takes_an_openpose_folder_as_one_recording(tmp_path):
         assert not any(f.parent == folder for f, _ in found)  # its frames are not inputs
     assert (root / "notes" / "a.csv") in [f for f, _ in discover_inputs([root])]
     assert readable_problem(folder) is None
+
+
+def test_cli_smooths_an_openpose_folder(tmp_path):
+    """``tobitkf smooth`` takes the folder as one recording (one output per recording)."""
+    pytest.importorskip("click")
+    from click.testing import CliRunner
+
+    from tobitkf.app.cli import app
+
+    rng = np.random.default_rng(7)
+    base = np.array([300.0, 300.0])
+    poses = [_pose(rng, 25, base + [2.0 * t, 0.0]) for t in range(40)]
+    folder = _write_folder(tmp_path / "in" / "clip_json", [[_person(k)] for k in poses])
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "in"), "-o", str(out), "--quiet"])
+    assert res.exit_code == 0, res.output
+    (made,) = sorted(out.rglob("*.csv"))
+    assert made.name.startswith(folder.name)
+    (back,) = load(made)
+    assert back.positions.shape == (40, 25, 2) and back.units == "px"

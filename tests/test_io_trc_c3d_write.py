@@ -199,3 +199,13 @@ def test_new_formats_are_registered():
 
     assert {"openpose", "mediapipe", "azure_kinect", "trc", "c3d"} <= set(formats())
     assert {"trc", "c3d"} <= set(writable_formats())
+
+
+def test_trc_without_the_coordinate_line(tmp_path):
+    lines = OPENSIM_STYLE.split("\n")
+    del lines[4:6]  # no "X1 Y1 Z1" line, no blank line
+    p = tmp_path / "short.trc"
+    p.write_text("\n".join(lines))
+    (s,) = read_trc(p)
+    assert s.n_frames == 3
+    np.testing.assert_array_equal(s.positions[0, 0], np.array([1.5, 952.25, 120.125]) * 1e-3)

@@ -254,7 +254,10 @@ def read_mediapipe(
     if fps is not None:
         fps = check_rate(p, None, float(fps), "fps", repr(fps))
     if image_size is None and "image_size" in extra:
-        image_size = tuple(number_array(p, extra["image_size"], '"image_size"', (2,)))
+        size = number_array(p, extra["image_size"], '"image_size"', (2,))
+        if not np.all(size > 0):
+            raise ReadError(p, None, f'expected "image_size" (width, height) > 0, found {size}')
+        image_size = (float(size[0]), float(size[1]))
     scale = None
     if image_size is not None:
         scale = np.asarray(image_size, dtype=float)

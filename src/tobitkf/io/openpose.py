@@ -143,17 +143,26 @@ def read_openpose(
     if fps is not None:
         fps = check_rate(p, None, float(fps), "fps", repr(fps))
     files = _frame_files(p)
-    docs = [(f, _people(f, load_json(f))) for f in files]
+    # per frame and person: (2-D keypoints, 3-D keypoints, person_id); the parsed documents
+    # (with face and hand arrays) are not kept
+    parsed: list[list[tuple[np.ndarray | None, np.ndarray | None, int]]] = []
+    for f in files:
+        people = _people(f, load_json(f))
+        parsed.append(
+            [
+                (_keypoints(f, q, i, 2), _keypoints(f, q, i, 3), _person_id(f, q, i))
+                for i, q in enumerate(people)
+            ]
+        )
     if dims is None:
-        has3 = any(_keypoints(f, q, i, 3) is not None for f, ps in docs for i, q in enumerate(ps))
-        dims = 3 if has3 else 2
+        dims = 3 if any(k3 is not None for fr in parsed for _k2, k3, _i in fr) else 2
     frames: list[list[np.ndarray]] = []
     ids: list[list[int]] = []
     n_joints = None
-    for f, people in docs:
+    for f, people in zip(files, parsed):
         dets, pids = [], []
-        for i, person in enumerate(people):
-            kp = _keypoints(f, person, i, dims)
+        for i, (k2, k3, pid) in enumerate(people):
+            kp = k3 if dims == 3 else k2
             if kp is None:
                 continue
             if n_joints is None:
@@ -163,7 +172,7 @@ def read_openpose(
                     f, None, f"people[{i}] has {kp.shape[0]} keypoints, earlier people {n_joints}"
                 )
             dets.append(kp)
-            pids.append(_person_id(f, person, i))
+            pids.append(pid)
         frames.append(dets)
         ids.append(pids)
     if n_joints is None:

@@ -100,7 +100,9 @@ def read_trc(path: str | os.PathLike[str], implausible: str = "error") -> list[S
             raise ReadError(path, 4, f"NumMarkers says {declared}, line 4 names {len(names)}")
     m = len(names)
     ncols = 2 + 3 * m
-    rows, numbers = nonempty(lines, 5)
+    # the X1 Y1 Z1 line (line 5) is left out by some writers: then line 5 is data
+    start = 5 if not lines[4].strip() or "X1" in lines[4].split("\t") else 4
+    rows, numbers = nonempty(lines, start)
     if not rows:
         raise ReadError(path, None, "no frames after the header")
     fixed = []
