@@ -231,6 +231,8 @@ def test_mediapipe_csv_from_pandas_matches_json(tmp_path):
         np.testing.assert_array_equal(c.positions, j.positions)
         np.testing.assert_array_equal(c.confidence, j.confidence)
         np.testing.assert_array_equal(c.timestamps, j.timestamps)
+    _mp_json(frames, tmp_path / "pose.json")  # the same results as JSON beside the CSV
+    assert detect_format(csv_path) == "mediapipe"
     world = read_mediapipe(csv_path)
     assert world[0].units == "m"
     np.testing.assert_array_equal(world[0].positions[0], _array(frames[0][0][1], "xyz"))
@@ -252,7 +254,7 @@ def test_mediapipe_legacy_single_pose_and_nulls(tmp_path):
         ('{"frames": [{"pose_landmarks": [[{"x": 1}]]}]}', "expected 33 landmarks"),
         ('{"frames": []}', "no pose"),
         ("frame,landmark,x,y\n0,elbow,1,2\n", "unknown MediaPipe Pose landmark"),
-        ("frame,landmark,x,y\n0,nose,1,abc\n", "expected a number"),
+        ("frame,landmark,x,y\n0,nose,1,abc\n", "number in column 'y'"),
         ("frame,landmark,x,y\n0,nose,1,2\n0,nose,1,2\n", "twice"),
         ("frame,landmark,x,yy\n", "columns"),
         ("frame,landmark,x,y,visibility\n0,0,1,2,1.5\n", r"outside \[0, 1\]"),

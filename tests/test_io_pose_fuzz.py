@@ -161,16 +161,25 @@ TRC = (
 )
 
 
+_ROW = "{t},{ms},0,{j},0.5,0.5,0.1,0.9,0.8,0.1,0.2,0.3\n"
+MEDIAPIPE_CSV = "frame,timestamp_ms,pose,landmark,x,y,z,visibility,presence,world_x,world_y,world_z\n"
+MEDIAPIPE_CSV += "".join(_ROW.format(t=t, ms=33 * t, j=j) for t in range(2) for j in range(33))
+
+
+@pytest.mark.parametrize(
+    "reader, text, sep, ext",
+    [(read_trc, TRC, "\t", ".trc"), (read_mediapipe, MEDIAPIPE_CSV, ",", ".csv")],
+    ids=["trc", "mediapipe_csv"],
+)
 @SETTINGS
 @given(data=st.data())
-def test_mutated_trc(tmp_path, data):
-    """One tab-separated field of a valid TRC file replaced by a token or dropped."""
-    lines = [ln.split("\t") for ln in TRC.split("\n")]
+def test_mutated_text(tmp_path, reader, text, sep, ext, data):
+    """Up to three fields of a valid file replaced by tokens."""
+    lines = [ln.split(sep) for ln in text.split("\n")]
     spots = [(i, j) for i, ln in enumerate(lines) for j in range(len(ln))]
     for _ in range(data.draw(st.integers(1, 3))):
         i, j = data.draw(st.sampled_from(spots))
-        if j < len(lines[i]):
-            lines[i][j] = data.draw(TOKENS)
-    p = tmp_path / "m.trc"
-    p.write_text("\n".join("\t".join(ln) for ln in lines))
-    _check(read_trc, p)
+        lines[i][j] = data.draw(TOKENS)
+    p = tmp_path / f"m{ext}"
+    p.write_text("\n".join(sep.join(ln) for ln in lines))
+    _check(reader, p)

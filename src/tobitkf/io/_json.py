@@ -71,34 +71,30 @@ def number_array(
     becomes NaN when ``allow_null``.
     """
     as_list(path, value, where)
-
-    def bad(item: Any) -> bool:
-        if isinstance(item, bool) or not isinstance(item, (int, float)):
-            return not (allow_null and item is None)
-        return False
-
-    flat: list[Any] = []
-    stack = [value]
-    ok = True
-    while stack:
-        v = stack.pop()
-        if isinstance(v, list):
-            stack.extend(reversed(v))
-        elif bad(v):
+    allowed = (int, float, type(None)) if allow_null else (int, float)
+    try:  # the leaves as an object array: one C pass over the nesting
+        obj = np.array(value, dtype=object)
+    except (ValueError, TypeError, RecursionError):
+        obj = None
+    kinds = set() if obj is None else set(map(type, obj.flat))
+    if obj is None or not kinds <= set(allowed):
+        leaf = None if obj is None else next(x for x in obj.flat if type(x) not in allowed)
+        if obj is None or isinstance(leaf, list):
             raise ReadError(
-                path, None, f"expected numbers in {where}, found {_kind(v)} ({str(v)[:40]!r})"
+                path,
+                None,
+                f"expected {where} to be a rectangular array of numbers, found "
+                "nested arrays of unequal lengths",
             )
-        else:
-            flat.append(v)
+        raise ReadError(
+            path, None, f"expected numbers in {where}, found {_kind(leaf)} ({str(leaf)[:40]!r})"
+        )
     try:
-        arr = np.array(value, dtype=float) if flat or shape else np.zeros(0)
-    except (ValueError, TypeError, OverflowError):
-        ok = False
-        arr = np.zeros(0)
-    if not ok or (shape is not None and arr.shape != shape):
-        found = "nested arrays of unequal lengths" if not ok else f"shape {arr.shape}"
-        want = f"of shape {shape}" if shape is not None else "to be a rectangular array"
-        raise ReadError(path, None, f"expected {where} {want}, found {found}")
+        arr = obj.astype(float)
+    except (OverflowError, ValueError, TypeError):
+        raise ReadError(path, None, f"expected numbers in {where}, found a huge integer") from None
+    if shape is not None and arr.shape != shape:
+        raise ReadError(path, None, f"expected {where} of shape {shape}, found shape {arr.shape}")
     if np.isinf(arr).any():
         raise ReadError(path, None, f"expected finite numbers in {where}, found a huge number")
     return arr

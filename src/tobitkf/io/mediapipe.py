@@ -46,6 +46,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -54,11 +55,11 @@ import numpy as np
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
 from tobitkf.io._text import (
-    NUMBER,
     check_output_size,
     check_positions,
     check_rate,
     decode,
+    parse_rows,
     read_bytes,
     read_head,
 )
@@ -87,12 +88,10 @@ def _landmarks(path: Path, value: Any, where: str) -> np.ndarray:
     items = as_list(path, value, where)
     if len(items) != N:
         raise ReadError(path, None, f"expected {N} landmarks in {where}, found {len(items)}")
-    out = np.full((N, 5), np.nan)
-    for j, lm in enumerate(items):
-        lm = as_object(path, lm, f"{where}[{j}]")
-        vals = [lm.get(k) for k in _FIELDS]
-        out[j] = number_array(path, vals, f"{where}[{j}]", (5,), allow_null=True)
-    return out
+    values = [
+        [as_object(path, lm, f"{where}[{j}]").get(k) for k in _FIELDS] for j, lm in enumerate(items)
+    ]
+    return number_array(path, values, where, (N, 5), allow_null=True)
 
 
 def _people(path: Path, value: Any, where: str) -> list[np.ndarray]:
@@ -134,20 +133,11 @@ def _read_json(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[
     return frames, times, extra
 
 
-def _csv_number(path: Path, line: int, text: str, column: str) -> float:
-    s = text.strip()
-    if not s:
-        return np.nan
-    if NUMBER.fullmatch(s) is None or not np.isfinite(float(s)):
-        raise ReadError(path, line, f"expected a number in column {column!r}, found {s[:40]!r}")
-    return float(s)
-
-
 def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[str, Any]]:
     text = decode(path, read_bytes(path))
-    rows = csv.reader(io.StringIO(text, newline=""))
+    reader = csv.reader(io.StringIO(text, newline=""))
     try:
-        header = [h.strip() for h in next(rows)]
+        header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise ReadError(path, None, "empty file: expected a MediaPipe CSV header") from None
     except csv.Error as exc:
@@ -164,57 +154,99 @@ def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[s
             f"required, each once); unknown {unknown}, missing {missing}",
         )
     col = {h: i for i, h in enumerate(header)}
-    cells: dict[tuple[int, int], dict[str, np.ndarray]] = {}
-    stamps: dict[int, float] = {}
+    numeric = [c for c in CSV_COLUMNS if c in col and c != "landmark"]
+    idx = [col[c] for c in numeric]
+    rows: list[str] = []
+    names: list[str] = []
+    lines: list[int] = []
     try:
-        for row in rows:
-            line = rows.line_num
+        for row in reader:
             if not any(f.strip() for f in row):
                 continue
             if len(row) != len(header):
-                raise ReadError(path, line, f"expected {len(header)} fields, found {len(row)}")
-            frame = _csv_number(path, line, row[col["frame"]], "frame")
-            pose = _csv_number(path, line, row[col["pose"]], "pose") if "pose" in col else 0.0
-            for v, what in ((frame, "frame"), (pose, "pose")):
-                if not (np.isfinite(v) and v == int(v) and 0 <= v < 2**31):
-                    raise ReadError(path, line, f"expected a non-negative integer {what}")
-            name = row[col["landmark"]].strip()
-            j = _INDEX.get(name)
-            if j is None and name.isascii() and name.isdigit() and int(name) < N:
-                j = int(name)
-            if j is None:
-                raise ReadError(path, line, f"unknown MediaPipe Pose landmark {name[:40]!r}")
-            vals = {c: _csv_number(path, line, row[col[c]], c) for c in col if c in CSV_COLUMNS[4:]}
-            if "timestamp_ms" in col:
-                ts = _csv_number(path, line, row[col["timestamp_ms"]], "timestamp_ms")
-                if stamps.setdefault(int(frame), ts) != ts and not np.isnan(ts):
-                    raise ReadError(path, line, f"frame {int(frame)} has two timestamps")
-            key = (int(frame), int(pose))
-            person = cells.setdefault(
-                key, {"image": np.full((N, 5), np.nan), "world": np.full((N, 5), np.nan)}
-            )
-            if not np.isnan(person["image"][j, 0]) or not np.isnan(person["world"][j, 0]):
                 raise ReadError(
-                    path, line, f"landmark {name!r} twice in frame {key[0]}, pose {key[1]}"
+                    path, reader.line_num, f"expected {len(header)} fields, found {len(row)}"
                 )
-            person["image"][j] = [vals.get(k, np.nan) for k in _FIELDS]
-            person["world"][j, :3] = [vals.get(f"world_{k}", np.nan) for k in "xyz"]
-            person["world"][j, 3:] = person["image"][j, 3:]
+            rows.append(",".join(row[i] for i in idx))
+            names.append(row[col["landmark"]].strip())
+            lines.append(reader.line_num)
     except csv.Error as exc:
-        raise ReadError(path, rows.line_num, f"invalid CSV ({exc})") from None
-    if not cells:
+        raise ReadError(path, reader.line_num, f"invalid CSV ({exc})") from None
+    if not rows:
         raise ReadError(path, None, "no landmark rows after the header")
-    n_frames = max(f for f, _ in cells) + 1
+    try:
+        what = ", ".join(numeric)
+        data = parse_rows(
+            path, rows, lines, sep=",", ncols=len(numeric), what=what, allow_empty=True
+        )
+    except ReadError as exc:  # name the column: the fields counted are the numeric ones
+        m = re.search(r"in field (\d+)", exc.reason)
+        if m is None:
+            raise
+        column = numeric[int(m.group(1)) - 1]
+        reason = exc.reason.replace(m.group(0), f"in column {column!r}")
+        raise ReadError(path, exc.line, reason) from None
+    v = {c: data[:, k] for k, c in enumerate(numeric)}
+    frame = v["frame"]
+    pose = v.get("pose", np.zeros(len(rows)))
+    for what, a in (("frame", frame), ("pose", pose)):
+        bad = ~((a >= 0) & (a < 2**31) & (a == np.round(a)))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ReadError(path, lines[k], f"expected a non-negative integer {what}")
+    lm = np.empty(len(rows), dtype=np.int64)
+    for k, name in enumerate(names):
+        j = _INDEX.get(name)
+        if j is None and name.isascii() and name.isdigit() and int(name) < N:
+            j = int(name)
+        if j is None:
+            raise ReadError(path, lines[k], f"unknown MediaPipe Pose landmark {name[:40]!r}")
+        lm[k] = j
+    frame, pose = frame.astype(np.int64), pose.astype(np.int64)
+    n_frames = int(frame.max()) + 1
     check_output_size(path, n_frames * 8 * N * 5 * 2, len(text), f"{n_frames} frames")
-    has_world = any(c in col for c in ("world_x", "world_y", "world_z"))
-    frames: list[list[Person]] = [[] for _ in range(n_frames)]
-    for (f, _pose), person in sorted(cells.items()):
-        if not has_world:
-            del person["world"]
-        frames[f].append(person)
+    key = (frame * 2**31 + pose) * N + lm
+    order = np.argsort(key, kind="stable")
+    dup = np.flatnonzero(np.diff(key[order]) == 0)
+    if dup.size:
+        k = int(order[dup[0] + 1])
+        raise ReadError(
+            path, lines[k], f"landmark {names[k]!r} twice in frame {frame[k]}, pose {pose[k]}"
+        )
     times = None
-    if stamps and len(stamps) == n_frames and not np.isnan(list(stamps.values())).any():
-        times = np.array([stamps[f] for f in range(n_frames)]) * 1e-3
+    if "timestamp_ms" in v:
+        ts = v["timestamp_ms"]
+        per_frame = np.full(n_frames, np.nan)
+        per_frame[frame] = ts
+        clash = ~np.isnan(ts) & (ts != per_frame[frame]) | np.isnan(ts) & ~np.isnan(
+            per_frame[frame]
+        )
+        if clash.any():
+            k = int(np.argmax(clash))
+            raise ReadError(path, lines[k], f"frame {frame[k]} has two timestamps")
+        if not np.isnan(per_frame).any():
+            times = per_frame * 1e-3
+    image = np.full((len(rows), 5), np.nan)
+    for f, c in enumerate(_FIELDS):
+        if c in v:
+            image[:, f] = v[c]
+    has_world = any(f"world_{c}" in v for c in "xyz")
+    world = np.full((len(rows), 5), np.nan)
+    for f, c in enumerate("xyz"):
+        if f"world_{c}" in v:
+            world[:, f] = v[f"world_{c}"]
+    world[:, 3:] = image[:, 3:]
+    frames: list[list[Person]] = [[] for _ in range(n_frames)]
+    group = frame * 2**31 + pose
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    for a, b in zip(starts, [*starts[1:], len(order)]):
+        members = order[a:b]
+        person = {"image": np.full((N, 5), np.nan)}
+        person["image"][lm[members]] = image[members]
+        if has_world:
+            person["world"] = np.full((N, 5), np.nan)
+            person["world"][lm[members]] = world[members]
+        frames[int(frame[members[0]])].append(person)
     return frames, times, {}
 
 
@@ -311,7 +343,9 @@ def sniff_mediapipe(path: Path, head: str) -> int:
         return 85 if '"pose_landmarks"' in head or '"pose_world_landmarks"' in head else 0
     first = head.split("\n", 1)[0].strip().lstrip("\ufeff")
     cols = {c.strip() for c in first.split(",")}
-    return 85 if {"frame", "landmark", "x", "y"} <= cols else 0
+    # above the generic CSV's score with a sidecar: the same results saved as pose.json
+    # beside pose.csv look like a CSV with its sidecar to that sniffer
+    return 95 if {"frame", "landmark", "x", "y"} <= cols else 0
 
 
 register_format(
