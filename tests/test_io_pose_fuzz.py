@@ -162,7 +162,8 @@ TRC = (
 
 
 _ROW = "{t},{ms},0,{j},0.5,0.5,0.1,0.9,0.8,0.1,0.2,0.3\n"
-MEDIAPIPE_CSV = "frame,timestamp_ms,pose,landmark,x,y,z,visibility,presence,world_x,world_y,world_z\n"
+MEDIAPIPE_CSV = ",".join(("frame", "timestamp_ms", "pose", "landmark", *"xyz", "visibility"))
+MEDIAPIPE_CSV += ",presence,world_x,world_y,world_z\n"
 MEDIAPIPE_CSV += "".join(_ROW.format(t=t, ms=33 * t, j=j) for t in range(2) for j in range(33))
 
 
