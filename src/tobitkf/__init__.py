@@ -75,6 +75,8 @@ _EXPORTS: dict[str, str] = {
     "register_format": "tobitkf.io",
     "formats": "tobitkf.io",
     "ReadError": "tobitkf.io",
+    "from_movement": "tobitkf.io.movement",
+    "to_movement": "tobitkf.io.movement",
 }
 
 __all__ = ["__version__", *_EXPORTS]

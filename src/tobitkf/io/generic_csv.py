@@ -155,6 +155,9 @@ def _parse_header(path, fields: list[str], line_no: int):
             triple = [t.lower() for t in cols[k : k + 3]]
             want = [(base + a).lower() for a in _AXES]
             n = 3 if triple == want else 2 if triple[:2] == want[:2] else 0
+            if n == 2 and len(triple) == 3 and triple[2].startswith(base.lower() + "_"):
+                if triple[2][len(base) :] not in _EXTRA:
+                    n = 0  # <joint>_x, <joint>_y, <joint>_<typo>: a third axis was meant
             if not base or not n or (xyz and n != len(xyz[0])):
                 expect = _AXES if not xyz else _AXES[: len(xyz[0])]
                 raise ReadError(
