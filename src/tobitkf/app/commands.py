@@ -415,7 +415,7 @@ def smooth(
 
 # --------------------------------------------------------------------------- info
 @app.command()
-@click.argument("path", type=click.Path(exists=True, dir_okay=False))
+@click.argument("path", type=click.Path(exists=True))
 @_input_format_option("--format", help="Input format.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(path, input_format, as_json):
