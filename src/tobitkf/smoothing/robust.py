@@ -61,7 +61,11 @@ standard deviation is ``speed_sd``, per body region) and measurement noise ``noi
 filter output is returned: across a rejected stretch the OU velocity decays with
 ``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
 held. Online, a joint not accepted yet is returned as measured (its filter starts at its
-first accepted sample; live, nobody knows whether it ever will be).
+first accepted sample; live, nobody knows whether it ever will be), and no output step
+of a joint is larger than the largest step of its input so far
+(:mod:`tobitkf.smoothing._step_guard`): after a long rejection the estimate catches up
+over a few frames instead of snapping back in one, and the shift is added to its
+standard deviation.
 
 Implementation
 --------------
@@ -307,6 +311,13 @@ def _offline(
     return est, rejected, var
 
 
+def step_guard() -> Any:
+    """The compiled causal step guard (imports numba on first use)."""
+    from tobitkf.smoothing import _step_guard
+
+    return _step_guard
+
+
 def _robust_bodies(
     ys: Array,
     missing: NDArray[np.bool_],
@@ -353,6 +364,8 @@ def _robust_bodies(
         var = np.empty((T, B, J))
         k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var)  # fmt: skip
+        guard = step_guard()
+        guard.guard_frames(ys, missing, est, var, *guard.new_state(B, J, ys.shape[-1]))
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -403,6 +416,7 @@ class RobustStepper:
         if self._state is None:
             self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]))
             self._scratch = k.new_work(B, J)
+            self._guard = step_guard().new_state(B, J, ys.shape[-1])
             self._time = 0.0
         else:
             self._time = self._time + dt  # the batch times: the cumulated steps
@@ -415,6 +429,10 @@ class RobustStepper:
             _inferred_scale(states, missing, self.factor)[None],
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
             *self._scratch, out, self.rejected[None], self.std[None],
+        )  # fmt: skip
+        step_guard().guard_frames(
+            np.ascontiguousarray(ys, dtype=float)[None],
+            np.ascontiguousarray(missing, dtype=bool)[None], out, self.std[None], *self._guard,
         )  # fmt: skip
         np.sqrt(self.std, out=self.std)
         return out[0]
