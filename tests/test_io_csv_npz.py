@@ -197,3 +197,13 @@ def test_csv_from_real_krajjat(tmp_path):
     (r,) = load(p)
     _assert_same(s, r)
     assert r.topology.name == "kinect_v2_21"
+
+
+def test_an_unrelated_json_beside_a_csv_does_not_make_it_ours(tmp_path):
+    from tobitkf.io.generic_csv import sniff_csv
+
+    head = "a_x,a_y,a_z\n0,0,0\n"
+    (tmp_path / "x.csv").write_text(head)
+    alone = sniff_csv(tmp_path / "x.csv", head)
+    (tmp_path / "x.json").write_text('{"landmarks": []}')  # e.g. another tool's output
+    assert sniff_csv(tmp_path / "x.csv", head) == alone

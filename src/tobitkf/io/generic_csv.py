@@ -690,7 +690,8 @@ def sniff_csv(path: Path, head: str) -> int:
     """Score: a header line with ``<joint>_x,<joint>_y(,<joint>_z)`` columns (more sure
     with the sidecar :func:`write_csv` writes beside it, or, in the old layout, after its
     ``# topology:`` line)."""
-    written = sidecar_path(path) != path and sidecar_path(path).is_file()
+    side = sidecar_path(path)
+    written = side != path and side.is_file() and _is_sidecar(side)  # not any JSON beside it
     for line in head.split("\n")[:50]:
         s = line.strip()
         written = written or s.startswith("# topology:")
