@@ -237,3 +237,16 @@ def test_binary_pose_readers_fuzz(tmp_path, body, hdf5, fmt):
         tk.load(path, format=fmt)
     except ReadError as exc:
         assert str(path) in str(exc)
+
+
+def test_missing_optional_package_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py now raises ImportError
+    path = tmp_path / "x.analysis.h5"
+    path.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
+    with pytest.raises(ImportError, match=r"pip install 'tobitkf\[pose\]'"):
+        tk.load(path, format="sleap_analysis")
+    monkeypatch.setitem(sys.modules, "sleap_io", None)
+    with pytest.raises(ImportError, match=r"pip install 'tobitkf\[slp\]'"):
+        tk.load(path, format="slp")
