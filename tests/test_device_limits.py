@@ -77,3 +77,14 @@ def test_kimore_feet_stay_within_the_models_noise_of_their_measurements():
     # (KIMORE's feet are INFERRED); before the rule the feet drifted 1.05 m (5 sd) away
     sd = np.sqrt(0.01 * DEFAULT_INFERRED_NOISE_FACTOR)
     assert np.nanmax(d) < 2 * sd
+
+
+@pytest.mark.parametrize("method", ["tkf", "tkfc"])
+def test_the_kinect_limits_are_refused_for_pixels_and_2d(method):
+    rng = np.random.default_rng(1)
+    px = rng.uniform(0, 640, size=(30, 4, 2))
+    with pytest.raises(ValueError, match="give lower= and upper="):
+        tk.smooth(px, fps=30.0, method=method, units="px")
+    # with limits in the recording's own units it runs (an image 640 x 480 px)
+    out = tk.smooth(px, fps=30.0, method=method, units="px", lower=(0, 0), upper=(640, 480))
+    assert out.shape == px.shape

@@ -145,6 +145,36 @@ def warn_contradicted_limits(
     )
 
 
+def _check_device_limits(name: str, inp: SmoothInput, params: dict[str, Any]) -> None:
+    """The default limits are the Kinect V2's, in metres, camera space, 3-D: refuse them
+    for anything else (a 2-D or pixel recording would be clipped everywhere)."""
+    default = (
+        tuple(np.ravel(params["lower"])) == paper.KINECT_DEVICE_LOWER
+        and tuple(np.ravel(params["upper"])) == paper.KINECT_DEVICE_UPPER
+    )
+    if default and (inp.n_dims != 3 or inp.units != "m"):
+        what = f"{inp.n_dims}-D" if inp.n_dims != 3 else f"in {inp.units or 'unknown units'}"
+        raise ValueError(
+            f"{name}: the default censoring limits are the Kinect V2's camera-space limits "
+            f"in metres (lower={paper.KINECT_DEVICE_LOWER}, upper={paper.KINECT_DEVICE_UPPER})"
+            f"; this recording is {what}: give lower= and upper= in its own units"
+        )
+
+
+def _limits_3d(inp: SmoothInput, params: dict[str, Any]) -> dict[str, tuple[float, ...]]:
+    """Limits for the three axes the method sees: 2 limits (a 2-D recording) get no
+    censoring on the padded third axis; 2 limits for a 3-D recording are an error."""
+    out = {}
+    for key, pad in (("lower", -np.inf), ("upper", np.inf)):
+        v = tuple(np.ravel(params[key]))
+        if len(v) == 2:
+            if inp.n_dims != 2:
+                raise ValueError(f"{key}: 2 numbers given for a {inp.n_dims}-D recording")
+            v = (*v, pad)
+        out[key] = v
+    return out
+
+
 def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) -> SmoothOutput:
     """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3)."""
     ys, missing = inp.ys, inp.missing
@@ -297,6 +327,9 @@ def _register(
     variant: str | None = None,
 ) -> None:
     def run(inp: SmoothInput, **params: Any) -> SmoothOutput:
+        if kind == "tkf":
+            _check_device_limits(name, inp, params)
+            params = {**params, **_limits_3d(inp, params)}
         return run_kalman(inp, kind, variant, **params)
 
     def live(topology: Topology, up_axis: int, inferred_noise_factor: float, **params: Any):

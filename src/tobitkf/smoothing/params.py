@@ -102,15 +102,20 @@ def positive_vec(name: str, value: Any) -> Any:
     return float(arr) if arr.ndim == 0 else tuple(float(v) for v in arr)
 
 
-def limit_vec(name: str, value: Any) -> tuple[float, float, float]:
-    """3 numbers (one may be given for all), ±inf allowed, NaN not."""
+def limit_vec(name: str, value: Any) -> tuple[float, ...]:
+    """3 numbers (one may be given for all), or 2 for a 2-D recording; ±inf allowed, NaN
+    not."""
+    arr = None
     try:
-        arr = np.broadcast_to(np.asarray(value, dtype=float), (3,))
+        a = np.asarray(value, dtype=float)
+        arr = a if a.shape == (2,) else np.broadcast_to(a, (3,))
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be 3 numbers (±inf allowed), got {value!r}") from None
-    if np.any(np.isnan(arr)):
-        raise ValueError(f"{name} must be 3 numbers (±inf allowed), got {value!r}")
-    return tuple(float(v) for v in arr)  # type: ignore[return-value]
+        pass
+    if arr is None or np.any(np.isnan(arr)):
+        raise ValueError(
+            f"{name} must be 3 numbers (2 for a 2-D recording; ±inf allowed), got {value!r}"
+        )
+    return tuple(float(v) for v in arr)
 
 
 def at_least_int(lo: int) -> Validator:
