@@ -251,7 +251,7 @@ def test_recovery_markdown_matches_fits_on_data_simulated_here():
     row = next(r for r in _rows(md, "estimate")[1:] if r[0].startswith("q, plain Gaussian"))
     assert row[1] == "0.1"
     assert row[2] == f"{np.mean(qs):.4f} ± {np.std(qs, ddof=1):.4f}"
-    assert row[3] == f"{100 * (np.mean(qs) / 0.1 - 1):+.0f} %"
+    assert row[3] == f"{round(100 * (np.mean(qs) / 0.1 - 1)):+d} %"
     assert row[4] == ""  # no standard error computed for this form
 
 

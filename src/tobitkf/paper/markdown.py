@@ -207,7 +207,7 @@ def recovery_markdown(study: RecoveryStudy) -> str:
                 ESTIMATES[key][0],
                 f"{r['truth']:g}",
                 f"{r['mean']:.4f}{sd}",
-                f"{100 * r['bias']:+.0f} %",
+                f"{round(100 * r['bias']):+d} %",  # no "-0 %"
                 f"{r['mean_stderr']:.4f}" if math.isfinite(r["mean_stderr"]) else "",
             ]
         )
