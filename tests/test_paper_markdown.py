@@ -221,6 +221,10 @@ def test_recovery_markdown_without_censoring_corrected_is_gaussian():
     corrected = rows["q, corrected (TKF^c) likelihood, r known"]
     gaussian = rows["q, plain Gaussian likelihood (censoring ignored), r known"]
     assert corrected[2] == gaussian[2]
+    d = json.loads(json.dumps(study.to_dict()))
+    assert d["seeds"] == [7, 8]
+    np.testing.assert_allclose(d["estimates"]["q_corrected"], d["estimates"]["q_gaussian"], 1e-8)
+    assert "q, corrected (TKF^c) likelihood, r known" in study.format_text()
 
 
 def test_recovery_markdown_matches_fits_on_data_simulated_here():

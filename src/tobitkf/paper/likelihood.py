@@ -173,18 +173,20 @@ class RecoveryStudy:
 
     def format_text(self) -> str:
         c = self.config
+        n = len(self.seeds)
         lines = [
             f"Maximum-likelihood recovery: AR(1) a = {c.a}, q = {c.q}, r = {c.r}, limits "
             f"({c.lower}, {c.upper}), {c.sequences} sequences x {c.steps} steps",
-            f"  {len(self.seeds)} data sets (seeds {self.seeds[0]}..{self.seeds[-1]}), "
+            f"  {n} data set{'s' * (n > 1)} (seeds {self.seeds[0]}..{self.seeds[-1]}), "
             f"clipped {100 * self.clipped.mean():.1f} %, time {self.seconds:.1f} s",
             "",
         ]
         for key, s in self.summary().items():
+            sd = f" ± {s['sd']:.4f}" if np.isfinite(s["sd"]) else ""
+            se = f", mean stderr {s['mean_stderr']:.4f}" if np.isfinite(s["mean_stderr"]) else ""
             lines.append(
-                f"  {ESTIMATES[key][0]:<58} {s['mean']:.4f} ± {s['sd']:.4f} "
-                f"(truth {s['truth']}, bias {100 * s['bias']:+.0f} %, "
-                f"mean stderr {s['mean_stderr']:.4f})"
+                f"  {ESTIMATES[key][0]:<58} {s['mean']:.4f}{sd} "
+                f"(truth {s['truth']:g}, bias {round(100 * s['bias']):+d} %{se})"
             )
         return "\n".join(lines)
 
