@@ -274,12 +274,13 @@ def test_noise_fit_markdown_fixed_limits_never_reached_equal_the_gaussian_fit():
     """Identity: TKF^c with limits never reached is the KF, so both rows give one Q."""
     from tobitkf.smoothing.fit import fit_skeleton_noise
 
-    rng = np.random.default_rng(8)
-    obs = np.cumsum(0.01 * rng.standard_normal((80, 3, 3)), axis=0)
-    kw = dict(r=1e-4, compute_stderr=False)
-    a = fit_skeleton_noise(obs, lower=[-50] * 3, upper=[50] * 3, **kw)
-    b = fit_skeleton_noise(obs, form="gaussian", **kw)
-    rows = _rows(noise_fit_markdown([("censored", a), ("kf", b)]), "recording")[1:]
+    obs = np.cumsum(0.01 * np.random.default_rng(8).standard_normal((80, 3, 3)), axis=0)
+    wide = {"lower": [-50] * 3, "upper": [50] * 3}
+    fits = [
+        (label, fit_skeleton_noise(obs, r=1e-4, compute_stderr=False, **kw))
+        for label, kw in (("censored", wide), ("kf", {"form": "gaussian"}))
+    ]
+    rows = _rows(noise_fit_markdown(fits), "recording")[1:]
     assert rows[0][1:3] == ["corrected", rows[1][2]] and rows[1][1] == "gaussian"
     assert rows[0][4] == "1.00e-04 (fixed)"
     assert rows[0][3] == "–"  # no standard errors asked for
