@@ -122,7 +122,7 @@ def oscillator_markdown(res: OscillatorResult, transient: int = 100) -> str:
     and NCI averaged after the first ``transient`` steps."""
     c = res.config
     seeds = res.seeds
-    many = len(seeds) > 1
+    many = len(seeds) > 1  # [column] * many: the spread columns only with several seeds
     s0 = f"seed {seeds[0]}"
     over = f"over seeds {seeds[0]}–{seeds[-1]}"
     start = "drawn from N(x0, P0) per run" if c.random_x0 else "fixed at x0 = (5, 0)"
