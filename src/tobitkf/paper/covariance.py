@@ -28,13 +28,18 @@ from typing import Any
 import numpy as np
 
 from tobitkf.paper.oscillator import (
-    PAPER_TABLE1_RMSE,
-    PAPER_TABLE2_NCI,
     OscillatorConfig,
     OscillatorResult,
     noncredibility_index,
     oscillator_experiment,
     simulate_oscillator,
+)
+from tobitkf.paper.published import (
+    PAPER_EQ23_MONTE_CARLO,
+    PAPER_EQ24_EXACT,
+    PAPER_EQ25_STANDARD_TKF,
+    PAPER_TABLE1_RMSE,
+    PAPER_TABLE2_NCI,
 )
 
 __all__ = [
@@ -67,20 +72,6 @@ EXAMPLE_BRACKET = np.array([[4.0, 3.0, 4.0], [3.0, 4.0, 4.0], [4.0, 4.0, 4.0]])
 EXAMPLE_LOWER = np.array([-1.0, -3.0, 1.0])
 #: upper censoring limits b
 EXAMPLE_UPPER = np.array([1.0, 7.0, 4.0])
-
-# --- the paper's printed matrices (4 decimals), transcribed from the 2020 paper -----------
-#: eq. 23, R_s: Monte Carlo (mean of 100 sample covariances, 10^5 draws each)
-PAPER_EQ23_MONTE_CARLO = np.array(
-    [[0.4648, 0.6962, 0.5083], [0.6962, 4.7754, 1.9195], [0.5083, 1.9195, 1.4384]]
-)
-#: eq. 24, R_{k,2}: exact censored covariance (eq. 21, the proposed TKF^c)
-PAPER_EQ24_EXACT = np.array(
-    [[0.4651, 0.6962, 0.5085], [0.6962, 4.7747, 1.9189], [0.5085, 1.9189, 1.4379]]
-)
-#: eq. 25, R*_{k,2}: the standard TKF's matrix (eq. 22)
-PAPER_EQ25_STANDARD_TKF = np.array(
-    [[0.2724, 0.4719, 0.5151], [0.4719, 5.0000, 3.2744], [0.5151, 3.2744, 3.2002]]
-)
 
 
 def standard_tkf_covariance(
