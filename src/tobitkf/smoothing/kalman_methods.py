@@ -51,9 +51,13 @@ from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import paper
 from tobitkf.smoothing.params import limit_vec, optional, positive_float, positive_vec
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
-from tobitkf.smoothing.timebase import elapsed_since_valid, inferred_r_scale
+from tobitkf.smoothing.timebase import (
+    elapsed_since_valid,
+    inferred_r_scale,
+    inferred_sample_scale,
+)
 
-__all__ = ["atkf_c", "run_kalman"]
+__all__ = ["atkf_c", "run_kalman", "run_kalman_core"]
 
 Array = NDArray[np.float64]
 
@@ -87,8 +91,58 @@ def _check_limits(params: dict[str, Any]) -> None:
         raise ValueError(f"lower {params['lower']} must be below upper {params['upper']}")
 
 
+_KERNEL_KIND = {"kf": 0, "standard": 1, "corrected": 2, "atkf": 3}
+
+
+def _vec3(v: Any) -> Array:
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (3,)))
+
+
 def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) -> SmoothOutput:
-    """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3)."""
+    """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3).
+
+    Runs the compiled per-axis kernel (:mod:`tobitkf.smoothing._kalman_kernels`), the same
+    numbers as :func:`run_kalman_core` (the numpy core) to rounding, without its per-frame
+    numpy calls and with no array kept beyond the outputs (and, offline, the variances).
+    """
+    from tobitkf.smoothing import _kalman_kernels as k  # numba: only when a method runs
+
+    ys = inp.ys
+    T = ys.shape[0]
+    bshape = ys.shape[1:-1]
+    flat = np.ascontiguousarray(ys).reshape(T, -1, 3)
+    q = _vec3(params["q"])
+    if inp.is_reference:
+        qs = np.ascontiguousarray(np.broadcast_to(q, (T, 3)))
+    else:
+        qs = q[None] * (inp.steps / paper.REFERENCE_DT)[:, None]
+    scale = inferred_sample_scale(inp.tracking_state, ~inp.missing, inp.inferred_noise_factor)
+    rs = np.empty((0, 0)) if scale is None else scale.reshape(T, -1)
+    used: dict[str, Any] = {}
+    c, lower, upper = np.full(3, np.inf), np.full(3, -np.inf), np.full(3, np.inf)
+    if kind == "atkf":
+        c = atkf_c(params, inp.up_axis)
+        used["c"] = tuple(float(v) for v in c)
+    elif kind == "tkf":
+        lower, upper = _vec3(params["lower"]), _vec3(params["upper"])
+    est, std, clipped = k.filter_run(
+        _KERNEL_KIND[variant if kind == "tkf" else kind],  # type: ignore[index]
+        flat, qs, _vec3(params["r"]), rs, lower, upper, c,
+        np.ascontiguousarray(inp.steps, dtype=float), np.cumsum(inp.steps, dtype=float),
+        bool(inp.is_reference), paper.REFERENCE_DT, bool(inp.offline),
+    )  # fmt: skip
+    est = est.reshape(ys.shape)
+    std = std.reshape((T, *bshape))
+    clipped = clipped.reshape((T, *bshape))
+    return SmoothOutput(est, clipped=clipped, params=used, std=std)
+
+
+def run_kalman_core(
+    inp: SmoothInput, kind: str, variant: str | None, **params: Any
+) -> SmoothOutput:
+    """:func:`run_kalman` through the numpy core (``kalman_filter``, ``tobit_filter``,
+    ``adaptive_tobit_filter``, ``rts_smooth``): the reference the compiled kernel is
+    tested against (tests/test_kalman_kernels.py)."""
     ys, missing = inp.ys, inp.missing
     T = ys.shape[0]
     bshape = ys.shape[1:-1]
