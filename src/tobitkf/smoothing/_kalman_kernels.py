@@ -38,6 +38,7 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _BIG = 1e150  # as core.tobit._BIG
 _EPS = 1e-9  # as core.tobit.EPS_CENSORED
 _FAR = 3.0  # as core.censored._FAR
+_UNCENSORED = 12.0  # both limits further (in sd): uncensored to 1.8e-33
 _CF_TERMS = 60  # as core.censored._CF_TERMS
 _GL12_X, _GL12_W = np.polynomial.legendre.leggauss(12)
 # core.tobit._SERIES: 2 ∫_0^β z² φ(z) dz = 2 φ(0) Σ_k (-1/2)^k / k! β^(2k+3) / (2k+3)
@@ -100,10 +101,15 @@ def _mills_tail(x: float) -> tuple:
 def truncated(alpha: float, beta: float) -> tuple:
     """core.censored._truncated_core (logs=False) for one (α, β), α <= β:
     (P_a, P_un, P_b, μ_T, v_T, μ_T - α, β - μ_T)."""
-    p_lower = ndtr(alpha)
-    p_upper = ndtr(-beta)
-    if alpha == -math.inf and beta == math.inf:
-        return p_lower, 1.0, p_upper, 0.0, 1.0, math.inf, math.inf
+    # A limit beyond 12 sd contributes below 1.8e-33 (Φ(-12)) to every quantity: its
+    # normal functions are skipped (the full evaluation gives the same numbers to 1e-30,
+    # and exactly P_un = 1, μ_T = 0, v_T = 1 when both limits are that far).
+    far_lo = alpha < -_UNCENSORED
+    far_up = beta > _UNCENSORED
+    if far_lo and far_up:
+        return 0.0, 1.0, 0.0, 0.0, 1.0, -alpha, beta
+    p_lower = 0.0 if far_lo else ndtr(alpha)
+    p_upper = 0.0 if far_up else ndtr(-beta)
     flip = (alpha + beta) > 0
     if flip:
         a, b, pa, qb = -beta, -alpha, p_upper, p_lower
@@ -164,8 +170,8 @@ def truncated(alpha: float, beta: float) -> tuple:
         else:  # general: no cancellation, no underflow
             p_un = ndtr(b) - pa if b <= 0 else (1.0 - pa) - qb
             lp = math.log(p_un)
-            ra = math.exp(_log_phi(a) - lp)
-            rb = math.exp(_log_phi(b) - lp)
+            ra = 0.0 if a < -_UNCENSORED else math.exp(_log_phi(a) - lp)
+            rb = 0.0 if b > _UNCENSORED else math.exp(_log_phi(b) - lp)
             mu = ra - rb
             ta = a * ra if math.isfinite(a) else 0.0
             tb = b * rb if math.isfinite(b) else 0.0
@@ -245,6 +251,9 @@ def filter_run(
     for n in range(N):
         for a in range(3):
             v[n, a] = r[a]
+    # ATKF: β = c/√S depends on the variances only, which converge: a one-entry memo per
+    # component of (β, P_a, P_un, Var f) skips the normal functions when β repeats
+    memo = np.full((N, 3, 4), np.nan) if kind == ATKF else np.empty((0, 3, 4))
     first = np.full(N, -1, dtype=np.int64)
     last = np.full(N, -1, dtype=np.int64)  # last valid frame (ATKF gaps)
     scale_c = not reference
@@ -291,10 +300,15 @@ def filter_run(
                     ca = c[a] * cfac if scale_c else c[a]
                     S = vp + rr
                     beta = min(ca / math.sqrt(S), _BIG)
-                    pa = math.exp(log_ndtr(-beta))
-                    pu = math.erf(beta * _SQRT_HALF)
-                    phi = math.exp(-0.5 * beta * beta) * _INV_SQRT_2PI
-                    vf = _pu_vt_symmetric(beta, pu, phi) + 2.0 * pa * beta * beta
+                    mm = memo[n, a]
+                    if beta == mm[0]:
+                        pa, pu, vf = mm[1], mm[2], mm[3]
+                    else:
+                        pa = math.exp(log_ndtr(-beta))
+                        pu = math.erf(beta * _SQRT_HALF)
+                        phi = math.exp(-0.5 * beta * beta) * _INV_SQRT_2PI
+                        vf = _pu_vt_symmetric(beta, pu, phi) + 2.0 * pa * beta * beta
+                        mm[0], mm[1], mm[2], mm[3] = beta, pa, pu, vf
                     pxy = vp * pu
                     K = pxy / (S * (vf + (2.0 * _EPS) * pa))
                     d = y - xp
