@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import data_file
 from scipy import special
 
 import tobitkf as tk
+from conftest import data_file
 from tobitkf.core.censored import clipped_normal_variance_diag, truncated_standard_normal
 from tobitkf.smoothing import _kalman_kernels as k
 from tobitkf.smoothing import paper

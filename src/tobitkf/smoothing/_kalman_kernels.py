@@ -2,20 +2,24 @@
 
 ``kf``, ``tkf``, ``tkfc`` and ``atkf`` as :mod:`tobitkf.smoothing.kalman_methods` uses
 them: each joint a 3-D random walk with A = H = I and diagonal Q, R, so every axis of
-every joint is an independent scalar filter. :func:`filter_run` runs all of them in one
-pass over time, joint by joint inside each frame, with the same arithmetic as the numpy
-core (:mod:`tobitkf.core.engine`, :mod:`tobitkf.core.tobit`,
-:func:`tobitkf.core.censored.clipped_normal_variance_diag`), in the same order of
-operations, so the outputs equal the core's to rounding (tests/test_kalman_kernels.py
-compares the two on random and real data, censored samples included). The core stays
-the reference implementation (general models, likelihoods, streaming); this is the
-fast path of the skeleton methods only, and it keeps no more than the outputs: no
-predicted covariances, probabilities or likelihoods.
+every joint is an independent scalar filter. :func:`gaussian_run` (kf, atkf) and
+:func:`tobit_run` (tkf, tkfc) run them in one pass over time, joint by joint inside each
+frame, with the same arithmetic as the numpy core (:mod:`tobitkf.core.engine`,
+:mod:`tobitkf.core.tobit`, :func:`tobitkf.core.censored.clipped_normal_variance_diag`), in
+the same order of operations, so the outputs equal the core's to rounding
+(tests/test_kalman_kernels.py compares the two on random and real data, censored samples
+included: 1e-12 m, up to ~1e-11 m for joints held several sd beyond a limit, where the
+gain is a ratio of tail quantities). Where a limit lies more than 12 sd away its normal
+functions are skipped (its terms are below 2e-33). The core stays the reference
+implementation (general models, likelihoods, streaming); this is the fast path of the
+skeleton methods only, and it keeps no more than the outputs: no predicted covariances,
+probabilities or likelihoods.
 
 The univariate normal functions are ports of scipy's: ``ndtr`` (cephes: erf near 0,
 erfc beyond), ``log_ndtr`` (log1p(-erfc/2) above -1, log(erfc/2) below, the asymptotic
 series where erfc underflows), with ``math.erf`` / ``math.erfc`` (C99 libm) for cephes'
-erf / erfc; tests check them against scipy to 1e-14 relative.
+erf / erfc; tests check them against scipy to 1e-13 relative (libm's and cephes' erfc
+differ by a few ulp in the far tails).
 
 Imported lazily (numba is imported only when a Kalman-type method runs).
 ``NUMBA_DISABLE_JIT=1`` runs the same code as plain Python (slow; for debugging).
@@ -28,9 +32,7 @@ import math
 import numpy as np
 from numba import njit
 
-_jit = njit(cache=True, nogil=True)
-
-KF, TKF, TKFC, ATKF = 0, 1, 2, 3
+_jit = njit(cache=True, nogil=True, error_model="numpy")
 
 _SQRT_HALF = math.sqrt(0.5)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
@@ -124,17 +126,18 @@ def truncated(alpha: float, beta: float) -> tuple:
         if finite and h * (1.0 + abs(c)) <= 1.0:  # narrow: Gauss–Legendre, tilted density
             s0 = 0.0
             s1 = 0.0
-            e = np.empty(12)
             for i in range(12):
                 x = _GL12_X[i]
-                e[i] = math.exp(-(c * h) * x - 0.5 * (h * h) * x * x)
-                s0 += e[i] * _GL12_W[i]
-                s1 += e[i] * x * _GL12_W[i]
+                e = math.exp(-(c * h) * x - 0.5 * (h * h) * x * x)
+                s0 += e * _GL12_W[i]
+                s1 += e * x * _GL12_W[i]
             m1 = s1 / s0
             s2 = 0.0
             for i in range(12):
-                dx = _GL12_X[i] - m1
-                s2 += e[i] * (dx * dx) * _GL12_W[i]
+                x = _GL12_X[i]
+                e = math.exp(-(c * h) * x - 0.5 * (h * h) * x * x)
+                dx = x - m1
+                s2 += e * (dx * dx) * _GL12_W[i]
             v1 = s2 / s0
             lp = math.log(h) + _log_phi(c) + math.log(s0)
             p_un = math.exp(lp)
@@ -217,157 +220,241 @@ def _pu_vt_symmetric(beta: float, pu: float, phi: float) -> float:
     return pu - 2.0 * beta * phi
 
 
-# ------------------------------------------------------------------ the filter
+# ------------------------------------------------------------------ the filters
+# Two kernels, so that a method compiles only its own update (numba compiles every
+# function a kernel calls): ``gaussian_run`` (kf, atkf) and ``tobit_run`` (tkf, tkfc),
+# sharing the per-joint bookkeeping below; ``rts_run`` only when offline.
+#
+# Arguments common to both: ys (T, N, 3) NaN = missing; qs (T, 3) process-noise variance
+# of each step; r (3,) measurement-noise variance; rs (T, N) multiplier of r (INFERRED
+# samples) or (0, 0) for none; outputs est (T, N, 3), std (T, N) (unless offline: the
+# filtered variances go to var (T, N, 3) and rts_run writes std), clipped (T, N) bool;
+# work state (N, 3, 6) (x, v, then the ATKF memo) and index (N, 2) int64 (first and last
+# valid frame). The caller allocates everything: no allocation code to compile here.
+# A joint's filter starts at its first measurement with variance r, predicted from frame 0
+# on (x0 = first measurement, P0 = R, as in kalman_methods.run_kalman_core).
+
+
 @_jit
-def filter_run(
-    kind: int,
-    ys: np.ndarray,  # (T, N, 3) NaN = missing
-    qs: np.ndarray,  # (T, 3) process-noise variance of each step
-    r: np.ndarray,  # (3,) measurement-noise variance
-    rs: np.ndarray,  # (T, N) multiplier of r (INFERRED samples), or (0, 0): none
-    lower: np.ndarray,  # (3,) fixed limits (tkf, tkfc)
-    upper: np.ndarray,
+def _init(state: np.ndarray, index: np.ndarray, r: np.ndarray) -> None:
+    for n in range(state.shape[0]):
+        index[n, 0] = -1
+        index[n, 1] = -1
+        for a in range(3):
+            state[n, a, 0] = 0.0
+            state[n, a, 1] = r[a]
+            state[n, a, 2] = math.nan
+
+
+@_jit
+def _begin(ys: np.ndarray, t: int, n: int, state: np.ndarray, index: np.ndarray) -> bool:
+    """Is joint n measured at frame t; its first measurement starts its filter."""
+    valid = not math.isnan(ys[t, n, 0])
+    if valid and index[n, 0] < 0:
+        index[n, 0] = t
+        for a in range(3):
+            state[n, a, 0] = ys[t, n, a]
+    return valid
+
+
+@_jit
+def _store(t: int, n: int, state: np.ndarray, est: np.ndarray, std: np.ndarray,
+           var: np.ndarray, offline: bool) -> None:  # fmt: skip
+    st = state[n]
+    for a in range(3):
+        est[t, n, a] = st[a, 0]
+    if offline:
+        for a in range(3):
+            var[t, n, a] = st[a, 1]
+    else:  # the root-mean-square of the axes' posterior sd (np.mean, then sqrt)
+        std[t, n] = math.sqrt(((st[0, 1] + st[1, 1]) + st[2, 1]) / 3)
+
+
+@_jit
+def blank_before_first(est: np.ndarray, std: np.ndarray, index: np.ndarray) -> None:
+    """NaN before each joint's first measurement (everywhere for a joint never seen)."""
+    T = est.shape[0]
+    for n in range(est.shape[1]):
+        stop = T if index[n, 0] < 0 else index[n, 0]
+        for t in range(stop):
+            std[t, n] = math.nan
+            for a in range(3):
+                est[t, n, a] = math.nan
+
+
+@_jit
+def _any_gap(ys: np.ndarray) -> bool:
+    """Some joint misses a frame after its first measurement (before its last frame)."""
+    T, N, _ = ys.shape
+    for n in range(N):
+        prev = -1  # last valid frame before t
+        for t in range(T):
+            if prev >= 0 and prev != t - 1:
+                return True
+            if not math.isnan(ys[t, n, 0]):
+                prev = t
+    return False
+
+
+@_jit
+def gaussian_run(
+    adaptive: bool,  # atkf (else kf)
+    ys: np.ndarray,
+    qs: np.ndarray,
+    r: np.ndarray,
+    rs: np.ndarray,
     c: np.ndarray,  # (3,) ATKF half-widths per 1/30 s
     steps: np.ndarray,  # (T,) seconds before each frame
     times: np.ndarray,  # (T,) cumulated steps
     reference: bool,  # every step is 1/30 s: c unscaled unless some joint has a gap
     ref_dt: float,
-    offline: bool,  # RTS pass after the filter
-) -> tuple:
-    """Filter (and smooth) every joint's axes: (means (T, N, 3), std (T, N), clipped (T, N)).
-
-    Frames before a joint's first measurement are NaN in both outputs; the joint's
-    filter starts at its first measurement with variance r, predicted from frame 0 on
-    (x0 = first measurement, P0 = R, as in kalman_methods.run_kalman).
-    """
+    offline: bool,
+    est: np.ndarray,
+    std: np.ndarray,
+    clipped: np.ndarray,
+    var: np.ndarray,
+    state: np.ndarray,
+    index: np.ndarray,
+) -> None:
+    """kf, or atkf: limits x̂_{t-1} ± c (scaled by the time since the joint's last
+    measurement, c per 1/30 s), a plain KF update at frame 0 (Algorithm 2, 2020)."""
     T, N, _ = ys.shape
     has_rs = rs.shape[0] > 0
-    est = np.empty((T, N, 3))
-    std = np.empty((T, N))
-    clipped = np.zeros((T, N), dtype=np.bool_)
-    var = np.empty((T, N, 3)) if offline else np.empty((0, N, 3))
-    x = np.zeros((N, 3))
-    v = np.empty((N, 3))
-    for n in range(N):
-        for a in range(3):
-            v[n, a] = r[a]
-    # ATKF: β = c/√S depends on the variances only, which converge: a one-entry memo per
-    # component of (β, P_a, P_un, Var f) skips the normal functions when β repeats
-    memo = np.full((N, 3, 4), np.nan) if kind == ATKF else np.empty((0, 3, 4))
-    first = np.full(N, -1, dtype=np.int64)
-    last = np.full(N, -1, dtype=np.int64)  # last valid frame (ATKF gaps)
-    scale_c = not reference
-    if kind == ATKF and reference:  # scaled for every joint as soon as one has a gap
-        for n in range(N):
-            prev = -1  # last valid frame before t
-            for t in range(T):
-                if prev >= 0 and prev != t - 1:
-                    scale_c = True
-                    break
-                if not math.isnan(ys[t, n, 0]):
-                    prev = t
-            if scale_c:
-                break
+    _init(state, index, r)
+    # c is scaled on every joint as soon as one has a gap (as run_kalman_core does)
+    scale_c = adaptive and (not reference or _any_gap(ys))
     for t in range(T):
         q = qs[t]
+        kalman = not adaptive or t == 0
         for n in range(N):
-            valid = not math.isnan(ys[t, n, 0])
-            if valid and first[n] < 0:
-                first[n] = t
-                for a in range(3):
-                    x[n, a] = ys[t, n, a]
+            last = index[n, 1]
+            valid = _begin(ys, t, n, state, index)
+            st = state[n]
             cfac = 1.0
-            if kind == ATKF and scale_c:
-                if last[n] < 0 or last[n] == t - 1:
+            if scale_c:
+                if last < 0 or last == t - 1:
                     cfac = steps[t] / ref_dt
                 else:
-                    cfac = (times[t] - times[last[n]]) / ref_dt
+                    cfac = (times[t] - times[last]) / ref_dt
             rsc = rs[t, n] if has_rs else 1.0
             any_clip = False
             for a in range(3):
-                xp = x[n, a]
-                vp = v[n, a] + q[a]
+                xp = st[a, 0]
+                vp = st[a, 1] + q[a]
                 y = ys[t, n, a]
                 if math.isnan(y):  # unobserved: zero gain, the prediction
-                    v[n, a] = vp
+                    st[a, 1] = vp
                     continue
                 rr = r[a] * rsc if has_rs else r[a]
-                if kind == KF or (kind == ATKF and t == 0):
+                if kalman:
                     K = vp / (vp + rr)
                     e = y - xp
                     pxy = vp
-                elif kind == ATKF:
+                else:  # core.tobit._atkf_update_symmetric
                     ca = c[a] * cfac if scale_c else c[a]
                     S = vp + rr
                     beta = min(ca / math.sqrt(S), _BIG)
-                    mm = memo[n, a]
-                    if beta == mm[0]:
-                        pa, pu, vf = mm[1], mm[2], mm[3]
+                    # β depends on the variances only, which converge: a one-entry memo
+                    # per component of (β, P_a, P_un, Var f) skips the normal functions
+                    if beta == st[a, 2]:
+                        pa, pu, vf = st[a, 3], st[a, 4], st[a, 5]
                     else:
                         pa = math.exp(log_ndtr(-beta))
                         pu = math.erf(beta * _SQRT_HALF)
                         phi = math.exp(-0.5 * beta * beta) * _INV_SQRT_2PI
                         vf = _pu_vt_symmetric(beta, pu, phi) + 2.0 * pa * beta * beta
-                        mm[0], mm[1], mm[2], mm[3] = beta, pa, pu, vf
+                        st[a, 2], st[a, 3], st[a, 4], st[a, 5] = beta, pa, pu, vf
                     pxy = vp * pu
                     K = pxy / (S * (vf + (2.0 * _EPS) * pa))
                     d = y - xp
                     e = min(max(d, -ca), ca)
                     if abs(d) >= ca:
                         any_clip = True
-                elif kind == TKF:
-                    lo, up = lower[a], upper[a]
-                    yc = min(max(y, lo), up)
-                    sr = math.sqrt(rr)
-                    p_lo, pu, p_up, mu_t, v_t, _, _ = truncated((lo - xp) / sr, (up - xp) / sr)
-                    ey = pu * (xp + sr * mu_t) + p_lo * min(max(lo, -_BIG), _BIG)
-                    ey = ey + p_up * min(max(up, -_BIG), _BIG)
-                    e = yc - ey
-                    floor = rr * (v_t + _EPS * (p_lo + p_up))
-                    pxy = vp * pu
-                    K = pxy / (pu * pu * vp + floor)
-                    if yc <= lo or yc >= up:
-                        any_clip = True
-                else:  # TKFC
-                    lo, up = lower[a], upper[a]
-                    yc = min(max(y, lo), up)
+                st[a, 0] = xp + K * e
+                st[a, 1] = vp - K * pxy
+            if valid:
+                index[n, 1] = t
+                clipped[t, n] = any_clip
+            _store(t, n, state, est, std, var, offline)
+
+
+@_jit
+def tobit_run(
+    corrected: bool,  # tkfc (else the standard tkf)
+    ys: np.ndarray,
+    qs: np.ndarray,
+    r: np.ndarray,
+    rs: np.ndarray,
+    lower: np.ndarray,  # (3,) limits
+    upper: np.ndarray,
+    offline: bool,
+    est: np.ndarray,
+    std: np.ndarray,
+    clipped: np.ndarray,
+    var: np.ndarray,
+    state: np.ndarray,
+    index: np.ndarray,
+) -> None:
+    """tkf (core.tobit.tkf_update) or tkfc (core.tobit.tkfc_update), fixed limits."""
+    T, N, _ = ys.shape
+    has_rs = rs.shape[0] > 0
+    _init(state, index, r)
+    for t in range(T):
+        q = qs[t]
+        for n in range(N):
+            valid = _begin(ys, t, n, state, index)
+            st = state[n]
+            rsc = rs[t, n] if has_rs else 1.0
+            any_clip = False
+            for a in range(3):
+                xp = st[a, 0]
+                vp = st[a, 1] + q[a]
+                y = ys[t, n, a]
+                if math.isnan(y):  # unobserved: zero gain, the prediction
+                    st[a, 1] = vp
+                    continue
+                rr = r[a] * rsc if has_rs else r[a]
+                lo, up = lower[a], upper[a]
+                yc = min(max(y, lo), up)
+                if yc <= lo or yc >= up:
+                    any_clip = True
+                if corrected:
                     S = vp + rr
                     ey, vy, p_lo, pu, p_up = clipped_diag(xp, S, lo, up)
                     pxy = vp * pu
                     K = pxy / (vy + _EPS * S * (p_lo + p_up))
-                    e = yc - ey
-                    if yc <= lo or yc >= up:
-                        any_clip = True
-                x[n, a] = xp + K * e
-                v[n, a] = vp - K * pxy
+                else:
+                    sr = math.sqrt(rr)
+                    p_lo, pu, p_up, mu_t, v_t, _, _ = truncated((lo - xp) / sr, (up - xp) / sr)
+                    ey = pu * (xp + sr * mu_t) + p_lo * min(max(lo, -_BIG), _BIG)
+                    ey = ey + p_up * min(max(up, -_BIG), _BIG)
+                    floor = rr * (v_t + _EPS * (p_lo + p_up))
+                    pxy = vp * pu
+                    K = pxy / (pu * pu * vp + floor)
+                st[a, 0] = xp + K * (yc - ey)
+                st[a, 1] = vp - K * pxy
             if valid:
-                last[n] = t
+                index[n, 1] = t
                 clipped[t, n] = any_clip
+            _store(t, n, state, est, std, var, offline)
+
+
+@_jit
+def rts_run(est: np.ndarray, var: np.ndarray, qs: np.ndarray, std: np.ndarray) -> None:
+    """RTS with A = I over the filtered est, var (in place): x⁻_{t+1} = x_t,
+    P⁻_{t+1} = P_t + Q_{t+1} (core.kalman.rts_smooth, diagonal path); std from the
+    smoothed variances."""
+    T, N, _ = est.shape
+    for t in range(T - 2, -1, -1):
+        q = qs[t + 1]
+        for n in range(N):
             for a in range(3):
-                est[t, n, a] = x[n, a]
-            if offline:
-                for a in range(3):
-                    var[t, n, a] = v[n, a]
-            else:
-                std[t, n] = math.sqrt(((v[n, 0] + v[n, 1]) + v[n, 2]) / 3)
-    if offline:  # RTS with A = I: x⁻_{t+1} = x_t, P⁻_{t+1} = P_t + Q_{t+1}
-        for t in range(T - 2, -1, -1):
-            q = qs[t + 1]
-            for n in range(N):
-                for a in range(3):
-                    pf = var[t, n, a]
-                    ppt = pf + q[a]
-                    G = pf * 1.0 / ppt if ppt > 0 else 0.0
-                    xf = est[t, n, a]
-                    est[t, n, a] = xf + G * (est[t + 1, n, a] - xf)
-                    var[t, n, a] = pf + G * G * (var[t + 1, n, a] - ppt)
-        for t in range(T):
-            for n in range(N):
-                std[t, n] = math.sqrt(((var[t, n, 0] + var[t, n, 1]) + var[t, n, 2]) / 3)
-    for n in range(N):
-        stop = T if first[n] < 0 else first[n]
-        for t in range(stop):
-            std[t, n] = math.nan
-            for a in range(3):
-                est[t, n, a] = math.nan
-    return est, std, clipped
+                pf = var[t, n, a]
+                ppt = pf + q[a]
+                G = pf * 1.0 / ppt if ppt > 0 else 0.0
+                xf = est[t, n, a]
+                est[t, n, a] = xf + G * (est[t + 1, n, a] - xf)
+                var[t, n, a] = pf + G * G * (var[t + 1, n, a] - ppt)
+    for t in range(T):
+        for n in range(N):
+            std[t, n] = math.sqrt(((var[t, n, 0] + var[t, n, 1]) + var[t, n, 2]) / 3)

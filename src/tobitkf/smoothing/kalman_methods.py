@@ -55,6 +55,7 @@ from tobitkf.smoothing.timebase import (
     elapsed_since_valid,
     inferred_r_scale,
     inferred_sample_scale,
+    readonly,
 )
 
 __all__ = ["atkf_c", "run_kalman", "run_kalman_core"]
@@ -91,9 +92,6 @@ def _check_limits(params: dict[str, Any]) -> None:
         raise ValueError(f"lower {params['lower']} must be below upper {params['upper']}")
 
 
-_KERNEL_KIND = {"kf": 0, "standard": 1, "corrected": 2, "atkf": 3}
-
-
 def _vec3(v: Any) -> Array:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (3,)))
 
@@ -110,7 +108,8 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     ys = inp.ys
     T = ys.shape[0]
     bshape = ys.shape[1:-1]
-    flat = np.ascontiguousarray(ys).reshape(T, -1, 3)
+    flat = readonly(np.ascontiguousarray(ys).reshape(T, -1, 3))  # one compiled version
+    N = flat.shape[1]
     q = _vec3(params["q"])
     if inp.is_reference:
         qs = np.ascontiguousarray(np.broadcast_to(q, (T, 3)))
@@ -119,18 +118,26 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     scale = inferred_sample_scale(inp.tracking_state, ~inp.missing, inp.inferred_noise_factor)
     rs = np.empty((0, 0)) if scale is None else scale.reshape(T, -1)
     used: dict[str, Any] = {}
-    c, lower, upper = np.full(3, np.inf), np.full(3, -np.inf), np.full(3, np.inf)
-    if kind == "atkf":
-        c = atkf_c(params, inp.up_axis)
-        used["c"] = tuple(float(v) for v in c)
-    elif kind == "tkf":
+    r = _vec3(params["r"])
+    est, std = np.empty((T, N, 3)), np.empty((T, N))
+    clipped = np.zeros((T, N), dtype=bool)
+    var = np.empty((T, N, 3) if inp.offline else (0, 0, 3))
+    work = (var, np.empty((N, 3, 6)), np.empty((N, 2), dtype=np.int64))
+    if kind == "tkf":
         lower, upper = _vec3(params["lower"]), _vec3(params["upper"])
-    est, std, clipped = k.filter_run(
-        _KERNEL_KIND[variant if kind == "tkf" else kind],  # type: ignore[index]
-        flat, qs, _vec3(params["r"]), rs, lower, upper, c,
-        np.ascontiguousarray(inp.steps, dtype=float), np.cumsum(inp.steps, dtype=float),
-        bool(inp.is_reference), paper.REFERENCE_DT, bool(inp.offline),
-    )  # fmt: skip
+        k.tobit_run(variant == "corrected", flat, qs, r, rs, lower, upper, bool(inp.offline),
+                    est, std, clipped, *work)  # fmt: skip
+    else:
+        c = atkf_c(params, inp.up_axis) if kind == "atkf" else np.full(3, np.inf)
+        if kind == "atkf":
+            used["c"] = tuple(float(v) for v in c)
+        steps = np.ascontiguousarray(inp.steps, dtype=float)
+        k.gaussian_run(kind == "atkf", flat, qs, r, rs, c, steps, np.cumsum(steps),
+                       bool(inp.is_reference), paper.REFERENCE_DT, bool(inp.offline),
+                       est, std, clipped, *work)  # fmt: skip
+    if inp.offline:
+        k.rts_run(est, var, qs, std)
+    k.blank_before_first(est, std, work[2])
     est = est.reshape(ys.shape)
     std = std.reshape((T, *bshape))
     clipped = clipped.reshape((T, *bshape))

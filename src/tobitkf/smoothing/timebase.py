@@ -22,6 +22,7 @@ __all__ = [
     "inferred_r_scale",
     "inferred_sample_scale",
     "measurements",
+    "readonly",
 ]
 
 Array = NDArray[np.float64]
@@ -79,6 +80,15 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
     if not np.array_equal(missing, all_last(nan)):  # a partly-NaN sample: all its axes NaN
         ys = np.where(missing[..., None], np.nan, ys)
     return ys, missing
+
+
+def readonly(a: NDArray[Any]) -> NDArray[Any]:
+    """A read-only view of ``a``. The compiled kernels get their input samples this way,
+    whether the caller's array is writable or not: numba compiles one version of a
+    function per argument type, and writability is part of an array's type."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def any_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
