@@ -10,7 +10,10 @@ returns what ``smooth(recording, method)`` returns (tested), without looking ahe
 Bodies may come and go: give a frame as a mapping ``{body_id: (J, 3) positions}``. A new
 id starts a new filter; an id missing from a frame is predicted (its prediction is
 returned) for ``max_missing`` seconds, then dropped. Each body's numbers are exactly those
-of a LiveSmoother fed that body alone.
+of a LiveSmoother fed that body alone. Internally the bodies that appeared in the same
+frame share one stepper (one array of bodies, one kernel call per frame: the steppers
+treat bodies independently), so six people cost about what one array of six does; a
+dropped body's slot is stepped with an empty frame until its whole group is gone.
 
 Example
 -------
@@ -86,12 +89,21 @@ class _HistoryStepper:
 
 
 @dataclass
-class _Body:
-    """One body of a stream keyed by id: its own stepper and when it was last seen."""
+class _Group:
+    """Bodies keyed by id that appeared in the same frame: one stepper, one slot each."""
 
     stepper: Any
-    last_seen: float
+    size: int
     frames: int = 0
+
+
+@dataclass
+class _Body:
+    """One body of a stream keyed by id: its group and slot, when it was last seen."""
+
+    group: _Group
+    slot: int
+    last_seen: float
 
 
 class LiveSmoother:
@@ -307,22 +319,40 @@ class LiveSmoother:
         if self._bodies is None:
             self._bodies = {}
         self._clock += dt
-        nan_frame = np.full((self.topology.n_joints, 3), np.nan)
-        out: dict[Any, Array] = {}
-        for body, (pos, st) in checked.items():
-            entry = self._bodies.get(body)
-            if entry is None:  # a new id starts a new filter
-                entry = self._bodies[body] = _Body(self._new_stepper(), self._clock)
-            step = dt if entry.frames else 1.0 / self.fps
-            out[body] = self._step(entry.stepper, pos, st, step)
-            entry.last_seen, entry.frames = self._clock, entry.frames + 1
         for body in [b for b in self._bodies if b not in checked]:
-            entry = self._bodies[body]
-            if self._clock - entry.last_seen > self.max_missing:
+            if self._clock - self._bodies[body].last_seen > self.max_missing:
                 del self._bodies[body]  # gone: dropped
-                continue
-            out[body] = self._step(entry.stepper, nan_frame, None, dt)
-            entry.frames += 1
+        new = [b for b in checked if b not in self._bodies]
+        # new ids start new filters: one group for all of them when the method has a
+        # stepper (bodies independent in it), else one each (a history re-run)
+        for members in [new] if self.spec.live is not None else [[b] for b in new]:
+            if members:
+                group = _Group(self._new_stepper(), len(members))
+                for slot, body in enumerate(members):
+                    self._bodies[body] = _Body(group, slot, self._clock)
+        results = {}
+        J = self.topology.n_joints
+        for group in {id(e.group): e.group for e in self._bodies.values()}.values():
+            pos = np.full((group.size, J, 3), np.nan)
+            members = [(b, e) for b, e in self._bodies.items() if e.group is group]
+            given = [checked[b][1] for b, _ in members if b in checked]
+            states = None
+            if any(st is not None for st in given):  # the others: TRACKED, as None is
+                states = np.full((group.size, J), int(TrackingState.TRACKED), dtype=np.int8)
+            for body, entry in members:
+                if body in checked:
+                    pos[entry.slot], st = checked[body]
+                    if st is not None:
+                        states[entry.slot] = st  # type: ignore[index]
+            step = dt if group.frames else 1.0 / self.fps
+            res = self._step(group.stepper, pos, states, step)
+            group.frames += 1
+            for body, entry in members:
+                results[body] = res[entry.slot]
+                if body in checked:
+                    entry.last_seen = self._clock
+        out = {b: results[b] for b in checked}
+        out.update({b: results[b] for b in self._bodies if b not in checked})
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
