@@ -64,8 +64,9 @@ def test_bodies_that_arrive_together_share_a_stepper_and_stay_independent(method
         for key in frame:
             got[key].append(out[key])
         assert ("c" in out) == (k < 30 + 0.2 * FPS)  # predicted 0.2 s, then dropped
-    for key, pos, states, start, stop in (("a", a, None, 0, T), ("b", b, st_b, 0, T),
-                                          ("c", c, None, 0, 30), ("d", d, None, 20, T)):  # fmt: skip
+    spans = (("a", a, None, 0, T), ("b", b, st_b, 0, T), ("c", c, None, 0, 30),
+             ("d", d, None, 20, T))  # fmt: skip
+    for key, pos, states, start, stop in spans:
         alone = tk.LiveSmoother("kinect_v2", method, fps=FPS)
         ref = [alone.update(pos[k], None if states is None else states[k], timestamp=k / FPS)
                for k in range(start, stop)]  # fmt: skip
