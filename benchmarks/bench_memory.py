@@ -63,6 +63,7 @@ def main() -> None:
     ap.add_argument("-m", "--method", action="append", help="only these methods")
     ap.add_argument("--frames", type=int, default=3000)
     ap.add_argument("--recordings", type=int, default=200)
+    ap.add_argument("--markdown", action="store_true", help="end with the README's table")
     args = ap.parse_args()
     names = args.method or sorted(tk.methods())
     ys = synthetic_skeletons(args.frames, args.recordings, 25)
@@ -76,10 +77,23 @@ def main() -> None:
         del ys
         print(f"{args.recordings} x {args.frames} x 25 batch: input {mib:.0f} MiB")
         print(f"{'method':>14} {'peak above input (MiB)':>24} {'x input':>8}")
+        rows = []
         for name in names:
             r = measure(path, name)
             above = (r["peak_kib"] - r["before_kib"]) * 1024
+            rows.append((name, above / r["input_bytes"]))
             print(f"{name:>14} {above / 2**20:24.0f} {above / r['input_bytes']:8.2f}")
+    if args.markdown:
+        from bench_filters import machine
+
+        print("\x1e")  # docs_results keeps what follows
+        print(f"{args.recordings} recordings × {args.frames} frames × 25 joints ({mib:.0f} MiB), "
+              f"one `tk.smooth` call, measured {machine()}:")  # fmt: skip
+        print()
+        print("| method | peak memory above the input, × the input |")
+        print("|---|---|")
+        for name, ratio in rows:
+            print(f"| {name} | {ratio:.2f} |")
 
 
 if __name__ == "__main__":
