@@ -258,26 +258,8 @@ def _begin(ys: np.ndarray, t: int, n: int, state: np.ndarray, index: np.ndarray)
 
 
 @_jit
-def _axis(st: np.ndarray, a: int, q: float, y: float, r: float, rsc: float,
-          has_rs: bool) -> tuple:  # fmt: skip
-    """Predict axis a: (x⁻, v⁻, R of the step, observed); unobserved (y NaN): zero gain,
-    the prediction is the new state."""
-    vp = st[a, 1] + q
-    if math.isnan(y):
-        st[a, 1] = vp
-        return st[a, 0], vp, r, False
-    return st[a, 0], vp, r * rsc if has_rs else r, True
-
-
-@_jit
-def _finish(t: int, n: int, valid: bool, any_clip: bool, state: np.ndarray,
-            index: np.ndarray, out: tuple, offline: bool) -> None:  # fmt: skip
-    """Joint n after frame t: its last valid frame, clipped flag, mean and sd (or, offline,
-    variances); ``out = (est, std, clipped, var)``."""
-    est, std, clipped, var = out
-    if valid:
-        index[n, 1] = t
-        clipped[t, n] = any_clip
+def _store(t: int, n: int, state: np.ndarray, est: np.ndarray, std: np.ndarray,
+           var: np.ndarray, offline: bool) -> None:  # fmt: skip
     st = state[n]
     for a in range(3):
         est[t, n, a] = st[a, 0]
@@ -338,7 +320,6 @@ def gaussian_run(
     measurement, c per 1/30 s), a plain KF update at frame 0 (Algorithm 2, 2020)."""
     T, N, _ = ys.shape
     has_rs = rs.shape[0] > 0
-    out = (est, std, clipped, var)
     _init(state, index, r)
     # c is scaled on every joint as soon as one has a gap (as run_kalman_core does)
     scale_c = adaptive and (not reference or _any_gap(ys))
@@ -358,10 +339,13 @@ def gaussian_run(
             rsc = rs[t, n] if has_rs else 1.0
             any_clip = False
             for a in range(3):
+                xp = st[a, 0]
+                vp = st[a, 1] + q[a]
                 y = ys[t, n, a]
-                xp, vp, rr, observed = _axis(st, a, q[a], y, r[a], rsc, has_rs)
-                if not observed:
+                if math.isnan(y):  # unobserved: zero gain, the prediction
+                    st[a, 1] = vp
                     continue
+                rr = r[a] * rsc if has_rs else r[a]
                 if kalman:
                     K = vp / (vp + rr)
                     e = y - xp
@@ -388,7 +372,10 @@ def gaussian_run(
                         any_clip = True
                 st[a, 0] = xp + K * e
                 st[a, 1] = vp - K * pxy
-            _finish(t, n, valid, any_clip, state, index, out, offline)
+            if valid:
+                index[n, 1] = t
+                clipped[t, n] = any_clip
+            _store(t, n, state, est, std, var, offline)
 
 
 @_jit
@@ -411,7 +398,6 @@ def tobit_run(
     """tkf (core.tobit.tkf_update) or tkfc (core.tobit.tkfc_update), fixed limits."""
     T, N, _ = ys.shape
     has_rs = rs.shape[0] > 0
-    out = (est, std, clipped, var)
     _init(state, index, r)
     for t in range(T):
         q = qs[t]
@@ -421,10 +407,13 @@ def tobit_run(
             rsc = rs[t, n] if has_rs else 1.0
             any_clip = False
             for a in range(3):
+                xp = st[a, 0]
+                vp = st[a, 1] + q[a]
                 y = ys[t, n, a]
-                xp, vp, rr, observed = _axis(st, a, q[a], y, r[a], rsc, has_rs)
-                if not observed:
+                if math.isnan(y):  # unobserved: zero gain, the prediction
+                    st[a, 1] = vp
                     continue
+                rr = r[a] * rsc if has_rs else r[a]
                 lo, up = lower[a], upper[a]
                 yc = min(max(y, lo), up)
                 if yc <= lo or yc >= up:
@@ -444,7 +433,10 @@ def tobit_run(
                     K = pxy / (pu * pu * vp + floor)
                 st[a, 0] = xp + K * (yc - ey)
                 st[a, 1] = vp - K * pxy
-            _finish(t, n, valid, any_clip, state, index, out, offline)
+            if valid:
+                index[n, 1] = t
+                clipped[t, n] = any_clip
+            _store(t, n, state, est, std, var, offline)
 
 
 @_jit
