@@ -343,3 +343,17 @@ def test_report_renders_in_chromium(tmp_path):
     assert grey.std() > 10  # a page with tables and figures, not a blank or error page
     # nothing runs off to the right: the rightmost 40 px are page background
     assert (grey[:, -40:-20] > 240).mean() > 0.99
+
+
+def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
+    # tkfc with the Kinect's device limits on a recording whose feet sit below them
+    seq = _recording()
+    pos = seq.positions.copy()
+    pos[:, [15, 19], 1] = -1.55  # FootLeft, FootRight
+    save([seq.replace(positions=pos)], tmp_path / "low.csv", format="csv")
+    res = _invoke("smooth", tmp_path / "low.csv", "--method", "tkfc", "-o", tmp_path / "out")
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.output.split())
+    assert out.count("beyond the censoring limits") == 1
+    assert "warning" in out and "low.csv" in out
+    assert "UserWarning" not in res.output

@@ -50,7 +50,8 @@ def test_handwritten_csv(tmp_path):
 @pytest.mark.parametrize(
     ("text", "line", "match"),
     [
-        ("time,a_x,a_y\n", 1, "expected columns"),
+        ("time,a_x,a_z\n", 1, "expected columns"),
+        ("a_x,a_y,a_z,b_x,b_y\n", 1, "expected columns"),  # 3-D and 2-D joints mixed
         ("a_x,a_y,a_z\n1,2\n", 2, "expected 3 values"),
         ("a_x,a_y,a_z\n1,2,x\n", 2, "field 3"),
         ("a_x,a_y,a_z,foo\n1,2,3,4\n", 1, "unexpected column 'foo'"),
@@ -124,12 +125,17 @@ def test_csv_multibody_keeps_64_bit_ids_and_never_merges_bodies(tmp_path):
     assert [s.body_id for s in back] == [72057594037931101, 72057594037931102]
     for a, b in zip(ntu, back, strict=True):
         _assert_same(a, b)
-    # an id that equals another body's index, or ids that are not integers: numbered instead
+    # an id that equals another body's index, or ids that are not integers: numbered in
+    # the body column, the ids themselves in the sidecar
     for ids in ((1, None), ("a", "b"), (3, 3)):
         seqs = [_random_sequence(rng, 4, topo, body_id=b) for b in ids]
         save(seqs, p, format="csv")
         back = load(p)
-        assert [s.body_id for s in back] == [0, 1]
+        assert [s.body_id for s in back] == list(ids)
+        lines = p.read_text().splitlines()
+        k = lines[0].split(",").index("body")
+        body_column = [ln.split(",")[k] for ln in lines[1:]]
+        assert sorted(set(body_column)) == ["0", "1"]
         for a, b in zip(seqs, back, strict=True):
             np.testing.assert_array_equal(a.positions, b.positions)
 
@@ -191,3 +197,13 @@ def test_csv_from_real_krajjat(tmp_path):
     (r,) = load(p)
     _assert_same(s, r)
     assert r.topology.name == "kinect_v2_21"
+
+
+def test_an_unrelated_json_beside_a_csv_does_not_make_it_ours(tmp_path):
+    from tobitkf.io.generic_csv import sniff_csv
+
+    head = "a_x,a_y,a_z\n0,0,0\n"
+    (tmp_path / "x.csv").write_text(head)
+    alone = sniff_csv(tmp_path / "x.csv", head)
+    (tmp_path / "x.json").write_text('{"landmarks": []}')  # e.g. another tool's output
+    assert sniff_csv(tmp_path / "x.csv", head) == alone

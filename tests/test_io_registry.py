@@ -95,7 +95,7 @@ def test_save_dispatch(tmp_path):
     with pytest.raises(ValueError, match="cannot choose"):
         save(s, tmp_path / "a.txt")
     with pytest.raises(ValueError, match="cannot be written"):
-        save(s, tmp_path / "a.c3d", format="c3d")
+        save(s, tmp_path / "a.tsv", format="qualisys")
     with pytest.raises(TypeError):
         save([np.zeros(3)], tmp_path / "a.csv")
 

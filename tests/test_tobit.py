@@ -528,3 +528,37 @@ def test_last_call_memo_equals_the_function():
         x = x.copy()
         x[rng.random(x.shape) < 0.1] = rng.uniform(-40, 5)
     np.testing.assert_array_equal(memo(x[:2]), special.log_ndtr(x[:2]))  # other shape
+
+
+@pytest.mark.parametrize("variant", ["standard", "corrected"])
+def test_posterior_variances_stay_between_zero_and_the_prediction(variant):
+    # issue 14 point 6: with Q/R >= 1e16 the standard TKF's v = v⁻ - Pxy²/Pyy cancelled
+    # to negative values (-1.8e134 with R = 1, Q = 1e150). A linear update can only shrink
+    # the variance: 0 <= v <= v⁻ at every step, whatever the scale. 600 random scales
+    # (before the fix, 1 run in 90 of the standard TKF broke this)
+    rng = np.random.default_rng(20261124)
+    for _ in range(600):
+        q, r = 10 ** rng.uniform(-10, 200), 10 ** rng.uniform(-10, 50)
+        model = LinearGaussian(
+            A=np.eye(1), H=np.eye(1), Q=q * np.eye(1), R=r * np.eye(1),
+            x0=np.zeros(1), P0=r * np.eye(1),
+        )  # fmt: skip
+        ys = rng.normal(size=(10, 1)) * np.sqrt(q) * rng.uniform(0, 3)
+        lo, up = -abs(rng.normal()) * np.sqrt(q), abs(rng.normal()) * np.sqrt(q)
+        with np.errstate(all="ignore"):
+            res = tobit_filter(model, ys, lo, up, variant=variant)
+        v, vp = res.variances, res.predicted_variances
+        assert np.all(np.isfinite(res.means)) and np.all(np.isfinite(v)), (q, r)
+        assert np.all(v >= 0) and np.all(v <= vp * (1 + 1e-12)), (q, r)
+
+
+def test_an_uncensored_measurement_far_out_keeps_the_tkfc_finite():
+    # issue 14 point 6: a measurement 1e154 sd from the prediction
+    model = LinearGaussian(
+        A=np.eye(1), H=np.eye(1), Q=np.eye(1), R=np.eye(1), x0=np.zeros(1), P0=np.eye(1)
+    )
+    res = tobit_filter(model, np.full((5, 1), 1e154), 0.0, np.inf, variant="corrected")
+    assert np.all(np.isfinite(res.means)) and np.all(np.isfinite(res.loglik))
+    # it moves towards the measurement, never past it
+    m = res.means[:, 0]
+    assert np.all(np.diff(m) > 0) and np.all((m > 0) & (m <= 1e154))

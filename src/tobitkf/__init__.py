@@ -46,6 +46,8 @@ _EXPORTS: dict[str, str] = {
     "SkeletonSequence": "tobitkf.skeleton.sequence",
     "TrackingState": "tobitkf.skeleton.sequence",
     "SampleState": "tobitkf.skeleton.sequence",
+    "to_dataframe": "tobitkf.skeleton.dataframe",
+    "from_dataframe": "tobitkf.skeleton.dataframe",
     # smoothing and its registry
     "smooth": "tobitkf.smoothing.api",
     "DEFAULT_METHOD": "tobitkf.smoothing.api",
@@ -73,6 +75,8 @@ _EXPORTS: dict[str, str] = {
     "register_format": "tobitkf.io",
     "formats": "tobitkf.io",
     "ReadError": "tobitkf.io",
+    "from_movement": "tobitkf.io.movement",
+    "to_movement": "tobitkf.io.movement",
 }
 
 __all__ = ["__version__", *_EXPORTS]

@@ -14,6 +14,7 @@ import fnmatch
 import os
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,6 +52,8 @@ class FileSummary:
     seconds: float = 0.0
     input_format: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: warnings the method gave for this file (e.g. limits the data contradict), once each
+    warnings: tuple[str, ...] = ()
 
 
 def strip_extension(name: str) -> str:
@@ -73,8 +76,9 @@ def discover_inputs(
 ) -> list[tuple[Path, Path]]:
     """Expand files and folders into ``(file, base)`` pairs.
 
-    A folder contributes every file below it (recursively) whose name matches ``pattern``
-    and for which ``skip`` (e.g. :func:`tobitkf.io.is_companion_file`) is not true; the
+    A folder that is itself a recording (:func:`is_recording_folder`) is one input, like a
+    file. Another folder contributes every file below it (recursively) whose name matches
+    ``pattern`` and for which ``skip`` (e.g. :func:`tobitkf.io.is_companion_file`) is not true; the
     skipped files are appended to ``skipped`` when given. ``base`` is the folder, so
     outputs can keep the relative layout. A file is taken as given (neither the pattern
     nor ``skip`` filters explicit files); its base is its own folder. What a folder walk
@@ -94,7 +98,7 @@ def discover_inputs(
         path = Path(item)
         if not path.exists():
             raise FileNotFoundError(f"input not found: {path}")
-        if path.is_dir():
+        if path.is_dir() and not is_recording_folder(path):
             for f in _walk(path, recursive, problems):
                 if fnmatch.fnmatch(f.name, pattern) and not f.name.startswith("."):
                     if skip is not None and skip(f):
@@ -124,7 +128,10 @@ def _walk(folder: Path, recursive: bool, problems: list[tuple[Path, str]]) -> li
         try:
             if entry.is_dir(follow_symlinks=False):
                 if recursive and not entry.name.startswith("."):
-                    files.extend(_walk(p, recursive, problems))
+                    if is_recording_folder(p):  # e.g. an OpenPose JSON output folder
+                        files.append(p)
+                    else:
+                        files.extend(_walk(p, recursive, problems))
                 continue
             if entry.is_symlink():
                 os.stat(p)  # raises for a dangling link or a loop
@@ -151,6 +158,9 @@ def _reason(exc: OSError) -> str:
 def readable_problem(path: str | os.PathLike[str]) -> str | None:
     """Why ``path`` cannot be opened for reading (permission, ...), or None when it can."""
     try:
+        if os.path.isdir(path):  # a recording folder: it must be listable
+            os.listdir(path)
+            return None
         with open(path, "rb"):
             pass
     except OSError as exc:
@@ -193,6 +203,18 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
     return method  # no provenance kept in the format: the name decides
 
 
+def is_recording_folder(path: Path) -> bool:
+    """True for a folder that a registered format reads as one recording (an OpenPose
+    JSON output folder): batch tools take it as one input instead of walking into it."""
+    from tobitkf.io import ReadError, detect_format
+
+    try:
+        detect_format(path)
+    except (ReadError, OSError):
+        return False
+    return True
+
+
 def not_a_recording(path: Path) -> bool:
     """True for files a folder walk should pass over: companion files read with their
     recording (UI-PRMD angles) and files whose extension no registered reader claims
@@ -201,6 +223,8 @@ def not_a_recording(path: Path) -> bool:
     """
     from tobitkf.io import formats, is_companion_file
 
+    if path.is_dir():
+        return not is_recording_folder(path)
     name = path.name.lower()
     known = {ext for spec in formats().values() for ext in spec.extensions}
     if not any(name.endswith(ext) for ext in known):
@@ -340,7 +364,10 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
-        smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+        said = tuple(dict.fromkeys(str(w.message) for w in caught))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
             s.metadata["provenance"]["source"] = {"path": str(job.source), "format": in_fmt}
         atomic_save(smoothed, job.output, job.output_format)
@@ -368,6 +395,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         missing_percent=_percent(missing),
         seconds=time.perf_counter() - start,
         input_format=in_fmt,
+        warnings=said,
     )
 
 

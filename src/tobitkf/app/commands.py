@@ -397,6 +397,9 @@ def smooth(
         )
         if rows:
             console.print(f"outputs in {Path(outdir).resolve()}")
+        for r in results:
+            for w in r.warnings:
+                err_console.print(f"[yellow]warning[/yellow] {escape(r.source)}: {escape(w)}")
         for r in failed:
             err_console.print(f"[red]FAILED[/red] {escape(r.source)}: {escape(str(r.error))}")
     if interrupted is not None:
@@ -412,7 +415,7 @@ def smooth(
 
 # --------------------------------------------------------------------------- info
 @app.command()
-@click.argument("path", type=click.Path(exists=True, dir_okay=False))
+@click.argument("path", type=click.Path(exists=True))
 @_input_format_option("--format", help="Input format.")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def info(path, input_format, as_json):

@@ -154,7 +154,11 @@ def tkf_update(
     floor = r * (ts.v_t + EPS_CENSORED * (Pa + Pb))
     if sm.diagonal:
         Pxy = Pxy0 * Pu
-        x, P, K = gain_update_diag(xp, Pp, Pxy, Pu * Pu * HPH + floor, e, obs, full, out_x)
+        Pyy = Pu * Pu * HPH + floor
+        x, P, K = gain_update_diag(xp, Pp, Pxy, Pyy, e, obs, full, out_x)
+        # v = v⁻ - Pxy²/Pyy = v⁻ floor / Pyy exactly; the second form has no cancellation
+        # (the first went negative once v⁻ exceeded about 1e16 floor: Q/R >= 1e16)
+        P = np.where(K != 0.0, Pp * (floor / Pyy), Pp)
     else:
         Pxy = Pxy0 * Pu[..., None, :]
         Pyy = HPH * Pu[..., :, None] * Pu[..., None, :]

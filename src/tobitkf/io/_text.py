@@ -27,6 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.skeleton.sequence import KNOWN_UNITS
 
 GZIP_MAGIC = b"\x1f\x8b"
 
@@ -37,6 +38,8 @@ MIN_OUTPUT_BYTES = 64 * 2**20
 OUTPUT_BYTES_PER_INPUT_BYTE = 32
 #: plausible coordinates: |x| <= MAX_ABS_POSITION_M metres (after unit conversion)
 MAX_ABS_POSITION_M = 1e4
+#: plausible coordinates in pixels or unknown units (no length to convert to metres)
+MAX_ABS_POSITION_OTHER = 1e8
 #: plausible frame rates (Hz), bounds included
 MIN_RATE_HZ = 1e-3
 MAX_RATE_HZ = 1e5
@@ -222,9 +225,11 @@ def check_positions(
     *,
     names: Sequence[str] | None = None,
     state: np.ndarray | None = None,
+    units: str | None = "m",
 ) -> None:
-    """Apply the plausibility bound :data:`MAX_ABS_POSITION_M` to positions (T, J, 3) in
-    metres.
+    """Apply the plausibility bound :data:`MAX_ABS_POSITION_M` to positions (T, J, D) in
+    ``units`` (the bound converted to them; :data:`MAX_ABS_POSITION_OTHER` for pixels and
+    unknown units).
 
     With ``implausible="error"`` the first coordinate out of bounds raises a
     :class:`ReadError` naming the line of its frame (``line_numbers[t]``, if known), the
@@ -232,8 +237,11 @@ def check_positions(
     in ``state``), in place.
     """
     check_implausible_option(implausible)
+    per_unit = None if units is None else KNOWN_UNITS.get(units)
+    bound = MAX_ABS_POSITION_OTHER if per_unit is None else MAX_ABS_POSITION_M / per_unit
+    unit_text = "(unknown units)" if units is None else units
     with np.errstate(invalid="ignore"):
-        bad = ~(np.abs(positions) <= MAX_ABS_POSITION_M) & ~np.isnan(positions)
+        bad = ~(np.abs(positions) <= bound) & ~np.isnan(positions)
     if not bad.any():
         return
     joint_bad = bad.any(axis=-1)
@@ -247,8 +255,8 @@ def check_positions(
     raise ReadError(
         path,
         None if line_numbers is None else line_numbers[t],
-        f"implausible position {float(positions[t, j, a])!r} m ({'xyz'[a]} of joint "
-        f"{joint}, frame {t + 1}): expected |value| <= {MAX_ABS_POSITION_M:g} m; pass "
+        f"implausible position {float(positions[t, j, a])!r} {unit_text} ({'xyz'[a]} of "
+        f"joint {joint}, frame {t + 1}): expected |value| <= {bound:g} {unit_text}; pass "
         "implausible='missing' to read such samples as missing",
     )
 

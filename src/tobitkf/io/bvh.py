@@ -282,6 +282,7 @@ def read_bvh(
         positions=positions,
         topology=Topology.from_names(names, parents, up_axis=1, name="bvh"),
         fps=fps,
+        units="m",
         metadata={
             "source": str(path),
             "format": "bvh",

@@ -178,6 +178,7 @@ def read_c3d(
         positions=positions,
         topology=Topology.from_names(names, up_axis=2, name="c3d"),
         fps=rate,
+        units="m",
         metadata={
             "source": str(path),
             "format": "c3d",

@@ -5,16 +5,22 @@ Layout (a plain table: ``pandas.read_csv(path)`` loads it with no options)::
     time,SpineBase_x,SpineBase_y,SpineBase_z,SpineBase_state,SpineBase_sd,SpineBase_sample,...
     0.0,0.1,0.2,2.5,2,0.004,0,...
 
+    time,body,snout_x,snout_y,snout_confidence,...      (2-D keypoints with a score)
+    0.0,0,312.5,200.25,0.98,...
+
 * header (first line): an optional ``time`` or ``timestamp`` column (seconds), an optional
   ``body`` column (several bodies: rows are grouped by its value), then for every joint
   ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (case-insensitive suffixes, in this order,
-  joints in file order) and, after them in any order, optionally ``<joint>_state``
-  (tracking state: 0 not tracked, 1 inferred, 2 tracked), ``<joint>_sd`` (posterior
-  standard deviation, metres) and ``<joint>_sample`` (sample state, ``SampleState``:
-  0 measured, 1 rejected and filled, 2 missing and filled, 3 extrapolated, 4 no estimate).
+  joints in file order; ``_x``, ``_y`` alone for 2-D keypoints, the same for every joint)
+  and, after them in any order, optionally ``<joint>_state`` (tracking state: 0 not
+  tracked, 1 inferred, 2 tracked), ``<joint>_sd`` (posterior standard deviation, in the
+  positions' units), ``<joint>_sample`` (sample state, ``SampleState``: 0 measured,
+  1 rejected and filled, 2 missing and filled, 3 extrapolated, 4 no estimate) and
+  ``<joint>_confidence`` (a pose estimator's score in [0, 1]).
   A leading index column as ``DataFrame.to_csv`` writes it (header field empty or
   ``Unnamed: 0``) is skipped.
-* values: metres, plain decimal numbers; an empty field or ``nan`` is a missing value.
+* values: plain decimal numbers in the sidecar's ``units`` (without a sidecar: metres for
+  3-D, unknown for 2-D); an empty field or ``nan`` is a missing value.
 * separator: comma (``,``); a file whose header has tabs or semicolons and no comma uses
   that separator instead (text inside double quotes does not count).
 * header fields may be double-quoted (RFC 4180: ``"Head,L_x"``, ``""`` for a quote inside);
@@ -24,7 +30,8 @@ Layout (a plain table: ``pandas.read_csv(path)`` loads it with no options)::
 
 Sidecar. What a table cannot hold goes into a JSON file beside it, named like the CSV
 with its last extension replaced by ``.json`` (``a.robust.csv`` -> ``a.robust.json``,
-:func:`sidecar_path`): topology, up axis, fps, body ids, the column meanings and the
+:func:`sidecar_path`): topology (with its bones), units, up axis, fps, body ids (names
+too), the column meanings and the
 provenance (tobitkf version, method, complete parameters, source). The reader uses it
 when it exists and is a tobitkf sidecar (``"format": "tobitkf.csv-sidecar"``).
 
@@ -66,7 +73,7 @@ from tobitkf.io._text import (
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SampleState, SkeletonSequence
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
 
 __all__ = [
@@ -81,7 +88,7 @@ __all__ = [
 _TIME = ("time", "timestamp", "t")
 _AXES = ("_x", "_y", "_z")
 #: per-joint columns after x, y, z: suffix -> what they hold
-_EXTRA = ("_state", "_sd", "_sample")
+_EXTRA = ("_state", "_sd", "_sample", "_confidence")
 _INDEX = ("", "unnamed: 0")  # DataFrame.to_csv's index column
 #: the ``format`` entry that marks a JSON file as a tobitkf CSV sidecar
 SIDECAR_FORMAT = "tobitkf.csv-sidecar"
@@ -89,9 +96,11 @@ SIDECAR_VERSION = 1
 _COLUMNS = {
     "time": "seconds",
     "body": "body id (several bodies: rows grouped by it)",
-    "<joint>_x, <joint>_y, <joint>_z": "position, metres; empty or nan = missing",
+    "<joint>_x, <joint>_y, <joint>_z": "position, in `units`; empty or nan = missing; "
+    "no _z column for 2-D keypoints",
     "<joint>_state": "tracking state: 0 not tracked, 1 inferred (filled or guessed), 2 tracked",
-    "<joint>_sd": "posterior standard deviation of the position, metres (rms over the axes)",
+    "<joint>_sd": "posterior standard deviation of the position, in `units` (rms over the axes)",
+    "<joint>_confidence": "the pose estimator's score in [0, 1]; empty = none",
     "<joint>_sample": {
         str(int(SampleState.MEASURED)): "measured: a measurement was used",
         str(int(SampleState.REJECTED)): "rejected: judged impossible, position filled in",
@@ -145,18 +154,23 @@ def _parse_header(path, fields: list[str], line_no: int):
             base = c[:-2]
             triple = [t.lower() for t in cols[k : k + 3]]
             want = [(base + a).lower() for a in _AXES]
-            if triple != want or not base:
+            n = 3 if triple == want else 2 if triple[:2] == want[:2] else 0
+            if n == 2 and len(triple) == 3 and triple[2].startswith(base.lower() + "_"):
+                if triple[2][len(base) :] not in _EXTRA:
+                    n = 0  # <joint>_x, <joint>_y, <joint>_<typo>: a third axis was meant
+            if not base or not n or (xyz and n != len(xyz[0])):
+                expect = _AXES if not xyz else _AXES[: len(xyz[0])]
                 raise ReadError(
                     path,
                     line_no,
-                    f"expected columns {[base + a for a in _AXES]} at positions {k + 1}-{k + 3}, "
-                    f"found {cols[k : k + 3]}",
+                    f"expected columns {[base + a for a in expect]} at positions {k + 1}-"
+                    f"{k + len(expect)}, found {cols[k : k + len(expect)]}",
                 )
             if base in joints:
                 raise ReadError(path, line_no, f"joint {base!r} appears twice in the header")
             joints.append(base)
-            xyz.append((k, k + 1, k + 2))
-            k += 3
+            xyz.append(tuple(range(k, k + n)))
+            k += n
             continue
         suffix = next(
             (x for x in _EXTRA if joints and low.endswith(x) and c[: -len(x)] == joints[-1]),
@@ -170,14 +184,17 @@ def _parse_header(path, fields: list[str], line_no: int):
             path,
             line_no,
             f"unexpected column {c!r} (position {k + 1}); expected time, body, "
-            "<joint>_x/_y/_z, <joint>_state, <joint>_sd or <joint>_sample",
+            "<joint>_x/_y(/_z), <joint>_state, <joint>_sd, <joint>_sample or "
+            "<joint>_confidence",
         )
     if not joints:
-        raise ReadError(path, line_no, "expected <joint>_x, <joint>_y, <joint>_z columns")
+        raise ReadError(path, line_no, "expected <joint>_x, <joint>_y(, <joint>_z) columns")
     return len(cols), time_col, body_col, joints, xyz, extra
 
 
-def _topology(names: list[str], hint: str | None, up_axis: int | None) -> Topology:
+def _topology(
+    names: list[str], hint: str | None, up_axis: int | None, parents: list[int] | None = None
+) -> Topology:
     candidates = [hint] if hint else []
     candidates += available_topologies()
     for name in candidates:
@@ -190,7 +207,7 @@ def _topology(names: list[str], hint: str | None, up_axis: int | None) -> Topolo
                 return Topology(t.name, t.joints, t.parents, t.symmetry, up_axis)
             return t
     return Topology.from_names(
-        names, up_axis=1 if up_axis is None else up_axis, name=hint or "custom"
+        names, parents, up_axis=1 if up_axis is None else up_axis, name=hint or "custom"
     )
 
 
@@ -212,7 +229,8 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
 
     Returns
     -------
-    list of SkeletonSequence (one per ``body`` value, or one), positions (T, J, 3).
+    list of SkeletonSequence (one per ``body`` value, or one), positions (T, J, 3) or
+    (T, J, 2).
     """
     lines = read_lines(path)
     side = _read_sidecar(path)
@@ -264,7 +282,15 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     up_axis = side.get("up_axis")
     if up_axis is None and comments.get("up_axis") in ("0", "1", "2"):
         up_axis = int(comments["up_axis"])
-    topo = _topology(joints, side.get("topology", comments.get("topology")), up_axis)
+    parents = side.get("parents")
+    if parents is not None and len(parents) != len(joints):
+        parents = None
+    try:
+        topo = _topology(joints, side.get("topology", comments.get("topology")), up_axis, parents)
+    except ValueError as exc:  # the sidecar's parents do not form a tree
+        raise ReadError(sidecar_path(path), None, f"tobitkf CSV sidecar: {exc}") from None
+    n_dims = len(xyz[0])
+    units = side.get("units", "m" if n_dims == 3 else None)
     if body_col is not None:
         ids = data[:, body_col]
         if np.isnan(ids).any():
@@ -298,14 +324,15 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                 state[:, j] = col
         std = _std_columns(path, d, nos, extra["_sd"], joints)
         sample = _sample_columns(path, d, nos, extra["_sample"], joints)
-        check_positions(path, positions, nos, implausible, names=joints, state=state)
+        confidence = _confidence_columns(path, d, nos, extra["_confidence"], joints)
+        check_positions(path, positions, nos, implausible, names=joints, state=state, units=units)
         timestamps = None
         if time_col is not None:
             timestamps = d[:, time_col]
             check_times(path, timestamps, nos)
         body_id = group_id
         entry = side.get("bodies", {}).get(group_id, {})
-        if body_col is None and "body_id" in entry:
+        if "body_id" in entry:
             body_id = entry["body_id"]
         elif body_col is None and "body_id" in comments:
             body_id = comments["body_id"]
@@ -326,9 +353,32 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                 metadata=metadata,
                 std=std,
                 sample_state=sample,
+                confidence=confidence,
+                units=units,
             )
         )
     return out
+
+
+def _confidence_columns(
+    path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]
+):
+    """(T, J) confidences from the ``_confidence`` columns (NaN where none); None when the
+    file has none or this body's are all empty."""
+    if not cols:
+        return None
+    conf = np.full((len(d), len(joints)), np.nan)
+    for j, c in cols.items():
+        conf[:, j] = d[:, c]
+    if np.isnan(conf).all():
+        return None
+    bad = (conf < 0) | (conf > 1)
+    if bad.any():
+        k, j = (int(v[0]) for v in np.nonzero(bad))
+        raise ReadError(
+            path, nos[k], f"expected a confidence in [0, 1] for {joints[j]}, found {conf[k, j]}"
+        )
+    return conf
 
 
 def _std_columns(path, d: np.ndarray, nos: list[int], cols: dict[int, int], joints: list[str]):
@@ -418,6 +468,18 @@ def _read_sidecar(path) -> dict[str, Any]:
         out["fps"] = check_rate(side, None, float(fps), "fps", repr(fps))
     if isinstance(doc.get("provenance"), dict):
         out["provenance"] = doc["provenance"]
+    if "units" in doc:
+        units = doc["units"]
+        if units is not None and units not in KNOWN_UNITS:
+            raise bad(f"expected units {sorted(KNOWN_UNITS)} or null, found {units!r}")
+        out["units"] = units
+    parents = doc.get("parents")
+    if parents is not None:
+        if not isinstance(parents, list) or not all(
+            isinstance(p, int) and not isinstance(p, bool) for p in parents
+        ):
+            raise bad(f"expected a list of parent indices, found {parents!r}")
+        out["parents"] = parents
     bodies: dict[Any, dict[str, Any]] = {}
     entries = doc.get("bodies", [])
     if not isinstance(entries, list):
@@ -431,7 +493,10 @@ def _read_sidecar(path) -> dict[str, Any]:
         ):
             raise bad(f"expected an int or str body id, found {body_id!r}")
         entry = {k: e[k] for k in ("body_id", "provenance") if k in e}
-        bodies[e.get("body")] = entry
+        key = e.get("body")
+        if key is not None and (isinstance(key, bool) or not isinstance(key, int)):
+            raise bad(f"expected an int body column value, found {key!r}")
+        bodies[key] = entry
     out["bodies"] = bodies
     return out
 
@@ -489,6 +554,15 @@ def write_csv(
     with_std = any(s.std is not None for s in seqs)
     with_sample = any(s.sample_state is not None for s in seqs)
     with_time = any(s.timestamps is not None for s in seqs)
+    with_conf = any(s.confidence is not None for s in seqs)
+    n_dims = seqs[0].n_dims
+    units = seqs[0].units
+    for s in seqs[1:]:
+        if (s.n_dims, s.units) != (n_dims, units):
+            raise ValueError(
+                "all sequences written to one CSV must have the same dimension and units"
+            )
+    axes = _AXES[:n_dims]
     if not multi and seqs[0].body_id is not None:
         _writable_body_id(seqs[0].body_id)
     side = sidecar_path(path)
@@ -508,11 +582,12 @@ def write_csv(
     if multi:
         header.append("body")
     for n in names:
-        header += [_quoted(f"{n}{a}") for a in _AXES]
+        header += [_quoted(f"{n}{a}") for a in axes]
         for suffix, present in (
             ("_state", with_state),
             ("_sd", with_std),
             ("_sample", with_sample),
+            ("_confidence", with_conf),
         ):
             if present:
                 header.append(_quoted(f"{n}{suffix}"))
@@ -535,6 +610,8 @@ def write_csv(
                     vals.append("" if s.std is None else fmt_float(s.std[t, j]))
                 if with_sample:
                     vals.append("" if s.sample_state is None else str(int(s.sample_state[t, j])))
+                if with_conf:
+                    vals.append("" if s.confidence is None else fmt_float(s.confidence[t, j]))
             lines.append(sep.join(vals))
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
     if doc is not None:
@@ -563,7 +640,9 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
     for k, s in enumerate(seqs):
         # one body: its id lives here; several: the body column holds the ids
         entry: dict[str, Any] = (
-            {"body": None, "body_id": s.body_id} if ids is None else {"body": int(ids[k])}
+            {"body": None, "body_id": s.body_id}
+            if ids is None
+            else {"body": int(ids[k]), "body_id": s.body_id}
         )
         if shared is None and provs[k] is not None:
             entry["provenance"] = provs[k]
@@ -573,6 +652,8 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         "format_version": SIDECAR_VERSION,
         "written_by": f"tobitkf {__version__}",
         "topology": first.topology.name,
+        "parents": list(first.topology.parents),
+        "units": first.units,
         "up_axis": first.topology.up_axis,
         "fps": first.fps,
         "bodies": bodies,
@@ -624,17 +705,20 @@ def _quoted(field: str) -> str:
 
 
 def sniff_csv(path: Path, head: str) -> int:
-    """Score: a header line with ``<joint>_x,<joint>_y,<joint>_z`` columns (more sure
+    """Score: a header line with ``<joint>_x,<joint>_y(,<joint>_z)`` columns (more sure
     with the sidecar :func:`write_csv` writes beside it, or, in the old layout, after its
     ``# topology:`` line)."""
-    written = sidecar_path(path) != path and sidecar_path(path).is_file()
+    side = sidecar_path(path)
+    written = side != path and side.is_file() and _is_sidecar(side)  # not any JSON beside it
     for line in head.split("\n")[:50]:
         s = line.strip()
         written = written or s.startswith("# topology:")
         if not s or s.startswith("#"):
             continue
         low = s.lower()
-        if "_x" in low and "_y" in low and "_z" in low and ("," in s or ";" in s or "\t" in s):
+        fields = [f.strip().strip('"') for f in re.split(r"[,;\t]", low)]
+        has = {a: any(f.endswith(a) for f in fields) for a in _AXES}
+        if has["_x"] and has["_y"] and ("," in s or ";" in s or "\t" in s):
             if written:
                 return 90
             if low.split("\t")[0].split(",")[0].strip() in ("timestamp",) and "\t" in s:

@@ -75,6 +75,7 @@ def read_keraal_kinect(
         topology=topo,
         tracking_state=missing_state(positions),
         fps=fps,
+        units="m",
         metadata={
             "source": str(path),
             "format": "keraal_kinect",
@@ -104,6 +105,7 @@ def read_keraal_vicon(
         positions=positions,
         topology=topo,
         fps=fps,
+        units="m",
         metadata={
             "source": str(path),
             "format": "keraal_vicon",

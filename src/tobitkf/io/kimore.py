@@ -75,6 +75,7 @@ def read_kimore(
         timestamps=None,
         fps=fps,
         body_id=None,
+        units="m",
         metadata={"source": str(path), "format": "kimore", "fps_nominal": True},
     )
     return [seq]

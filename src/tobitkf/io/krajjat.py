@@ -130,6 +130,7 @@ def read_krajjat(
         tracking_state=state,
         timestamps=times,
         fps=fps,
+        units="m",
         metadata={"source": str(path), "format": "krajjat", "header": header_meta},
     )
     return [seq]

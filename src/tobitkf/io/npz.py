@@ -3,11 +3,12 @@
 Layout (all entries plain arrays; read with ``allow_pickle=False``):
 
 * ``format_version`` = 1, ``n_bodies`` = B;
-* per body ``b``: ``b{b}/positions`` (T, J, 3), optional ``b{b}/tracking_state`` (T, J),
+* per body ``b``: ``b{b}/positions`` (T, J, D), optional ``b{b}/tracking_state`` (T, J),
+  optional ``b{b}/confidence`` (T, J) float,
   optional ``b{b}/timestamps`` (T,), optional ``b{b}/std`` (T, J) float and
   ``b{b}/sample_state`` (T, J) int8 (smoothed output), ``b{b}/topology_joints`` (J,) str,
   ``b{b}/topology_parents`` (J,), ``b{b}/topology_symmetry`` (S, 2), and
-  ``b{b}/header`` = a JSON string with fps, body_id, topology name, up axis and the
+  ``b{b}/header`` = a JSON string with fps, body_id, units, topology name, up axis and the
   metadata; arrays inside the metadata (at any depth of dicts and lists) are stored as
   separate entries ``b{b}/meta/<n>`` and referenced from the JSON. A smoothed sequence's
   provenance (tobitkf version, method, complete parameters, source) is
@@ -133,6 +134,8 @@ def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             arrays[f"{p}/timestamps"] = s.timestamps
         if s.std is not None:
             arrays[f"{p}/std"] = s.std
+        if s.confidence is not None:
+            arrays[f"{p}/confidence"] = s.confidence
         if s.sample_state is not None:
             arrays[f"{p}/sample_state"] = s.sample_state
         topo = s.topology
@@ -143,6 +146,7 @@ def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
         header = {
             "fps": s.fps,
             "body_id": _encode(s.body_id, meta_arrays, p),
+            "units": s.units,
             "topology_name": topo.name,
             "up_axis": topo.up_axis,
             "metadata": _encode(s.metadata, meta_arrays, p),
@@ -232,14 +236,21 @@ def read_npz(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                 up_axis=int(header["up_axis"]),
             )
             positions = np.array(data[f"{p}/positions"], dtype=float)
-            if positions.shape[1:] != (len(topo.joints), 3):
+            if positions.ndim != 3 or positions.shape[1:] not in (
+                (len(topo.joints), 3),
+                (len(topo.joints), 2),
+            ):
                 raise ValueError(
                     f"positions of shape {positions.shape} for {len(topo.joints)} joints"
                 )
             state = data.get(f"{p}/tracking_state")
             if state is not None:
                 state = np.array(state)
-            check_positions(path, positions, None, implausible, names=topo.joints, state=state)
+            # archives written before units existed are 3-D metres
+            units = header.get("units", "m" if positions.shape[2] == 3 else None)
+            check_positions(
+                path, positions, None, implausible, names=topo.joints, state=state, units=units
+            )
             fps = header["fps"]
             if fps is not None:
                 fps = check_rate(path, None, float(fps), "fps", repr(fps))
@@ -254,6 +265,8 @@ def read_npz(path: str | os.PathLike[str], implausible: str = "error") -> list[S
                     metadata=_decode(header["metadata"], data),
                     std=data.get(f"{p}/std"),
                     sample_state=data.get(f"{p}/sample_state"),
+                    confidence=data.get(f"{p}/confidence"),
+                    units=units,
                 )
             )
     except ReadError:

@@ -242,6 +242,7 @@ def read_ntu(
                 tracking_state=state,
                 fps=fps,
                 body_id=body_id,
+                units="m",
                 metadata={
                     "source": str(path),
                     "format": "ntu",

@@ -131,6 +131,7 @@ def read_qualisys(
         topology=Topology.from_names(names, up_axis=2, name="qualisys"),
         timestamps=timestamps,
         fps=fps,
+        units="m",
         metadata={
             "source": str(path),
             "format": "qualisys",

@@ -3,7 +3,8 @@
 A format is registered with :func:`register_format`. ``detect_format`` asks every
 sniffer for a score on the file's first 64 KB (0 = not this format, higher = more sure)
 and breaks ties by the file extension; with no positive score it falls back to the
-extension alone when that is unambiguous.
+extension alone when that is unambiguous. A directory is offered to the formats that read
+folders (``sniff_dir``, e.g. an OpenPose JSON output folder).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ __all__ = [
 Reader = Callable[..., list[SkeletonSequence]]
 Writer = Callable[..., None]
 Sniffer = Callable[[Path, str], int]
+DirSniffer = Callable[[Path], int]
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,7 @@ class FormatSpec:
     description: str = ""
     companion: Callable[[Path], bool] | None = None
     side_outputs: Callable[[Path], list[Path]] | None = None
+    sniff_dir: DirSniffer | None = None
 
 
 _FORMATS: dict[str, FormatSpec] = {}
@@ -67,6 +70,7 @@ def register_format(
     aliases: Iterable[str] = (),
     companion: Callable[[Path], bool] | None = None,
     side_outputs: Callable[[Path], list[Path]] | None = None,
+    sniff_dir: DirSniffer | None = None,
 ) -> FormatSpec:
     """Register (or replace) a file format.
 
@@ -88,6 +92,9 @@ def register_format(
     side_outputs : callable ``(path) -> list of Path``, optional
         The files the writer writes beside ``path`` (the CSV's JSON sidecar); batch tools
         treat them as part of the output (:func:`output_files`).
+    sniff_dir : callable ``(directory) -> int``, optional
+        Score of a directory for a format whose recordings are folders (0 = not this
+        format); the reader then receives the directory's path.
     """
     spec = FormatSpec(
         name=name,
@@ -98,6 +105,7 @@ def register_format(
         description=description,
         companion=companion,
         side_outputs=side_outputs,
+        sniff_dir=sniff_dir,
     )
     _FORMATS[name] = spec
     for a in aliases:
@@ -184,7 +192,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     if not p.exists():
         raise ReadError(p, None, "file not found")
     if p.is_dir():
-        raise ReadError(p, None, "expected a file, found a directory")
+        return _detect_directory(p)
     if p.stat().st_size == 0:
         raise ReadError(p, None, "empty file: expected skeleton data")
     head = read_head(p)
@@ -210,6 +218,30 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         None,
         "unrecognised content: expected one of the formats "
         f"{sorted(n for n, s in _FORMATS.items() if s.reader is not None)}",
+    )
+
+
+def _detect_directory(path: Path) -> str:
+    """Name of the folder format with the best positive ``sniff_dir`` score."""
+    scored: list[tuple[int, str]] = []
+    folder_formats = []
+    for spec in _FORMATS.values():
+        if spec.sniff_dir is None or spec.reader is None:
+            continue
+        folder_formats.append(spec.name)
+        try:
+            score = int(spec.sniff_dir(path))
+        except Exception:  # a sniffer never decides by crashing
+            score = 0
+        if score > 0:
+            scored.append((score, spec.name))
+    if scored:
+        return max(scored)[1]
+    raise ReadError(
+        path,
+        None,
+        "expected a file, found a directory (folders are read by the formats "
+        f"{sorted(folder_formats)}, and this one holds none of their files)",
     )
 
 

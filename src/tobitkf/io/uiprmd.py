@@ -183,6 +183,7 @@ def read_uiprmd_kinect(
         positions=positions,
         topology=topo,
         fps=fps,
+        units="m",
         metadata={
             "source": str(path),
             "format": "uiprmd_kinect",
@@ -207,6 +208,7 @@ def read_uiprmd_vicon(
         positions=positions,
         topology=topo,
         fps=fps,
+        units="m",
         metadata={"source": str(path), "format": "uiprmd_vicon", "units_in_file": "mm"},
     )
     return [seq]

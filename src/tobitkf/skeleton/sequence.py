@@ -1,10 +1,12 @@
 """The skeleton sequence type: joint positions over time with tracking states.
 
-Arrays are time-first: ``positions`` is ``(T, J, 3)`` in metres with NaN marking a missing
-sample, ``tracking_state`` is ``(T, J)`` (:class:`TrackingState` codes) and ``timestamps``
-is ``(T,)`` seconds. A smoothed sequence also carries ``std`` ``(T, J)`` (posterior
-standard deviation, metres) and ``sample_state`` ``(T, J)`` (:class:`SampleState` codes:
-how each estimate came about).
+Arrays are time-first: ``positions`` is ``(T, J, D)`` with ``D = 3`` (3-D) or ``D = 2``
+(image keypoints), in ``units`` (``"m"``, ``"mm"``, ``"px"``, ... or None = unknown), with
+NaN marking a missing sample; ``tracking_state`` is ``(T, J)`` (Kinect
+:class:`TrackingState` codes), ``confidence`` ``(T, J)`` a pose estimator's score in
+[0, 1] (NaN where missing) and ``timestamps`` ``(T,)`` seconds. A smoothed sequence also
+carries ``std`` ``(T, J)`` (posterior standard deviation, in ``units``) and
+``sample_state`` ``(T, J)`` (:class:`SampleState` codes: how each estimate came about).
 """
 
 from __future__ import annotations
@@ -19,7 +21,21 @@ import numpy as np
 
 from tobitkf.skeleton.topology import Topology, get_topology
 
-__all__ = ["SampleState", "SkeletonSequence", "TrackingState"]
+__all__ = ["KNOWN_UNITS", "SampleState", "SkeletonSequence", "TrackingState"]
+
+#: units a sequence may declare (None = unknown); lengths in metres per unit, None when the
+#: unit is not a length in the world (pixels)
+KNOWN_UNITS: dict[str, float | None] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "px": None}
+
+
+class _Default:
+    """Marker of an argument left out (``units``: metres for 3-D, unknown for 2-D)."""
+
+    def __repr__(self) -> str:
+        return "<default>"
+
+
+_DEFAULT: Any = _Default()
 
 
 class TrackingState(IntEnum):
@@ -63,8 +79,8 @@ class SkeletonSequence:
 
     Parameters
     ----------
-    positions : ndarray, shape (T, J, 3)
-        Joint positions in metres; NaN where a joint is missing.
+    positions : ndarray, shape (T, J, D), D = 2 or 3
+        Joint positions in ``units``; NaN where a joint is missing.
     topology : Topology or str
         Joint names and tree; a string is resolved with :func:`get_topology`.
         ``topology.n_joints`` must equal J.
@@ -76,17 +92,27 @@ class SkeletonSequence:
     fps : float, optional
         Nominal frame rate, > 0.
     body_id : int, str or None
-        Identifier of the body (e.g. the Kinect body ID).
+        Identifier of the body (the Kinect body ID, or the individual's name of a
+        multi-animal / multi-person pose file).
     metadata : dict
         Source path, format and extra per-frame fields (e.g. ``orientations`` (T, J, 4));
         a smoothed sequence adds ``diagnostics`` and ``provenance`` (tobitkf version,
         method, complete parameters, source).
     std : ndarray, shape (T, J), optional
-        Posterior standard deviation of each position in metres: the root-mean-square
+        Posterior standard deviation of each position in ``units``: the root-mean-square
         over the axes of the per-axis posterior standard deviations, NaN where there is
         no estimate. Set by :func:`tobitkf.smooth` for methods that give one.
     sample_state : ndarray, shape (T, J), optional
         :class:`SampleState` codes (stored as int8); set by :func:`tobitkf.smooth`.
+    confidence : ndarray, shape (T, J), optional
+        A pose estimator's per-sample score in [0, 1] (DeepLabCut likelihood, SLEAP point
+        score, OpenPose / MediaPipe confidence); NaN where there is none for a sample;
+        None when the source gives none.
+    units : str or None
+        Unit of ``positions``: ``"m"``, ``"cm"``, ``"mm"``, ``"px"`` (image pixels) or None
+        (unknown). Left out: ``"m"`` for 3-D positions (the convention of every 3-D
+        reader), None for 2-D ones. Metric gates of the smoothers apply to length units;
+        for ``"px"`` and None they are taken from the recording itself (docs/robust.md).
     """
 
     positions: np.ndarray
@@ -98,6 +124,8 @@ class SkeletonSequence:
     metadata: dict[str, Any] = field(default_factory=dict)
     std: np.ndarray | None = None
     sample_state: np.ndarray | None = None
+    confidence: np.ndarray | None = None
+    units: str | None = _DEFAULT
 
     def __post_init__(self) -> None:
         topo = self.topology
@@ -110,8 +138,8 @@ class SkeletonSequence:
             pos = np.asarray(self.positions, dtype=float)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"positions must be numeric, found {exc}") from None
-        if pos.ndim != 3 or pos.shape[2] != 3:
-            raise ValueError(f"positions must have shape (T, J, 3), found {pos.shape}")
+        if pos.ndim != 3 or pos.shape[2] not in (2, 3):
+            raise ValueError(f"positions must have shape (T, J, 3) or (T, J, 2), found {pos.shape}")
         T, J = pos.shape[:2]
         if J != topo.n_joints:
             raise ValueError(
@@ -150,6 +178,28 @@ class SkeletonSequence:
                 raise ValueError("std values must be >= 0 and finite, or NaN (no estimate)")
             object.__setattr__(self, "std", sd)
         self._set_codes("sample_state", SampleState, "0 to 4")
+        if self.confidence is not None:
+            try:
+                conf = np.array(self.confidence, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"confidence must be numeric, found {exc}") from None
+            if conf.shape != (T, J):
+                raise ValueError(
+                    f"confidence must have shape (T, J) = {(T, J)}, found {conf.shape}"
+                )
+            if np.any((conf < 0) | (conf > 1)):
+                raise ValueError("confidence values must be in [0, 1] or NaN")
+            object.__setattr__(self, "confidence", conf)
+        units = self.units
+        if units is _DEFAULT:
+            units = "m" if pos.shape[2] == 3 else None
+        if units is not None:
+            if not isinstance(units, str) or units.strip().lower() not in KNOWN_UNITS:
+                raise ValueError(
+                    f"units must be one of {sorted(KNOWN_UNITS)} or None (unknown), found {units!r}"
+                )
+            units = units.strip().lower()
+        object.__setattr__(self, "units", units)
         if self.metadata is None:
             object.__setattr__(self, "metadata", {})
         elif not isinstance(self.metadata, dict):
@@ -185,6 +235,16 @@ class SkeletonSequence:
         return int(self.positions.shape[1])
 
     @property
+    def n_dims(self) -> int:
+        """Number of coordinates D per joint (2 or 3)."""
+        return int(self.positions.shape[2])
+
+    @property
+    def metres_per_unit(self) -> float | None:
+        """Length of one unit of ``positions`` in metres (None for pixels / unknown)."""
+        return None if self.units is None else KNOWN_UNITS[self.units]
+
+    @property
     def joint_names(self) -> tuple[str, ...]:
         """Joint names, length J."""
         return self.topology.joints
@@ -194,12 +254,14 @@ class SkeletonSequence:
 
     def __repr__(self) -> str:
         return (
-            f"SkeletonSequence(T={self.n_frames}, J={self.n_joints}, "
+            f"SkeletonSequence(T={self.n_frames}, J={self.n_joints}, D={self.n_dims}, "
+            f"units={self.units!r}, "
             f"topology={self.topology.name!r}, fps={self.fps}, body_id={self.body_id!r}, "
             f"tracking_state={'yes' if self.tracking_state is not None else 'no'}, "
             f"timestamps={'yes' if self.timestamps is not None else 'no'}"
             + (", std=yes" if self.std is not None else "")
             + (", sample_state=yes" if self.sample_state is not None else "")
+            + (", confidence=yes" if self.confidence is not None else "")
             + ")"
         )
 
@@ -253,7 +315,16 @@ class SkeletonSequence:
             metadata=meta,
             std=None if self.std is None else self.std[:, idx],
             sample_state=None if self.sample_state is None else self.sample_state[:, idx],
+            confidence=None if self.confidence is None else self.confidence[:, idx],
         )
+
+    def to_dataframe(self, layout: str = "long") -> Any:
+        """A pandas DataFrame of the sequence, ``layout`` ``"long"`` (a row per frame and
+        keypoint) or ``"wide"`` (a row per frame); see :mod:`tobitkf.skeleton.dataframe`,
+        and :func:`tobitkf.from_dataframe` for the way back."""
+        from tobitkf.skeleton.to_frame import to_dataframe
+
+        return to_dataframe(self, layout)
 
     def largest_jumps(self) -> tuple[np.ndarray, np.ndarray]:
         """Largest frame-to-frame displacement of each joint.
@@ -261,7 +332,7 @@ class SkeletonSequence:
         Returns
         -------
         jumps : ndarray, shape (J,)
-            ``max_t ||p_t - p_{t-1}||`` in metres over consecutive frames where both samples
+            ``max_t ||p_t - p_{t-1}||`` in ``units`` over consecutive frames where both samples
             are present; NaN if a joint has no such pair.
         frames : ndarray of int, shape (J,)
             Frame ``t`` at which the largest jump lands (``-1`` when ``jumps`` is NaN).
@@ -274,11 +345,11 @@ def largest_jumps(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Parameters
     ----------
-    positions : (T, J, 3)
+    positions : (T, J, D)
 
     Returns
     -------
-    jump : (J,) metres (NaN where a joint never has two consecutive valid frames)
+    jump : (J,) in the positions' units (NaN where a joint never has two consecutive valid frames)
     frame : (J,) index of the later frame of the largest jump (-1 if none)
     """
     p = np.asarray(positions, dtype=float)

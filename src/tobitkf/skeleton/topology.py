@@ -16,7 +16,13 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-__all__ = ["Topology", "available_topologies", "get_topology", "register_topology"]
+__all__ = [
+    "Topology",
+    "available_topologies",
+    "get_topology",
+    "parents_from_edges",
+    "register_topology",
+]
 
 GROUP_NAMES = ("hands", "arms", "torso", "legs")
 
@@ -104,8 +110,9 @@ class Topology:
         *,
         name: str = "custom",
         symmetry: Sequence[tuple[int, int]] | None = None,
+        edges: Iterable[tuple[int | str, int | str]] | None = None,
     ) -> Topology:
-        """Build a topology from joint names.
+        """Build a topology from joint names (and the bones a file declares, if any).
 
         Parameters
         ----------
@@ -119,8 +126,15 @@ class Topology:
         symmetry : sequence of (int, int), optional
             Left/right pairs; by default inferred from the names (``Left``/``Right``,
             ``left_``/``right_``, ``L``/``R`` prefixes, ``_l``/``_r`` suffixes).
+        edges : iterable of (a, b) joint names or indices, optional
+            Bones as a pose file declares them (a DeepLabCut ``skeleton``, SLEAP
+            ``edge_inds``), instead of ``parents``: see :func:`parents_from_edges`.
         """
         joints = tuple(str(n) for n in names)
+        if edges is not None:
+            if parents is not None:
+                raise ValueError("give parents or edges, not both")
+            parents = parents_from_edges(joints, edges)
         if parents is not None:
             index = {j: i for i, j in enumerate(joints)}
             resolved = []
@@ -220,6 +234,78 @@ class Topology:
             symmetry=sym,
             up_axis=self.up_axis,
         )
+
+
+def parents_from_edges(
+    joints: Sequence[str], edges: Iterable[tuple[int | str, int | str]]
+) -> tuple[int, ...]:
+    """Parent of each joint from undirected or directed bones ``(a, b)``.
+
+    When the edges read as ``(parent, child)`` form a forest (every joint has at most one
+    incoming edge and there is no cycle), that is the tree (SLEAP's directed skeletons).
+    Otherwise (a graph such as MediaPipe's connections, or DeepLabCut's undirected
+    ``skeleton``) the tree is a breadth-first spanning forest of the graph, each component
+    rooted at its joint listed first; edges that would close a cycle are left out.
+    Self-loops and repeated edges are ignored; an unknown joint is a ``ValueError``.
+    """
+    joints = tuple(joints)
+    index = {j: i for i, j in enumerate(joints)}
+    n = len(joints)
+
+    def resolve(v: int | str) -> int:
+        if isinstance(v, str) and v in index:
+            return index[v]
+        if not isinstance(v, str):
+            try:
+                i = int(v)
+            except (TypeError, ValueError):
+                i = -1
+            if 0 <= i < n:
+                return i
+        raise ValueError(f"bone end {v!r} is not a joint; joints: {list(joints)}")
+
+    pairs = []
+    for e in edges:
+        a, b = e
+        ia, ib = resolve(a), resolve(b)
+        if ia != ib and (ia, ib) not in pairs and (ib, ia) not in pairs:
+            pairs.append((ia, ib))
+    parents = [-1] * n
+    directed = True
+    for a, b in pairs:
+        if parents[b] != -1:
+            directed = False
+            break
+        parents[b] = a
+    if directed:
+        for j in range(n):  # a cycle never reaches a root
+            k, steps = j, 0
+            while k != -1 and steps <= n:
+                k, steps = parents[k], steps + 1
+            if k != -1:
+                directed = False
+                break
+    if directed:
+        return tuple(parents)
+    neighbours: list[list[int]] = [[] for _ in range(n)]
+    for a, b in pairs:
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+    parents = [-1] * n
+    seen = [False] * n
+    for root in range(n):
+        if seen[root]:
+            continue
+        seen[root] = True
+        queue = [root]
+        while queue:
+            u = queue.pop(0)
+            for v in neighbours[u]:
+                if not seen[v]:
+                    seen[v] = True
+                    parents[v] = u
+                    queue.append(v)
+    return tuple(parents)
 
 
 # ---------------------------------------------------------------------- name helpers

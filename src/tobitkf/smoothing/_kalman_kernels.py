@@ -387,6 +387,7 @@ def tobit_run(
     rs: np.ndarray,
     lower: np.ndarray,  # (3,) limits
     upper: np.ndarray,
+    tol: float,  # a sample beyond a limit by more than this is used as measured
     offline: bool,
     est: np.ndarray,
     std: np.ndarray,
@@ -394,8 +395,12 @@ def tobit_run(
     var: np.ndarray,
     state: np.ndarray,
     index: np.ndarray,
+    beyond: np.ndarray,  # out (N, 3) int64, zeros: samples beyond a limit, per joint axis
 ) -> None:
-    """tkf (core.tobit.tkf_update) or tkfc (core.tobit.tkfc_update), fixed limits."""
+    """tkf (core.tobit.tkf_update) or tkfc (core.tobit.tkfc_update), fixed limits. A
+    sensor clipped at a limit reports the limit itself: for a sample beyond a limit (by
+    more than ``tol``) that limit is lifted (±inf), as kalman_methods.sample_limits does
+    for the core."""
     T, N, _ = ys.shape
     has_rs = rs.shape[0] > 0
     _init(state, index, r)
@@ -415,6 +420,12 @@ def tobit_run(
                     continue
                 rr = r[a] * rsc if has_rs else r[a]
                 lo, up = lower[a], upper[a]
+                if y < lo - tol:
+                    lo = -math.inf
+                    beyond[n, a] += 1
+                elif y > up + tol:
+                    up = math.inf
+                    beyond[n, a] += 1
                 yc = min(max(y, lo), up)
                 if yc <= lo or yc >= up:
                     any_clip = True
@@ -430,7 +441,12 @@ def tobit_run(
                     ey = ey + p_up * min(max(up, -_BIG), _BIG)
                     floor = rr * (v_t + _EPS * (p_lo + p_up))
                     pxy = vp * pu
-                    K = pxy / (pu * pu * vp + floor)
+                    pyy = pu * pu * vp + floor
+                    K = pxy / pyy
+                    st[a, 0] = xp + K * (yc - ey)
+                    # v⁻ - Pxy²/Pyy written as v⁻ floor/Pyy: no cancellation (core.tobit)
+                    st[a, 1] = vp * (floor / pyy) if K != 0.0 else vp
+                    continue
                 st[a, 0] = xp + K * (yc - ey)
                 st[a, 1] = vp - K * pxy
             if valid:

@@ -294,7 +294,8 @@ def gate_frame(
             relock = (tt - sf[j, S_REJ_SINCE] > max_reject) and (
                 raw_step <= vmax * dt_prev + margin
             )
-        parent_acc = True if is_root else acc[p]
+        # a missing parent is no evidence against the joint (only a rejected one is)
+        parent_acc = is_root or acc[p] or not _finite3(y[pp, 0], y[pp, 1], y[pp, 2])
         bone_ok = True
         blen = math.nan
         if use_bones:
@@ -310,7 +311,7 @@ def gate_frame(
                 h_cnt[j, 0] = 0
                 h_cnt[j, 1] = 0
                 sf[j, S_L_CUR] = math.nan
-            if ok and parent_acc and not is_root:
+            if ok and not is_root and acc[p]:
                 _bone_push(h_ring, h_sorted, h_cnt, j, blen)
     for j in range(J):
         a = acc[j]
@@ -435,12 +436,13 @@ def chain_frame(
     pj: np.ndarray,
     margin: float,
 ) -> None:
-    """The chain rule on a combined mask: a joint whose parent is rejected stays accepted
-    only if it was accepted in the neighbouring frame and did not jump from it."""
+    """The chain rule on a combined mask: a joint whose parent is rejected (present but
+    not accepted; a missing parent says nothing) stays accepted only if it was accepted
+    in the neighbouring frame and did not jump from it."""
     for k in range(order.shape[0]):
         j = order[k]
         p = parents[j]
-        if p < 0 or not out_t[j] or out_t[p]:
+        if p < 0 or not out_t[j] or out_t[p] or not _finite3(y_t[p, 0], y_t[p, 1], y_t[p, 2]):
             continue
         moved = _dist(y_t[j, 0], y_t[j, 1], y_t[j, 2], y_s[j, 0], y_s[j, 1], y_s[j, 2])
         if not (out_s[j] and moved <= pj[j, J_VMAX] * dt + margin):

@@ -65,6 +65,15 @@ from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingSta
 from tobitkf.smoothing import baselines as _baselines  # noqa: F401
 from tobitkf.smoothing import kalman_methods as _kalman_methods  # noqa: F401
 from tobitkf.smoothing import robust as _robust  # noqa: F401
+from tobitkf.smoothing.arrays import sequence_from_array
+from tobitkf.smoothing.keypoints import (
+    DEFAULT_MIN_CONFIDENCE,
+    check_min_confidence,
+    drop_third_axis,
+    length_scale,
+    low_confidence,
+    pad_third_axis,
+)
 from tobitkf.smoothing.params import as_bool, check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import (
     MethodSpec,
@@ -107,7 +116,7 @@ DEFAULT_METHOD = "robust"
 #: most accurate causal one
 DEFAULT_LIVE_METHOD = "robust_online"
 #: keywords of :func:`smooth` accepted next to the method's parameters
-COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor")
+COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor", "min_confidence")
 
 
 def method_defaults(method: str) -> dict[str, Any]:
@@ -131,6 +140,8 @@ def check_params(method: str, params: Mapping[str, Any]) -> dict[str, Any]:
         check_up_axis(params["up_axis"])
     if "inferred_noise_factor" in params:
         check_inferred_factor(params["inferred_noise_factor"])
+    if "min_confidence" in params:
+        check_min_confidence(params["min_confidence"])
     return full
 
 
@@ -222,22 +233,38 @@ def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any
 
 
 def smooth(
-    sequence: SkeletonSequence | Sequence[SkeletonSequence],
+    sequence: SkeletonSequence | Sequence[SkeletonSequence] | np.ndarray,
     method: str = DEFAULT_METHOD,
     *,
     offline: bool = False,
     up_axis: int | None = None,
     inferred_noise_factor: float = DEFAULT_INFERRED_NOISE_FACTOR,
+    min_confidence: float = DEFAULT_MIN_CONFIDENCE,
+    fps: float | None = None,
+    confidence: Any = None,
+    units: str | None = None,
+    topology: Any = None,
     **params: Any,
 ) -> Any:
-    """Smooth every joint of a skeleton sequence (or a list of them, one per body).
+    """Smooth every joint of a skeleton sequence (or a list of them, one per body), or
+    the keypoint tracks of a NumPy array.
+
+    Any sequence: 2-D or 3-D, in any ``units``, with or without ``confidence``
+    (:mod:`tobitkf.smoothing.keypoints`: lengths are converted to metres for the method
+    and back; pixels and unknown units make the robust methods take their gates from the
+    recording, docs/robust.md).
 
     Parameters
     ----------
-    sequence : SkeletonSequence or list of SkeletonSequence
+    sequence : SkeletonSequence, list of SkeletonSequence, or ndarray
         A list is smoothed body by body and a list is returned; bodies with the same
         number of frames, time base and topology go to the method together, stacked on
-        a body axis.
+        a body axis. An array ``(T, J, D)`` (frames, keypoints, coordinates, D = 2 or 3)
+        or ``(T, D)`` (one point), NaN where missing, gives an array of the same shape,
+        like :func:`scipy.signal.savgol_filter`; ``fps``, ``confidence``, ``units`` and
+        ``topology`` describe it (:func:`tobitkf.smoothing.arrays.sequence_from_array`:
+        by default 30 fps, no confidence, unknown units, keypoints without bones) and
+        are refused for sequences, which carry their own.
     method : str
         A registered method (``tobitkf methods``; default :data:`DEFAULT_METHOD`,
         ``"robust"``).
@@ -248,6 +275,10 @@ def smooth(
         Vertical axis (0, 1, 2); default: ``sequence.topology.up_axis``.
     inferred_noise_factor : float
         Measurement-variance multiplier (>= 1) for INFERRED joints.
+    min_confidence : float
+        Samples whose ``confidence`` is below this are missing (default
+        :data:`~tobitkf.smoothing.keypoints.DEFAULT_MIN_CONFIDENCE`, 0.1); no effect on
+        sequences without confidence.
     **params
         Method parameters; :func:`method_defaults` lists them.
 
@@ -262,20 +293,34 @@ def smooth(
     if up_axis is not None:
         up_axis = check_up_axis(up_axis)
     factor = check_inferred_factor(inferred_noise_factor)
+    min_conf = check_min_confidence(min_confidence)
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
+    opts = (offline, up_axis, factor, min_conf)
+    described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology}
+    if isinstance(sequence, np.ndarray):
+        seq, single = sequence_from_array(sequence, **described)
+        est = _smooth_group([seq], spec, full, *opts)[0].positions
+        return est[:, 0] if single else est
+    given = [k for k, v in described.items() if v is not None]
+    if given:
+        raise TypeError(
+            f"{', '.join(given)}: only for an array; a SkeletonSequence carries its own "
+            "(use sequence.replace(...) to change them)"
+        )
     if isinstance(sequence, SkeletonSequence):
-        return _smooth_group([sequence], spec, full, offline, up_axis, factor)[0]
+        return _smooth_group([sequence], spec, full, *opts)[0]
     if isinstance(sequence, (str, bytes)) or not isinstance(sequence, Sequence):
         raise TypeError(
-            f"smooth expects a SkeletonSequence or a list of them, got {type(sequence).__name__}"
+            "smooth expects a SkeletonSequence, a list of them or a NumPy array, got "
+            f"{type(sequence).__name__}"
         )
     seqs = list(sequence)
     for i, s in enumerate(seqs):
         if not isinstance(s, SkeletonSequence):
             raise TypeError(
-                f"smooth expects a SkeletonSequence or a list of them; item {i} is "
-                f"{type(s).__name__}"
+                f"smooth expects a SkeletonSequence, a list of them or a NumPy array; item "
+                f"{i} is {type(s).__name__}"
             )
     out: list[Any] = [None] * len(seqs)
     groups: dict[Any, list[int]] = {}
@@ -286,10 +331,13 @@ def smooth(
             s.fps,
             None if s.timestamps is None else s.timestamps.tobytes(),
             s.tracking_state is None,
+            s.confidence is None,
+            s.n_dims,
+            s.units,
         )
         groups.setdefault(key, []).append(i)
     for idx in groups.values():
-        res = _smooth_group([seqs[i] for i in idx], spec, full, offline, up_axis, factor)
+        res = _smooth_group([seqs[i] for i in idx], spec, full, *opts)
         for i, r in zip(idx, res, strict=True):
             out[i] = r
     return out
@@ -308,20 +356,34 @@ def _smooth_group(
     offline: bool,
     up_axis: int | None,
     factor: float,
+    min_conf: float = DEFAULT_MIN_CONFIDENCE,
 ) -> list[SkeletonSequence]:
-    """Smooth bodies sharing frames, topology and time base, stacked on a body axis."""
+    """Smooth bodies sharing frames, topology, time base, dimension and units, stacked
+    on a body axis."""
     ref = seqs[0]
     steps, _, is_reference = frame_steps(ref)
-    # (T, B, J, 3); one body is a view, not a copy
+    # (T, B, J, D); one body is a view, not a copy
     positions = (
         seqs[0].positions[:, None]
         if len(seqs) == 1
         else np.stack([s.positions for s in seqs], axis=1)
     )
+    n_dims = positions.shape[-1]
+    scale = length_scale(ref.units)  # metres per unit; None: pixels / unknown
+    if scale is not None and scale != 1.0:
+        positions = positions * scale
+    positions = pad_third_axis(positions)
     states = None
     if ref.tracking_state is not None:
         states = np.stack([s.tracking_state for s in seqs], axis=1)
+    confidence = None
+    if ref.confidence is not None:
+        confidence = np.stack([s.confidence for s in seqs], axis=1)
     ys, missing = measurements(positions, states)
+    low = low_confidence(confidence, min_conf)
+    if low is not None and (low & ~missing).any():
+        missing = missing | low
+        ys = np.where(missing[..., None], np.nan, ys)
     positions, ys = _read_only(positions), _read_only(ys)  # a method must not write into them
     inp = SmoothInput(
         positions=positions,
@@ -335,12 +397,17 @@ def _smooth_group(
         up_axis=ref.topology.up_axis if up_axis is None else up_axis,
         inferred_noise_factor=factor,
         offline=offline,
+        confidence=confidence,
+        units="m" if scale is not None else ref.units,
+        n_dims=n_dims,
     )
     if ref.n_frames == 0:
         result = SmoothOutput(positions.copy())
     else:
         result = run_method(spec, inp, params)
-    est = np.asarray(result.positions, dtype=float)
+    est = drop_third_axis(np.asarray(result.positions, dtype=float), n_dims)
+    if scale is not None and scale != 1.0:
+        est = est / scale
     clipped = (
         np.zeros(missing.shape, dtype=bool)
         if result.clipped is None
@@ -357,6 +424,8 @@ def _smooth_group(
     std = None
     if result.std is not None:
         std = np.asarray(result.std, dtype=float)
+        if scale is not None and scale != 1.0:
+            std = std / scale
         if (~finite & ~np.isnan(std)).any():  # as a rule the method's NaN are there already
             std = np.where(finite, std, np.nan)
     T = max(ref.n_frames, 1)
@@ -367,6 +436,8 @@ def _smooth_group(
         "inferred_noise_factor": factor,
         "up_axis": inp.up_axis,
     }
+    if confidence is not None:
+        used["min_confidence"] = min_conf
     out = []
     for b, s in enumerate(seqs):
         filled = (missing[:, b] | rejected[:, b]) & finite[:, b]

@@ -22,7 +22,14 @@ camera space, z for most optical systems); ``up_axis=`` overrides it. An explici
 ``c=(cx, cy, cz)`` is used as given, in the sequence's axes. The Kinect device limits of
 ``tkf`` / ``tkfc`` are defined in Kinect camera axes (x right, y up, z depth from the
 sensor): they only make sense for Kinect camera-space data; give ``lower=`` / ``upper=``
-for anything else.
+for anything else. A sensor that clips at a limit reports the limit itself, never a
+value beyond it: a sample beyond a limit (by more than 1 µm) is therefore used as an
+ordinary measurement on that axis instead of a censored one (the core filters, which
+follow the papers, would read it as censored at the limit and, if it stays there, pull
+the estimate ever further out: KIMORE's feet at y = -1.54 m against the -1.5 m limit
+drifted 1.3 m with ``tkfc``). When a joint axis lies beyond a limit persistently (at
+least 10 samples and 1 % of its samples) a warning says that the limits do not describe
+the recording.
 
 Tracking states. NOT_TRACKED joints and NaN positions are predicted, not updated.
 INFERRED joints get their measurement variance multiplied by ``inferred_noise_factor``.
@@ -36,6 +43,7 @@ the position is NaN. For the Tobit filters it is the Gaussian approximation's va
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -92,6 +100,56 @@ def _check_limits(params: dict[str, Any]) -> None:
         raise ValueError(f"lower {params['lower']} must be below upper {params['upper']}")
 
 
+#: a measurement further beyond a censoring limit than this (m) cannot have been clipped
+#: there (a clipped sensor reports the limit itself)
+BEYOND_LIMIT_TOL = 1e-6
+#: a joint axis with at least this many samples beyond a limit, and this fraction of its
+#: present samples, contradicts the limit persistently: a warning says so
+BEYOND_WARN_COUNT = 10
+BEYOND_WARN_FRACTION = 0.01
+
+
+def sample_limits(
+    ys: Array, valid: NDArray[np.bool_], lower: Array, upper: Array
+) -> tuple[Array, Array, NDArray[np.bool_]] | None:
+    """Per-sample limits for measurements ``ys (T or 1, *batch, 3)``: a limit is lifted
+    (set to -inf / +inf) for a sample that lies beyond it, since a sensor that clips at a
+    limit reports the limit itself, never a value beyond it; such a sample is used as
+    measured instead of pulling the estimate ever further out. ``None`` when no sample
+    lies beyond a limit (the constant limits apply as given). Also returns the mask of
+    samples beyond a limit."""
+    present = valid[..., None]
+    lo_out = present & (ys < lower - BEYOND_LIMIT_TOL)
+    up_out = present & (ys > upper + BEYOND_LIMIT_TOL)
+    beyond = lo_out | up_out
+    if not beyond.any():
+        return None
+    return np.where(lo_out, -np.inf, lower), np.where(up_out, np.inf, upper), beyond
+
+
+def warn_contradicted_limits(
+    count: NDArray[np.int64], n_valid: NDArray[np.int64], joint_names: Any, method: str
+) -> None:
+    """Warn when the data lie beyond a censoring limit persistently (per joint axis):
+    ``count (*batch, 3)`` samples beyond a limit out of ``n_valid (*batch)`` present."""
+    n = np.maximum(n_valid, 1)[..., None]
+    bad = (count >= BEYOND_WARN_COUNT) & (count >= BEYOND_WARN_FRACTION * n)
+    if not bad.any():
+        return
+    joints = sorted({int(j) for j in np.nonzero(bad.any(axis=-1))[-1]})
+    names = [str(joint_names[j]) if joint_names is not None else str(j) for j in joints]
+    worst = float((count / n).max())
+    warnings.warn(
+        f"{method}: the data lie beyond the censoring limits (up to {worst:.0%} of a joint "
+        f"axis's samples; joints {', '.join(names[:6])}{' ...' if len(names) > 6 else ''}): "
+        "a sensor clipped at a limit never reports beyond it, so these limits do not "
+        "describe this recording; those samples are used as measured. Give lower= / "
+        "upper= for this sensor (the defaults are the Kinect V2's camera-space limits).",
+        UserWarning,
+        stacklevel=4,
+    )
+
+
 def _vec3(v: Any) -> Array:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (3,)))
 
@@ -125,8 +183,14 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     work = (var, np.empty((N, 3, 6)), np.empty((N, 2), dtype=np.int64))
     if kind == "tkf":
         lower, upper = _vec3(params["lower"]), _vec3(params["upper"])
-        k.tobit_run(variant == "corrected", flat, qs, r, rs, lower, upper, bool(inp.offline),
-                    est, std, clipped, *work)  # fmt: skip
+        beyond = np.zeros((N, 3), dtype=np.int64)  # samples beyond a limit: used as measured
+        k.tobit_run(variant == "corrected", flat, qs, r, rs, lower, upper, BEYOND_LIMIT_TOL,
+                    bool(inp.offline), est, std, clipped, *work, beyond)  # fmt: skip
+        if beyond.any():
+            warn_contradicted_limits(
+                beyond.reshape((*bshape, 3)), (~inp.missing).sum(axis=0), inp.topology.joints,
+                "tkf" if variant == "standard" else "tkfc",
+            )  # fmt: skip
     else:
         c = atkf_c(params, inp.up_axis) if kind == "atkf" else np.full(3, np.inf)
         if kind == "atkf":
@@ -187,14 +251,19 @@ def run_kalman_core(
     elif kind == "kf":
         result = kalman_filter(model, ys, **kwargs)
     else:
+        lower = np.asarray(params["lower"], dtype=float)
+        upper = np.asarray(params["upper"], dtype=float)
+        lifted = sample_limits(ys, valid, lower, upper)
+        if lifted is not None:
+            kwargs["lower_seq"], kwargs["upper_seq"], beyond = lifted
+            lower = upper = None
+            warn_contradicted_limits(
+                beyond.sum(axis=0), valid.sum(axis=0), inp.topology.joints,
+                "tkf" if variant == "standard" else "tkfc",
+            )  # fmt: skip
+            del beyond
         result = tobit_filter(
-            model,
-            ys,
-            np.asarray(params["lower"], dtype=float),
-            np.asarray(params["upper"], dtype=float),
-            variant=variant,
-            keep_probabilities=False,
-            **kwargs,
+            model, ys, lower, upper, variant=variant, keep_probabilities=False, **kwargs
         )
     final = rts_smooth(model, result) if inp.offline else result
     est = final.means
@@ -269,6 +338,10 @@ class KalmanStepper:
         r_scale = inferred_r_scale(states, valid, self.factor)
         if r_scale is not None:
             kwargs["R_scale"] = r_scale
+        if self.kind == "tkf":
+            lifted = sample_limits(ys, valid, self._filter.lower, self._filter.upper)
+            if lifted is not None:
+                kwargs["lower"], kwargs["upper"] = lifted[:2]
         if self._c is not None:
             last = self._last_valid_time
             elapsed = np.where(np.isfinite(last), self._time - last, dt)

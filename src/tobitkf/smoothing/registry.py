@@ -71,6 +71,13 @@ class SmoothInput:
     up_axis : the vertical axis (0, 1, 2)
     inferred_noise_factor : variance multiplier for INFERRED joints
     offline : an RTS pass was asked for (only methods registered with ``offline_ok``)
+    confidence : (T, B, J) a pose estimator's score in [0, 1] of every sample (NaN = none
+        for that sample; samples below ``min_confidence`` are missing already), or None
+    units : the unit of the positions as the method sees them (``"m"``: lengths are
+        converted to metres before a method runs; ``"px"`` or None = unknown)
+    n_dims : coordinates of the sequence (2 or 3); a 2-D sequence reaches the method
+        with a third axis of zeros (NaN where missing), so ``ys`` is always
+        ``(T, B, J, 3)``, and that axis is dropped from the output
     """
 
     positions: Array
@@ -84,6 +91,9 @@ class SmoothInput:
     up_axis: int
     inferred_noise_factor: float
     offline: bool = False
+    confidence: Array | None = None
+    units: str | None = "m"
+    n_dims: int = 3
 
     @property
     def n_frames(self) -> int:

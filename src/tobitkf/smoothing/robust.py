@@ -61,7 +61,11 @@ standard deviation is ``speed_sd``, per body region) and measurement noise ``noi
 filter output is returned: across a rejected stretch the OU velocity decays with
 ``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
 held. Online, a joint not accepted yet is returned as measured (its filter starts at its
-first accepted sample; live, nobody knows whether it ever will be).
+first accepted sample; live, nobody knows whether it ever will be), and no output step
+of a joint is larger than the largest step of its input so far
+(:mod:`tobitkf.smoothing._step_guard`): after a long rejection the estimate catches up
+over a few frames instead of snapping back in one, and the shift is added to its
+standard deviation.
 
 Implementation
 --------------
@@ -84,17 +88,27 @@ from numpy.typing import NDArray
 
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing.keypoints import (
+    DEFAULT_MIN_CONFIDENCE,
+    check_min_confidence,
+    drop_third_axis,
+    length_scale,
+    low_confidence,
+    pad_third_axis,
+)
 from tobitkf.smoothing.params import (
     as_bool,
     at_least_int,
     check_inferred_factor,
     nonneg_float,
     nonneg_or_inf,
+    one_of,
     positive_or_inf,
     region_value,
 )
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
 from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
+from tobitkf.smoothing.robust_scale import recording_gates
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     frame_steps,
@@ -132,6 +146,10 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "min_run": 0.1,
     # rejected joints follow their parent (offset from the last good frame, sd = bone)
     "carry": True,
+    # metric parameters: "physical" (as given, in metres or the data's units), "recording"
+    # (taken from the recording: robust_scale), "auto" (physical for lengths, recording
+    # for pixels and unknown units)
+    "gates": "auto",
 }
 
 #: parameter validators (name -> check(name, value) -> value)
@@ -149,7 +167,13 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "lookback": at_least_int(0),
     "min_run": nonneg_float,
     "carry": as_bool,
+    "gates": one_of("auto", "physical", "recording"),
 }
+
+#: the parameters :func:`tobitkf.smoothing.robust_scale.recording_gates` derives
+RECORDING_PARAMS = ("noise_sd", "speed_sd", "v_max", "margin", "bone_tol_abs", "bone_tol_rel")
+#: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
+MIN_CONFIDENCE_WEIGHT = 0.01
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -211,12 +235,25 @@ class _Setup:
         return self.parents, self.order, self.pj, self.pf, self.pi
 
 
-def _inferred_scale(states: Any, missing: NDArray[np.bool_], factor: float) -> Array:
-    """Measurement-variance multiplier per sample: ``factor`` for valid INFERRED ones."""
+def _inferred_scale(
+    states: Any, missing: NDArray[np.bool_], factor: float, confidence: Any = None
+) -> Array:
+    """Measurement-variance multiplier per sample: ``factor`` for valid INFERRED ones,
+    times ``1 / confidence²`` where a confidence is given (the standard deviation grows
+    as the estimator's score falls; NaN confidence: 1)."""
     scale = inferred_r_scale(states, ~missing, factor)
-    if scale is None:
-        return np.ones(missing.shape)
-    return np.ascontiguousarray(scale[..., 0])
+    out = np.ones(missing.shape) if scale is None else np.ascontiguousarray(scale[..., 0])
+    if confidence is not None:
+        c = np.asarray(confidence, dtype=float)
+        w = np.where(np.isnan(c), 1.0, 1.0 / np.maximum(c, MIN_CONFIDENCE_WEIGHT) ** 2)
+        out = np.ascontiguousarray(out * w)
+    return out
+
+
+def use_recording_gates(params: dict[str, Any], units: str | None) -> bool:
+    """Whether the metric parameters come from the recording (``gates``, ``units``)."""
+    gates = params.get("gates", "auto")
+    return gates == "recording" or (gates == "auto" and units not in ("m", "cm", "mm"))
 
 
 def _offline(
@@ -278,6 +315,13 @@ def _offline(
     return est, rejected, var
 
 
+def step_guard() -> Any:
+    """The compiled causal step guard (imports numba on first use)."""
+    from tobitkf.smoothing import _step_guard
+
+    return _step_guard
+
+
 def _robust_bodies(
     ys: Array,
     missing: NDArray[np.bool_],
@@ -288,6 +332,9 @@ def _robust_bodies(
     params: dict[str, Any],
     factor: float,
     offline: bool,
+    confidence: Any = None,
+    units: str | None = "m",
+    n_dims: int = 3,
 ) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any]]:
     """Gate and smooth every body at once: ys (T, B, J, 3) NaN where missing.
 
@@ -295,6 +342,10 @@ def _robust_bodies(
     diagnostics dict per body and the resolved per-joint parameters.
     """
     T, B, J = missing.shape
+    derived: dict[str, Any] = {}
+    if use_recording_gates(params, units):
+        derived = recording_gates(ys, steps, topo.parents, n_dims)
+        params = {**params, **derived}
     setup = _Setup(topo, params)
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     L = bone_lengths(ys, topo.parents) if params["bones"] else None  # (B, J)
@@ -302,7 +353,7 @@ def _robust_bodies(
     missing = np.ascontiguousarray(missing, dtype=bool)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
-    rinf = _inferred_scale(states, missing, factor)
+    rinf = _inferred_scale(states, missing, factor, confidence)
     if offline:
         L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
         est, rejected, var = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
@@ -312,6 +363,8 @@ def _robust_bodies(
         var = np.empty((T, B, J))
         k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var)  # fmt: skip
+        guard = step_guard()
+        guard.guard_frames(ys, missing, est, var, *guard.new_state(B, J, ys.shape[-1]))
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -320,14 +373,18 @@ def _robust_bodies(
         }
         for b in range(B)
     ]
-    return est, np.sqrt(var), diags, setup.resolved
+    resolved = dict(setup.resolved)
+    for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
+        if name in derived:
+            resolved[name] = float(derived[name])
+    return est, np.sqrt(var), diags, resolved
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
     """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
     est, std, diags, resolved = _robust_bodies(
         inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
-        inp.inferred_noise_factor, offline,
+        inp.inferred_noise_factor, offline, inp.confidence, inp.units, inp.n_dims,
     )  # fmt: skip
     return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {})
 
@@ -358,6 +415,7 @@ class RobustStepper:
         if self._state is None:
             self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]))
             self._scratch = k.new_work(B, J)
+            self._guard = step_guard().new_state(B, J, ys.shape[-1])
             self._time = 0.0
         else:
             self._time = self._time + dt  # the batch times: the cumulated steps
@@ -371,6 +429,10 @@ class RobustStepper:
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
             *self._scratch, out, self.rejected[None], self.std[None],
         )  # fmt: skip
+        step_guard().guard_frames(
+            np.ascontiguousarray(ys, dtype=float)[None],
+            np.ascontiguousarray(missing, dtype=bool)[None], out, self.std[None], *self._guard,
+        )  # fmt: skip
         np.sqrt(self.std, out=self.std)
         return out[0]
 
@@ -380,6 +442,7 @@ def robust_smooth(
     *,
     offline: bool = True,
     inferred_noise_factor: float = DEFAULT_INFERRED_NOISE_FACTOR,
+    min_confidence: float = DEFAULT_MIN_CONFIDENCE,
     **params: Any,
 ) -> SkeletonSequence:
     """Reject physically impossible measurements, then smooth (module docstring).
@@ -389,11 +452,14 @@ def robust_smooth(
 
     Parameters
     ----------
-    sequence : SkeletonSequence, positions (T, J, 3) in metres.
+    sequence : SkeletonSequence, positions (T, J, D) (any units: lengths are converted
+        to metres; pixels and unknown units take the gates from the recording, ``gates``).
     offline : True (default): bone lengths from the whole recording, forward + backward
         gating, RTS smoother (interpolates across rejected stretches).  False: causal
         (online) — running bone lengths, forward gating, Kalman filter output only.
     inferred_noise_factor : variance multiplier for INFERRED joints (default 4).
+    min_confidence : samples whose confidence is below this are missing (default 0.1);
+        the others get the measurement variance times ``1 / confidence²``.
     v_max : speed bound, m/s: a number, (J,) values or a mapping per body region
         (``hands``, ``arms``, ``torso``, ``legs``); default hands 8, arms 5, torso 3, legs 10.
     margin : speed-gate noise allowance, m (default 0.05).
@@ -416,6 +482,10 @@ def robust_smooth(
     carry : rejected joints are carried along with their parent (pseudo-measurement at
         the parent plus the last good offset, standard deviation = that bone's length),
         instead of only being predicted by their own motion model (default True).
+    gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
+        recording for pixels and unknown units), ``"physical"`` (as given, in the data's
+        units after conversion of lengths to metres) or ``"recording"``
+        (:mod:`tobitkf.smoothing.robust_scale`).
 
     Returns
     -------
@@ -430,6 +500,7 @@ def robust_smooth(
         raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
     offline = as_bool("offline", offline)
     factor = check_inferred_factor(inferred_noise_factor)
+    min_conf = check_min_confidence(min_confidence)
     unknown = sorted(set(params) - set(ROBUST_DEFAULTS))
     if unknown:
         raise ValueError(
@@ -441,14 +512,27 @@ def robust_smooth(
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
     states = sequence.tracking_state
-    ys, missing = measurements(sequence.positions, states)
+    scale = length_scale(sequence.units)
+    positions = sequence.positions if scale in (None, 1.0) else sequence.positions * scale
+    ys, missing = measurements(pad_third_axis(positions), states)
+    conf = sequence.confidence
+    low = low_confidence(conf, min_conf)
+    if low is not None and (low & ~missing).any():
+        missing = missing | low
+        ys = np.where(missing[..., None], np.nan, ys)
     steps = frame_steps(sequence)[0]
     est, std, diags, resolved = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
         frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
+        None if conf is None else conf[:, None], "m" if scale is not None else sequence.units,
+        sequence.n_dims,
     )  # fmt: skip
-    est, std, diag = est[:, 0], std[:, 0], diags[0]
+    est, std, diag = drop_third_axis(est[:, 0], sequence.n_dims), std[:, 0], diags[0]
+    if scale not in (None, 1.0):
+        est, std = est / scale, std / scale
     used = {**full, **resolved, "inferred_noise_factor": factor, "offline": offline}
+    if conf is not None:
+        used["min_confidence"] = min_conf
     filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
     diagnostics = {
         **diag,

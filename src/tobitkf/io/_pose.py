@@ -1,0 +1,209 @@
+"""What the pose-estimator formats share: optional imports, arrays to sequences, and
+sequences to the (frames, individuals, keypoints) arrays their writers need."""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from tobitkf.io._text import check_positions, check_rate
+from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+
+__all__ = [
+    "HDF5_MAGIC",
+    "PoseArrays",
+    "is_hdf5",
+    "pose_arrays",
+    "require",
+    "sequences_from_arrays",
+]
+
+HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+
+#: module -> the pip extra that installs it
+_EXTRAS = {
+    "h5py": "pose",
+    "pandas": "pose",
+    "tables": "pose",
+    "xarray": "pose",
+    "h5netcdf": "pose",
+    "sleap_io": "slp",
+    "movement": "movement",
+}
+_PIP = {"sleap_io": "sleap-io", "tables": "tables"}
+
+
+def require(module: str, what: str) -> Any:
+    """Import an optional dependency, or an ImportError saying how to install it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        extra = _EXTRAS.get(module, "pose")
+        raise ImportError(
+            f"{what} needs the '{_PIP.get(module, module)}' package: "
+            f"pip install 'tobitkf[{extra}]' (or pip install {_PIP.get(module, module)})"
+        ) from None
+
+
+def is_hdf5(path: str | os.PathLike[str]) -> bool:
+    """True when the file starts with the HDF5 signature."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(8) == HDF5_MAGIC
+    except OSError:
+        return False
+
+
+def _fps(path: Any, fps: Any) -> float | None:
+    if fps is None:
+        return None
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)):
+        raise OptionError(f"fps must be a number, found {fps!r}")
+    return check_rate(path, None, float(fps), "fps", repr(fps))
+
+
+def sequences_from_arrays(
+    path: Any,
+    positions: np.ndarray,
+    confidence: np.ndarray | None,
+    keypoints: Sequence[str],
+    individuals: Sequence[Any] | None,
+    *,
+    fmt: str,
+    units: str | None = "px",
+    fps: Any = None,
+    timestamps: np.ndarray | None = None,
+    edges: Sequence[tuple[Any, Any]] | None = None,
+    symmetry: Sequence[tuple[str, str]] | None = None,
+    metadata: dict[str, Any] | None = None,
+    implausible: str = "error",
+) -> list[SkeletonSequence]:
+    """One sequence per individual from ``positions (T, I, J, D)`` and ``confidence
+    (T, I, J)`` (scores outside [0, 1] are clipped into it: SLEAP's peak values can
+    exceed 1). ``individuals`` None: a single unnamed individual (``I = 1``)."""
+    pos = np.asarray(positions, dtype=float)
+    if pos.ndim != 4 or pos.shape[-1] not in (2, 3) or pos.shape[2] != len(keypoints):
+        raise ReadError(
+            path,
+            None,
+            f"expected positions (frames, individuals, {len(keypoints)} keypoints, 2 or 3), "
+            f"found shape {pos.shape}",
+        )
+    if np.isinf(pos).any():
+        raise ReadError(path, None, "positions hold inf; expected numbers or NaN")
+    names = [str(k) for k in keypoints]
+    if len(set(names)) != len(names):
+        raise ReadError(path, None, f"duplicate keypoint names {names}")
+    conf = None
+    clipped = False
+    if confidence is not None:
+        conf = np.asarray(confidence, dtype=float)
+        if conf.shape != pos.shape[:3]:
+            raise ReadError(
+                path, None, f"confidence of shape {conf.shape}; expected {pos.shape[:3]}"
+            )
+        if np.isinf(conf).any():
+            raise ReadError(path, None, "confidence holds inf; expected numbers or NaN")
+        with np.errstate(invalid="ignore"):
+            clipped = bool(np.any((conf < 0) | (conf > 1)))
+        conf = np.clip(conf, 0.0, 1.0)
+    try:
+        if edges:
+            topo = Topology.from_names(names, name=fmt, edges=edges)
+        else:
+            topo = Topology.from_names(names, name=fmt)
+        if symmetry:
+            index = {n: i for i, n in enumerate(names)}
+            pairs = [(index[a], index[b]) for a, b in symmetry if a in index and b in index]
+            topo = Topology(topo.name, topo.joints, topo.parents, tuple(pairs), topo.up_axis)
+    except ValueError as exc:
+        raise ReadError(path, None, f"bad skeleton: {exc}") from None
+    rate = _fps(path, fps)
+    inds = [None] if individuals is None else list(individuals)
+    if len(inds) != pos.shape[1]:
+        raise ReadError(path, None, f"{pos.shape[1]} individuals but {len(inds)} names")
+    out = []
+    for i, ind in enumerate(inds):
+        p = np.ascontiguousarray(pos[:, i])
+        c = None if conf is None else np.ascontiguousarray(conf[:, i])
+        if c is not None and np.isnan(c).all():
+            c = None
+        check_positions(path, p, None, implausible, names=names, units=units)
+        meta = {"source": str(path), "format": fmt, **(metadata or {})}
+        if clipped:
+            meta["confidence_clipped"] = True
+        out.append(
+            SkeletonSequence(
+                p,
+                topo,
+                confidence=c,
+                units=units,
+                fps=rate,
+                timestamps=timestamps,
+                body_id=None if ind is None else _name(ind),
+                metadata=meta,
+            )
+        )
+    return out
+
+
+def _name(ind: Any) -> Any:
+    if isinstance(ind, bytes):
+        return ind.decode("utf-8", errors="replace")
+    if isinstance(ind, np.generic):
+        return ind.item()
+    return ind
+
+
+class PoseArrays:
+    """Sequences laid out for a pose writer: ``positions (T, I, J, D)``, ``confidence
+    (T, I, J)`` (NaN where none), ``keypoints``, ``individuals`` (names), ``fps``."""
+
+    def __init__(self, seqs: list[SkeletonSequence]) -> None:
+        first = seqs[0]
+        for s in seqs[1:]:
+            if (s.joint_names, s.n_dims, s.n_frames) != (
+                first.joint_names, first.n_dims, first.n_frames,
+            ):  # fmt: skip
+                raise ValueError(
+                    "all sequences written to one pose file must share keypoints, dimension "
+                    "and frame count"
+                )
+        self.positions = np.stack([s.positions for s in seqs], axis=1)
+        self.confidence = np.stack(
+            [
+                np.full(s.positions.shape[:2], np.nan) if s.confidence is None else s.confidence
+                for s in seqs
+            ],
+            axis=1,
+        )
+        self.keypoints = list(first.joint_names)
+        self.individuals = _individual_names(seqs)
+        self.fps = first.fps
+        self.n_dims = first.n_dims
+        self.topology = first.topology
+
+
+def _individual_names(seqs: list[SkeletonSequence]) -> list[str]:
+    """Distinct text names: the body ids when they are distinct, else ``individual_<k>``."""
+    ids = [s.body_id for s in seqs]
+    names = [str(b) for b in ids]
+    if any(b is None for b in ids) or len(set(names)) != len(names):
+        names = [f"individual_{k}" if b is None else f"{b}_{k}" for k, b in enumerate(ids)]
+        if len(seqs) == 1:
+            names = [str(ids[0]) if ids[0] is not None else "individual_0"]
+    return names
+
+
+def pose_arrays(sequences: Sequence[SkeletonSequence]) -> PoseArrays:
+    """The writer's arrays of ``sequences`` (ValueError when they do not fit one file)."""
+    seqs = list(sequences)
+    if not seqs:
+        raise ValueError("nothing to write: no sequences")
+    return PoseArrays(seqs)

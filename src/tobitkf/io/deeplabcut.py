@@ -1,0 +1,252 @@
+"""DeepLabCut pose files (.h5 and .csv; single- and multi-animal), read and written.
+
+DeepLabCut stores a pandas DataFrame whose columns are a MultiIndex with the levels
+``scorer``, ``individuals`` (multi-animal projects only), ``bodyparts`` and ``coords``
+(``x``, ``y``, ``likelihood``; ``x``, ``y``, ``z`` for 3-D). The row index is the frame
+number (``range(n_frames)`` for video predictions; ``labeled-data/<video>/<image>``
+paths for labelled frames, read as frames 0, 1, ...). The ``.h5`` holds it under the key
+``df_with_missing`` (``DataFrame.to_hdf(path, key="df_with_missing", format="table")``,
+PyTables); the ``.csv`` is ``DataFrame.to_csv(path)``: one header row per column level,
+its first field the level's name, then a row per frame starting with the index.
+
+Read: one sequence per individual (``body_id`` = the individual's name; a single-animal
+file gives one sequence with ``body_id`` None), positions in pixels (``units="px"``;
+3-D files: unknown units), ``confidence`` = ``likelihood``. In a multi-animal file the
+``single`` individual of DeepLabCut's unique body parts has its own keypoints. The
+file declares no skeleton (it lives in the project's ``config.yaml``): pass
+``skeleton=[("snout", "tailbase"), ...]`` for bones, and ``fps=`` for the time base.
+
+Write (:func:`write_deeplabcut`): the same layout, so the output goes back into
+DeepLabCut (or movement, or any tool reading its files): ``.h5`` or ``.csv`` by the
+path's suffix, ``likelihood`` = the confidence (1 where a position is given without
+one, NaN where it is missing), scorer ``tobitkf`` unless the input's is kept.
+Needs pandas (and PyTables for ``.h5``): ``pip install 'tobitkf[pose]'``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tobitkf.io._pose import is_hdf5, pose_arrays, require, sequences_from_arrays
+from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
+from tobitkf.skeleton.sequence import SkeletonSequence
+
+__all__ = [
+    "DLC_KEY",
+    "read_deeplabcut",
+    "sequences_from_dlc_frame",
+    "sniff_deeplabcut",
+    "write_deeplabcut",
+]
+
+#: the HDF5 key DeepLabCut writes its table under
+DLC_KEY = "df_with_missing"
+_LEVELS = ("scorer", "individuals", "bodyparts", "coords")
+
+
+def _header_rows(path: Path) -> tuple[int, bool]:
+    """Number of header rows of a DeepLabCut CSV (3 or 4) and whether its index is the
+    three ``labeled-data`` columns."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        first = [fh.readline() for _ in range(5)]
+    keys = [ln.split(",", 1)[0].strip().lower() for ln in first]
+    if keys[0] != "scorer":
+        raise ReadError(
+            path, 1, f"expected a DeepLabCut header row 'scorer,...', found {keys[0]!r}"
+        )
+    n = 4 if keys[1] == "individuals" else 3
+    if keys[n - 1] != "coords" and not (keys[n - 1] == "" and first[n - 1].startswith(",")):
+        raise ReadError(path, n, f"expected the header row 'coords,...', found {keys[n - 1]!r}")
+    labelled = keys[n] == "labeled-data"
+    if not labelled and n < len(keys) and keys[n] in ("frame", "frames"):
+        n += 1  # an index-name row pandas writes for a named index
+    return n, labelled
+
+
+def _read_frame(path: Path) -> Any:
+    pd = require("pandas", "reading DeepLabCut files")
+    if is_hdf5(path):
+        require("tables", "reading DeepLabCut .h5 files (pandas.read_hdf)")
+        try:
+            with pd.HDFStore(path, mode="r") as store:
+                keys = store.keys()
+                key = "/" + DLC_KEY if "/" + DLC_KEY in keys else (keys[0] if keys else None)
+                if key is None:
+                    raise ReadError(path, None, "no table in the HDF5 file")
+                df = store[key]
+        except ReadError:
+            raise
+        except (OSError, ValueError, TypeError, KeyError, RuntimeError, AttributeError) as exc:
+            # PyTables' HDF5ExtError is a RuntimeError
+            raise ReadError(path, None, f"not a DeepLabCut table ({exc})") from None
+    else:
+        n, labelled = _header_rows(path)
+        try:
+            df = pd.read_csv(path, header=list(range(n)), index_col=[0, 1, 2] if labelled else 0)
+        except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise ReadError(path, None, f"not a DeepLabCut CSV ({exc})") from None
+    if not isinstance(df, pd.DataFrame):
+        raise ReadError(path, None, "expected a DataFrame in the file")
+    return df
+
+
+def sequences_from_dlc_frame(
+    path: Any,
+    df: Any,
+    *,
+    fmt: str = "deeplabcut",
+    fps: Any = None,
+    skeleton: Sequence[tuple[str, str]] | None = None,
+    implausible: str = "error",
+) -> list[SkeletonSequence]:
+    """Sequences from a DeepLabCut DataFrame (the module's layout)."""
+    pd = require("pandas", "reading DeepLabCut files")
+    cols = df.columns
+    if not isinstance(cols, pd.MultiIndex) or cols.nlevels not in (3, 4):
+        raise ReadError(
+            path, None, "expected column levels scorer, [individuals,] bodyparts, coords"
+        )
+    names = [str(n).lower() if n is not None else "" for n in cols.names]
+    multi = cols.nlevels == 4
+    scorer = str(cols.get_level_values(0)[0])
+    inds = list(dict.fromkeys(cols.get_level_values(1))) if multi else [None]
+    coords_all = [str(c).lower() for c in cols.get_level_values(-1)]
+    bad = sorted(set(coords_all) - {"x", "y", "z", "likelihood"})
+    if bad:
+        raise ReadError(path, None, f"unknown coords {bad}; expected x, y, [z,] likelihood")
+    D = 3 if "z" in coords_all else 2
+    data = df.to_numpy(dtype=float)
+    T = data.shape[0]
+    index = df.index
+    frames = None
+    if not isinstance(index, pd.MultiIndex) and pd.api.types.is_integer_dtype(index):
+        frames = np.asarray(index, dtype=np.int64)
+    out: list[SkeletonSequence] = []
+    by_ind: dict[Any, dict[str, dict[str, int]]] = {}
+    for k, col in enumerate(cols):
+        ind = col[1] if multi else None
+        by_ind.setdefault(ind, {}).setdefault(str(col[-2]), {})[str(col[-1]).lower()] = k
+    for ind in inds:
+        parts = by_ind[ind]
+        kps = list(parts)
+        pos = np.full((T, 1, len(kps), D), np.nan)
+        conf = np.full((T, 1, len(kps)), np.nan)
+        for j, kp in enumerate(kps):
+            for a, c in enumerate("xyz"[:D]):
+                if c not in parts[kp]:
+                    raise ReadError(path, None, f"keypoint {kp!r} has no {c} column")
+                pos[:, 0, j, a] = data[:, parts[kp][c]]
+            if "likelihood" in parts[kp]:
+                conf[:, 0, j] = data[:, parts[kp]["likelihood"]]
+        edges = None
+        if skeleton:
+            edges = [(a, b) for a, b in skeleton if a in kps and b in kps]
+        meta: dict[str, Any] = {"scorer": scorer}
+        if frames is not None and not np.array_equal(frames, np.arange(T)):
+            meta["frames"] = frames
+        out += sequences_from_arrays(
+            path, pos, None if np.isnan(conf).all() else conf, kps,
+            None if ind is None else [ind], fmt=fmt, units="px" if D == 2 else None, fps=fps,
+            edges=edges, metadata=meta, implausible=implausible,
+        )  # fmt: skip
+    del names
+    return out
+
+
+def read_deeplabcut(
+    path: str | os.PathLike[str],
+    fps: float | None = None,
+    skeleton: Sequence[tuple[str, str]] | None = None,
+    implausible: str = "error",
+) -> list[SkeletonSequence]:
+    """Read a DeepLabCut ``.h5`` or ``.csv`` pose file (module docstring)."""
+    p = Path(path)
+    return sequences_from_dlc_frame(
+        p, _read_frame(p), fps=fps, skeleton=skeleton, implausible=implausible
+    )
+
+
+def dlc_frame(sequences: Sequence[SkeletonSequence], scorer: str | None = None) -> Any:
+    """The DeepLabCut DataFrame of sequences (one individual each)."""
+    pd = require("pandas", "writing DeepLabCut files")
+    seqs = list(sequences)
+    arr = pose_arrays(seqs)
+    if scorer is None:
+        scorer = str(seqs[0].metadata.get("scorer", "tobitkf"))
+    multi = len(seqs) > 1 or seqs[0].body_id is not None
+    coords = ["x", "y", "z"] if arr.n_dims == 3 else ["x", "y", "likelihood"]
+    T = arr.positions.shape[0]
+    blocks = []
+    for i in range(len(seqs)):
+        for j in range(len(arr.keypoints)):
+            p = arr.positions[:, i, j]
+            blocks += [p[:, a] for a in range(arr.n_dims)]
+            if arr.n_dims == 2:
+                c = arr.confidence[:, i, j]
+                present = ~np.isnan(p).any(axis=-1)
+                blocks.append(np.where(present, np.where(np.isnan(c), 1.0, c), np.nan))
+    levels = [[scorer], *([arr.individuals] if multi else []), arr.keypoints, coords]
+    level_names = _LEVELS if multi else ("scorer", "bodyparts", "coords")
+    columns = pd.MultiIndex.from_product(levels, names=list(level_names))
+    data = np.stack(blocks, axis=1) if blocks else np.empty((T, 0))
+    return pd.DataFrame(data, columns=columns, index=range(T))
+
+
+def write_deeplabcut(
+    sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str], scorer: str | None = None
+) -> None:
+    """Write sequences (one per individual) as a DeepLabCut ``.h5`` or ``.csv`` (by the
+    suffix; module docstring)."""
+    p = Path(path)
+    df = dlc_frame(sequences, scorer)
+    if p.suffix.lower() == ".csv":
+        df.to_csv(p)
+    elif p.suffix.lower() in (".h5", ".hdf5"):
+        require("tables", "writing DeepLabCut .h5 files (pandas.to_hdf)")
+        df.to_hdf(p, key=DLC_KEY, format="table", mode="w")
+    else:
+        raise ValueError(f"a DeepLabCut file ends in .h5 or .csv, not {p.name!r}")
+
+
+def _is_lightningpose(head: str) -> bool:
+    first = head.split("\n", 1)[0].lower()
+    return "heatmap" in first or "lightning" in first
+
+
+def sniff_deeplabcut(path: Path, head: str) -> int:
+    """Score: a CSV starting ``scorer,`` then ``bodyparts,`` / ``individuals,`` rows, or
+    an HDF5 file holding a pandas table (the key ``df_with_missing``)."""
+    if head.startswith("scorer,"):
+        second = head.split("\n", 2)[1].lower() if "\n" in head else ""
+        if second.startswith(("bodyparts,", "individuals,")):
+            return 40 if _is_lightningpose(head) else 85
+        return 0
+    if head.startswith("\ufffdHDF\r\n\x1a\n") or is_hdf5(path):
+        try:
+            import h5py
+        except ImportError:
+            return 5 if path.suffix.lower() == ".h5" else 0  # the reader says what to install
+        try:
+            with h5py.File(path, "r") as f:
+                if DLC_KEY in f:
+                    return 85
+                if "tracks" in f or "position" in f:
+                    return 0
+                # another key of a pandas table (PyTables marks its groups)
+                return 30 if any("pandas_type" in f[k].attrs for k in f) else 0
+        except (OSError, ValueError, KeyError):
+            return 0
+    return 0
+
+
+register_format(
+    "deeplabcut", read_deeplabcut, write_deeplabcut, (".h5",), sniff_deeplabcut,
+    description="DeepLabCut pose table (.h5 / .csv; x, y, likelihood per bodypart)",
+    aliases=("dlc",),
+)  # fmt: skip

@@ -1,0 +1,200 @@
+"""movement's poses datasets and their netCDF files (``.nc``).
+
+A movement poses dataset (an :class:`xarray.Dataset`, ``ds_type = "poses"``) holds
+
+* ``position`` with dims ``(time, space, keypoints, individuals)``, ``space`` = ``x``,
+  ``y`` (and ``z``);
+* ``confidence`` with dims ``(time, keypoints, individuals)`` (NaN where none);
+* attributes ``fps``, ``time_unit`` (``"seconds"``: ``time`` is in seconds;
+  ``"frames"``: frame numbers), ``source_software``, ``source_file``.
+
+:func:`from_movement` gives one :class:`SkeletonSequence` per individual (``body_id`` =
+its name; positions in pixels for 2-D, unknown units for 3-D unless the dataset says
+``units``); :func:`to_movement` builds such a dataset (loadable by movement, e.g.
+``movement.io.save_poses.to_dlc_file``) and records the units and the bones in the
+attributes ``tobitkf_units`` and ``tobitkf_parents`` so that a round trip loses nothing.
+The ``.nc`` files are that dataset written by ``Dataset.to_netcdf`` (movement saves and
+loads its datasets this way); :func:`read_movement` / :func:`write_movement` read and
+write them (xarray and h5netcdf: ``pip install 'tobitkf[pose]'``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tobitkf.core.version import __version__
+from tobitkf.io._pose import is_hdf5, pose_arrays, require, sequences_from_arrays
+from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+
+__all__ = ["from_movement", "read_movement", "sniff_movement", "to_movement", "write_movement"]
+
+_NETCDF3_MAGIC = "CDF\x01", "CDF\x02", "CDF\x05"
+
+
+def from_movement(ds: Any, *, path: Any = "<movement dataset>") -> list[SkeletonSequence]:
+    """Sequences (one per individual) of a movement poses dataset (module docstring)."""
+    xr = require("xarray", "movement datasets")
+    if not isinstance(ds, xr.Dataset):
+        raise TypeError(f"expected an xarray Dataset (movement poses), got {type(ds).__name__}")
+    if "position" not in ds:
+        raise ValueError("expected a movement poses dataset with a 'position' variable")
+    pos_da = ds["position"]
+    need = {"time", "space", "keypoints", "individuals"}
+    if set(pos_da.dims) != need:
+        raise ValueError(f"position must have dims {sorted(need)}, found {list(pos_da.dims)}")
+    space = [str(s) for s in pos_da["space"].values]
+    if space not in (["x", "y"], ["x", "y", "z"]):
+        raise ValueError(f"expected space coordinates x, y[, z], found {space}")
+    pos = pos_da.transpose("time", "individuals", "keypoints", "space").values
+    conf = None
+    if "confidence" in ds:
+        conf = ds["confidence"].transpose("time", "individuals", "keypoints").values
+        if np.isnan(conf).all():
+            conf = None
+    attrs = dict(ds.attrs)
+    time = np.asarray(ds["time"].values, dtype=float)
+    fps = attrs.get("fps")
+    fps = None if fps is None or (isinstance(fps, float) and np.isnan(fps)) else float(fps)
+    timestamps = None
+    if attrs.get("time_unit", "seconds") == "seconds" and time.size:
+        if fps is None or not np.array_equal(time, np.arange(time.size) / fps):
+            timestamps = time
+    elif time.size and not np.array_equal(time, np.arange(time.size)):
+        attrs["frames"] = time.astype(np.int64)
+    units = attrs.get("tobitkf_units", "px" if len(space) == 2 else None)
+    if isinstance(units, str) and units not in KNOWN_UNITS:
+        units = None
+    keypoints = [str(k) for k in ds["keypoints"].values]
+    individuals = [_text(i) for i in ds["individuals"].values]
+    meta: dict[str, Any] = {"source_software": attrs.get("source_software")}
+    if "frames" in attrs:
+        meta["frames"] = attrs["frames"]
+    if attrs.get("source_file"):
+        meta["source_file"] = str(attrs["source_file"])
+    seqs = sequences_from_arrays(
+        path, pos, conf, keypoints, individuals, fmt="movement", units=units, fps=fps,
+        timestamps=timestamps, metadata=meta,
+    )  # fmt: skip
+    parents = attrs.get("tobitkf_parents")
+    if parents is not None and len(np.atleast_1d(parents)) == len(keypoints):
+        try:
+            topo = Topology.from_names(
+                keypoints, [int(p) for p in np.atleast_1d(parents)], name="movement"
+            )
+            seqs = [s.replace(topology=topo) for s in seqs]
+        except ValueError:
+            pass  # not a tree: keep the keypoints without bones
+    return seqs
+
+
+def _text(v: Any) -> Any:
+    if isinstance(v, bytes):
+        return v.decode("utf-8", errors="replace")
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any:
+    """A movement poses dataset of one sequence or several (one per individual)."""
+    xr = require("xarray", "movement datasets")
+    seqs = [sequences] if isinstance(sequences, SkeletonSequence) else list(sequences)
+    arr = pose_arrays(seqs)
+    first = seqs[0]
+    if first.timestamps is not None:
+        time, unit = first.timestamps, "seconds"
+    elif first.fps is not None:
+        time, unit = np.arange(first.n_frames) / first.fps, "seconds"
+    else:
+        time, unit = np.arange(first.n_frames, dtype=float), "frames"
+    attrs: dict[str, Any] = {
+        "source_software": f"tobitkf {__version__}",
+        "ds_type": "poses",
+        "time_unit": unit,
+        "tobitkf_parents": np.asarray(first.topology.parents, dtype=np.int64),
+    }
+    if first.fps is not None:
+        attrs["fps"] = float(first.fps)
+    if first.units is not None:
+        attrs["tobitkf_units"] = first.units
+    src = first.metadata.get("source")
+    if src:
+        attrs["source_file"] = str(src)
+    return xr.Dataset(
+        {
+            "position": (
+                ("time", "space", "keypoints", "individuals"),
+                arr.positions.transpose(0, 3, 2, 1),
+            ),
+            "confidence": (("time", "keypoints", "individuals"), arr.confidence.transpose(0, 2, 1)),
+        },
+        coords={
+            "time": np.asarray(time, dtype=float),
+            "space": ["x", "y", "z"][: arr.n_dims],
+            "keypoints": arr.keypoints,
+            "individuals": arr.individuals,
+        },
+        attrs=attrs,
+    )
+
+
+def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
+    """Read a movement poses dataset saved as netCDF (``Dataset.to_netcdf``)."""
+    p = Path(path)
+    xr = require("xarray", "reading movement netCDF files")
+    try:
+        with xr.open_dataset(p) as ds:
+            ds.load()
+            kind = ds.attrs.get("ds_type", "poses")
+            if kind != "poses":
+                raise ReadError(p, None, f"a movement {kind!r} dataset, not poses")
+            return from_movement(ds, path=p)
+    except ReadError:
+        raise
+    except ImportError:
+        raise
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        raise ReadError(p, None, f"not a movement poses netCDF file ({exc})") from None
+
+
+def write_movement(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
+    """Write sequences as a movement poses dataset in a netCDF file."""
+    ds = to_movement(list(sequences))
+    try:
+        import h5netcdf  # noqa: F401
+
+        engine = "h5netcdf"
+    except ImportError:
+        engine = None
+    ds.to_netcdf(Path(path), engine=engine)
+
+
+def sniff_movement(path: Path, head: str) -> int:
+    """Score: a netCDF file (HDF5 or classic) holding a ``position`` variable."""
+    if head.startswith(_NETCDF3_MAGIC):
+        return 80 if b"position" in head.encode("utf-8", "replace") else 10
+    if not is_hdf5(path):
+        return 0
+    try:
+        import h5py
+    except ImportError:
+        return 4 if path.suffix.lower() == ".nc" else 0
+    try:
+        with h5py.File(path, "r") as f:
+            if "position" in f and "keypoints" in f:
+                return 90
+    except (OSError, ValueError):
+        return 0
+    return 0
+
+
+register_format(
+    "movement", read_movement, write_movement, (".nc",), sniff_movement,
+    description="movement poses dataset (netCDF)", aliases=("netcdf",),
+)  # fmt: skip

@@ -1,0 +1,68 @@
+"""SLEAP project and prediction files (``.slp``), read through the optional sleap-io.
+
+``sleap_io.load_slp`` gives the labels; every video's predictions become one sequence
+per track (``body_id`` = the track's name; untracked single-instance predictions: one
+sequence), from ``Labels.numpy(video=..., return_confidence=True)`` (frame k = video
+frame k), positions in pixels, ``confidence`` = point score (clipped into [0, 1]),
+bones from the skeleton's edges, left/right pairs from its symmetries.
+Install with ``pip install 'tobitkf[slp]'`` (or ``pip install sleap-io``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from tobitkf.io._pose import require, sequences_from_arrays
+from tobitkf.io.errors import ReadError
+from tobitkf.io.registry import register_format
+from tobitkf.skeleton.sequence import SkeletonSequence
+
+__all__ = ["read_slp", "sniff_slp"]
+
+
+def read_slp(
+    path: str | os.PathLike[str], fps: float | None = None, implausible: str = "error"
+) -> list[SkeletonSequence]:
+    """Read a SLEAP ``.slp`` file (module docstring)."""
+    p = Path(path)
+    sio = require("sleap_io", "reading SLEAP .slp files")
+    try:
+        labels = sio.load_slp(str(p))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ReadError(p, None, f"not a readable SLEAP file ({exc})") from None
+    if not labels.skeletons:
+        raise ReadError(p, None, "the file has no skeleton")
+    skel = labels.skeletons[0]
+    nodes = [n.name for n in skel.nodes]
+    edges = [(e.source.name, e.destination.name) for e in skel.edges]
+    symmetry = [tuple(n.name for n in s.nodes) for s in skel.symmetries]
+    out: list[SkeletonSequence] = []
+    for v, video in enumerate(labels.videos):
+        arr = labels.numpy(video=video, return_confidence=True)  # (T, tracks, nodes, 3)
+        if arr.size == 0:
+            continue
+        names = [t.name for t in labels.tracks] if labels.tracks else None
+        if names is not None and len(names) != arr.shape[1]:
+            names = [f"track_{k}" for k in range(arr.shape[1])]
+        if names is None and arr.shape[1] > 1:
+            names = [f"instance_{k}" for k in range(arr.shape[1])]
+        out += sequences_from_arrays(
+            p, arr[..., :2], arr[..., 2], nodes, names, fmt="slp", fps=fps, edges=edges,
+            symmetry=symmetry, metadata={"video": str(getattr(video, "filename", v))},
+            implausible=implausible,
+        )  # fmt: skip
+    if not out:
+        raise ReadError(p, None, "the file has no predicted or labelled instances")
+    return out
+
+
+def sniff_slp(path: Path, head: str) -> int:
+    """Score: an HDF5 file named ``.slp``."""
+    return 90 if path.suffix.lower() == ".slp" and head.startswith("\ufffdHDF") else 0
+
+
+register_format(
+    "slp", read_slp, None, (".slp",), sniff_slp,
+    description="SLEAP .slp labels / predictions (optional sleap-io)", aliases=("sleap",),
+)  # fmt: skip

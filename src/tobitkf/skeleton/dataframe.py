@@ -1,0 +1,193 @@
+"""pandas DataFrames of skeleton sequences, long or wide (pandas is an optional extra).
+
+Long layout (:func:`to_dataframe`, ``layout="long"``, the default): one row per frame,
+individual and keypoint::
+
+    frame  time   individual  keypoint  x      y      [z]  [confidence] [tracking_state]
+    0      0.000  mouse1      snout     312.5  200.2       0.98
+    ...
+
+``individual`` is the body id (a column only when some body has one or there are
+several bodies); ``time`` (seconds) when the sequence has timestamps or an fps;
+``std`` and ``sample_state`` after smoothing. Wide layout (``layout="wide"``): one row
+per frame (index ``time`` when there are timestamps or an fps, else ``frame``) and
+columns ``(individual, keypoint, coord)`` with coord ``x``, ``y``, ``z``, ``confidence``,
+``tracking_state``, ``std``, ``sample_state`` — the layout of a DeepLabCut table, whose
+``scorer`` level and ``likelihood`` coordinate :func:`from_dataframe` reads too.
+
+``DataFrame.attrs`` carries ``fps``, ``units``, ``topology`` (name), ``parents`` and
+``up_axis``, so a round trip through :func:`from_dataframe` gives back the sequences;
+without them, units are metres for 3-D and unknown for 2-D and the keypoints have no
+bones. :func:`from_dataframe` returns a list of sequences, one per individual, on the
+frames of the whole table (NaN where an individual has no row).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.to_frame import _COORDS, _PER_SAMPLE, _pandas, to_dataframe
+from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
+
+__all__ = ["from_dataframe", "to_dataframe"]
+
+_ALIASES = {
+    "keypoint": ("keypoint", "keypoints", "bodypart", "bodyparts", "joint", "marker"),
+    "individual": ("individual", "individuals", "body", "body_id", "track", "animal"),
+    "confidence": ("confidence", "likelihood", "score", "visibility"),
+}
+
+
+def _pick(columns: Sequence[str], role: str) -> str | None:
+    low = {str(c).lower(): c for c in columns}
+    return next((low[a] for a in _ALIASES[role] if a in low), None)
+
+
+def _topology(names: list[str], attrs: dict[str, Any]) -> Topology:
+    hint = attrs.get("topology")
+    parents = attrs.get("parents")
+    up = attrs.get("up_axis", 1)
+    for name in ([hint] if isinstance(hint, str) else []) + available_topologies():
+        try:
+            t = get_topology(name)
+        except KeyError:
+            continue
+        if t.joints == tuple(names):
+            return t
+    if parents is not None and len(parents) != len(names):
+        parents = None
+    return Topology.from_names(
+        names, parents, up_axis=up, name=hint if isinstance(hint, str) else "custom"
+    )
+
+
+def _build(
+    values: dict[str, np.ndarray], names: list[str], times: Any, ident: Any, attrs: dict
+) -> SkeletonSequence:
+    n_dims = 3 if "z" in values else 2
+    pos = np.stack([values[c] for c in _COORDS[:n_dims]], axis=-1)
+    kw: dict[str, Any] = {}
+    for name in _PER_SAMPLE:
+        if name in values and not np.isnan(values[name]).all():
+            v = values[name]
+            if name in ("tracking_state", "sample_state"):
+                if np.isnan(v).any():
+                    raise ValueError(f"{name} has empty values")
+                v = v.astype(np.int8)
+            kw[name] = v
+    units = attrs.get("units", "m" if n_dims == 3 else None)
+    fps = attrs.get("fps")
+    if times is not None and fps is not None:
+        if np.array_equal(times, np.arange(len(times), dtype=float) / float(fps)):
+            times = None  # the frame clock of the fps, not timestamps of their own
+    return SkeletonSequence(
+        pos,
+        _topology(names, attrs),
+        timestamps=times,
+        fps=fps,
+        body_id=ident,
+        units=units,
+        **kw,
+    )
+
+
+def _from_wide(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
+    cols = df.columns
+    if cols.nlevels == 4:  # DeepLabCut: scorer, individuals, bodyparts, coords
+        cols = cols.droplevel(0)
+    if cols.nlevels == 2:
+        cols = [(None, k, c) for k, c in cols]
+    elif cols.nlevels == 3:
+        cols = list(cols)
+        if df.columns.nlevels == 3 and df.columns.names[0] == "scorer":  # single-animal DLC
+            cols = [(None, k, c) for _, k, c in cols]
+    else:
+        raise ValueError(
+            "expected wide columns (keypoint, coord), (individual, keypoint, coord) or "
+            f"DeepLabCut's (scorer, individuals, bodyparts, coords); got {cols.nlevels} levels"
+        )
+    data = df.to_numpy(dtype=float)
+    order: dict[Any, dict[str, dict[str, np.ndarray]]] = {}
+    for k, (ind, kp, coord) in enumerate(cols):
+        role = str(coord).lower()
+        role = "confidence" if role in _ALIASES["confidence"] else role
+        if role not in _COORDS + _PER_SAMPLE:
+            raise ValueError(f"unknown coordinate {coord!r} of keypoint {kp!r}")
+        order.setdefault(ind, {}).setdefault(str(kp), {})[role] = data[:, k]
+    index = df.index
+    times = None
+    if index.name == "time" or (index.name is None and attrs.get("time_index")):
+        times = np.asarray(index, dtype=float)
+    out = []
+    for ind, per_kp in order.items():
+        names = list(per_kp)
+        T = len(df)
+        values = {}
+        for role in _COORDS + _PER_SAMPLE:
+            if any(role in per_kp[n] for n in names):
+                values[role] = np.stack(
+                    [per_kp[n].get(role, np.full(T, np.nan)) for n in names], axis=1
+                )
+        if "x" not in values or "y" not in values:
+            raise ValueError(f"individual {ind!r}: expected x and y coordinates")
+        out.append(_build(values, names, times, ind, attrs))
+    return out
+
+
+def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
+    pd = _pandas()
+    kp_col = _pick(df.columns, "keypoint")
+    if kp_col is None or "x" not in df.columns or "y" not in df.columns:
+        raise ValueError(
+            "expected a long table with columns keypoint (or bodypart, joint), x, y[, z] "
+            "and optionally frame, time, individual, confidence; or wide MultiIndex "
+            f"columns; got columns {list(df.columns)}"
+        )
+    ind_col = _pick(df.columns, "individual")
+    conf_col = _pick(df.columns, "confidence")
+    key = "frame" if "frame" in df.columns else "time" if "time" in df.columns else None
+    if key is None:
+        raise ValueError("expected a frame or time column")
+    frames = np.sort(pd.unique(df[key]))
+    names = list(pd.unique(df[kp_col].astype(str)))
+    inds = list(pd.unique(df[ind_col])) if ind_col is not None else [None]
+    T, J = len(frames), len(names)
+    f_idx = np.searchsorted(frames, df[key].to_numpy())
+    k_idx = pd.Index(names).get_indexer(df[kp_col].astype(str))
+    times = None
+    if "time" in df.columns:
+        times = np.full(T, np.nan)
+        times[f_idx] = df["time"].to_numpy(dtype=float)
+        if np.isnan(times).any():
+            raise ValueError("empty time values")
+    out = []
+    for ind in inds:
+        rows = np.ones(len(df), bool) if ind_col is None else (df[ind_col] == ind).to_numpy()
+        fi, ki = f_idx[rows], k_idx[rows]
+        if len(set(zip(fi.tolist(), ki.tolist(), strict=True))) != rows.sum():
+            raise ValueError(f"individual {ind!r}: a keypoint appears twice in one frame")
+        values = {}
+        for role, col in [(c, c) for c in _COORDS + _PER_SAMPLE if c in df.columns] + (
+            [("confidence", conf_col)] if conf_col not in (None, "confidence") else []
+        ):
+            v = np.full((T, J), np.nan)
+            v[fi, ki] = df.loc[rows, col].to_numpy(dtype=float)
+            values[role] = v
+        out.append(_build(values, names, times, ind, attrs))
+    return out
+
+
+def from_dataframe(df: Any) -> list[SkeletonSequence]:
+    """Sequences (one per individual) from a long or wide DataFrame (module docstring);
+    ``ValueError`` naming what is missing otherwise."""
+    pd = _pandas()
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"expected a pandas DataFrame, got {type(df).__name__}")
+    attrs = dict(df.attrs)
+    if isinstance(df.columns, pd.MultiIndex):
+        return _from_wide(df, attrs)
+    return _from_long(df, attrs)

@@ -1,0 +1,211 @@
+"""TRC (read and write) and the C3D writer.
+
+TRC fixtures are written here as OpenSim-style tools write them (MATLAB ``fprintf`` with
+``%s\\t\\t\\t`` after each marker name, a blank line after the X1 Y1 Z1 line, millimetres,
+trailing tabs); written files are also parsed back with pandas (the Pose2Sim recipe), not
+only with our reader. C3D output is read back with the ``c3d`` library itself and with
+our reader. Values written by the C3D format are float32: expected values are
+``np.float32(x)``, an exact identity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tobitkf.io import ReadError, detect_format, load, save
+from tobitkf.io.trc import read_trc, write_trc
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.topology import Topology
+
+OPENSIM_STYLE = (
+    "PathFileType\t4\t(X/Y/Z)\twalk.trc\n"
+    "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames\n"
+    "100.00\t100.00\t3\t3\tmm\t100.00\t1\t3\n"
+    "Frame#\tTime\tR.ASIS\t\t\tL.ASIS\t\t\tV.Sacral\t\t\t\n"
+    "\t\tX1\tY1\tZ1\tX2\tY2\tZ2\tX3\tY3\tZ3\t\n"
+    "\n"
+    "1\t0.000\t1.5\t952.25\t120.125\t-3\t950\t-120.5\t-150.75\t960.5\t0.25\t\n"
+    "2\t0.010\t\t\t\t-2\t951\t-121\t-151\t961\t1\t\n"
+    "3\t0.020\t2.5\t953\t121\t-1\t952\t-122\n"
+)
+
+
+def test_reads_an_opensim_style_file(tmp_path):
+    p = tmp_path / "walk.trc"
+    p.write_text(OPENSIM_STYLE)
+    assert detect_format(p) == "trc"
+    (s,) = load(p)
+    assert s.joint_names == ("R.ASIS", "L.ASIS", "V.Sacral")
+    assert s.fps == 100.0 and s.units == "m" and s.topology.up_axis == 1
+    np.testing.assert_array_equal(s.timestamps, [0.0, 0.01, 0.02])
+    np.testing.assert_array_equal(s.positions[0, 0], np.array([1.5, 952.25, 120.125]) * 1e-3)
+    assert np.isnan(s.positions[1, 0]).all()  # empty fields
+    assert np.isnan(s.positions[2, 2]).all()  # row cut short
+    np.testing.assert_array_equal(s.positions[2, 1], np.array([-1, 952, -122]) * 1e-3)
+    assert s.metadata["header"]["NumFrames"] == "3"
+
+
+def _seq(names, T=5, fps=50.0, units="m", seed=0):
+    rng = np.random.default_rng(seed)
+    pos = rng.normal(size=(T, len(names), 3))
+    pos[1, 0] = np.nan
+    pos[3, -1] = np.nan
+    return SkeletonSequence(pos, Topology.from_names(names), fps=fps, units=units)
+
+
+HOSTILE = [
+    "Head,L",
+    'say "hi"',
+    "#hash",
+    "ünïçødé",
+    "名前",
+    "emoji\U0001f600",
+    "a b",
+    "1.5",
+    "Frame#",
+    "X1",
+    ";",
+]
+TRC_REFUSED = ["tab\tname", "new\nline", "cr\rname", "", " ", " lead", "trail ", "nul\x00"]
+
+
+@pytest.mark.parametrize("name", HOSTILE)
+def test_trc_round_trip_of_hostile_names(tmp_path, name):
+    seq = _seq([name, "other", "third"])
+    p = tmp_path / "h.trc"
+    save(seq, p)
+    (back,) = load(p)
+    assert back.joint_names == seq.joint_names
+    np.testing.assert_array_equal(back.positions, seq.positions)
+    np.testing.assert_array_equal(back.timestamps, seq.times())
+    assert back.fps == seq.fps
+
+
+@pytest.mark.parametrize("name", TRC_REFUSED)
+def test_trc_refuses_names_it_cannot_hold(tmp_path, name):
+    p = tmp_path / "h.trc"
+    with pytest.raises(ValueError, match="cannot write the marker name"):
+        write_trc([_seq([name, "other"])], p)
+    assert not p.exists()
+
+
+def test_trc_written_file_parses_with_pandas_and_converts_units(tmp_path):
+    seq = _seq(["A", "B"], units="m")
+    p = tmp_path / "mm.trc"
+    write_trc([seq], p, units="mm")
+    head = pd.read_csv(p, sep="\t", skiprows=1, header=None, nrows=2)
+    header = dict(zip(head.iloc[0], head.iloc[1]))
+    assert header["Units"] == "mm" and float(header["DataRate"]) == 50.0
+    assert int(header["NumFrames"]) == 5 and int(header["NumMarkers"]) == 2
+    data = pd.read_csv(p, sep="\t", skiprows=5, header=None).to_numpy(dtype=float)
+    np.testing.assert_array_equal(data[:, 0], np.arange(1, 6))
+    np.testing.assert_array_equal(data[:, 2:], (seq.positions * 1000.0).reshape(5, 6))
+    (back,) = read_trc(p)
+    np.testing.assert_allclose(back.positions, seq.positions, rtol=1e-15, atol=0)
+
+
+def test_trc_writer_rules(tmp_path):
+    p = tmp_path / "x.trc"
+    with pytest.raises(ValueError, match="one set of markers"):
+        write_trc([_seq(["a"]), _seq(["a"])], p)
+    px = SkeletonSequence(np.ones((2, 1, 2)), Topology.from_names(["a"]), units="px")
+    with pytest.raises(ValueError, match="3-D"):
+        write_trc([px], p)
+    unknown = SkeletonSequence(np.ones((2, 1, 3)), Topology.from_names(["a"]), fps=10, units=None)
+    with pytest.raises(ValueError, match="unknown"):
+        write_trc([unknown], p)
+    write_trc([unknown], p, units="mm")
+    (back,) = read_trc(p)
+    np.testing.assert_array_equal(back.positions, np.full((2, 1, 3), 1e-3))
+    # no fps: the rate of the timestamps
+    ts = SkeletonSequence(np.ones((3, 1, 3)), Topology.from_names(["a"]), timestamps=[0, 0.5, 1.0])
+    write_trc([ts], p)
+    (back,) = read_trc(p)
+    assert back.fps == 2.0
+    np.testing.assert_array_equal(back.timestamps, [0, 0.5, 1.0])
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("hello\n", "PathFileType"),
+        (OPENSIM_STYLE.replace("\tmm\t", "\tinch\t"), "Units"),
+        (OPENSIM_STYLE.replace("100.00\t100.00\t3\t3", "100.00\t100.00\t3\t4"), "NumMarkers"),
+        (OPENSIM_STYLE.replace("1\t0.000\t1.5", "1\t0.000\tx"), "field 3"),
+        (OPENSIM_STYLE.replace("2\t0.010", "2\t-1.0"), "non-decreasing"),
+        (OPENSIM_STYLE.replace("Frame#\tTime\tR.ASIS", "Frame#\tTime\tL.ASIS"), "duplicate"),
+        (OPENSIM_STYLE.replace("100.00\t100.00", "0\t100.00"), "DataRate"),
+    ],
+)
+def test_trc_bad_content(tmp_path, text, match):
+    p = tmp_path / "bad.trc"
+    p.write_text(text)
+    with pytest.raises(ReadError, match=match) as err:
+        read_trc(p)
+    assert str(p) in str(err.value)
+
+
+# ------------------------------------------------------------------------------ C3D
+C3D_HOSTILE = ["Head,L", 'say "hi"', "#hash", "a b", "1.5", "LASI", "x" * 40]
+C3D_REFUSED = ["ünï", "tab\tname", "", " lead", "trail ", "new\nline"]
+
+
+@pytest.mark.parametrize("name", C3D_HOSTILE)
+def test_c3d_round_trip_through_the_library_and_our_reader(tmp_path, name):
+    c3d = pytest.importorskip("c3d")
+    seq = _seq([name, "B", "C"], T=6, fps=120.0, units="mm")
+    p = tmp_path / "w.c3d"
+    save(seq, p)
+    with open(p, "rb") as fh:
+        r = c3d.Reader(fh)
+        assert [lab.strip() for lab in r.point_labels] == [name, "B", "C"]
+        assert r.point_rate == 120.0 and r.frame_count == 6
+        assert r.get("POINT:UNITS").string_value.strip() == "mm"
+        pts = np.stack([p_[:, :4] for _, p_, _ in r.read_frames()])
+    present = ~np.isnan(seq.positions).any(axis=-1)
+    np.testing.assert_array_equal(pts[..., :3][present], seq.positions.astype(np.float32)[present])
+    assert (pts[..., 3][~present] == -1).all() and (pts[..., 3][present] >= 0).all()
+    (back,) = load(p)
+    assert back.joint_names == (name, "B", "C") and back.units == "m" and back.fps == 120.0
+    expected = seq.positions.astype(np.float32).astype(float) * 1e-3
+    np.testing.assert_array_equal(back.positions, expected)
+
+
+@pytest.mark.parametrize("name", C3D_REFUSED)
+def test_c3d_refuses_labels_it_cannot_hold(tmp_path, name):
+    pytest.importorskip("c3d")
+    p = tmp_path / "h.c3d"
+    with pytest.raises(ValueError, match="cannot write the label"):
+        save(_seq([name, "other"]), p)
+    assert not p.exists()
+
+
+def test_c3d_units_option(tmp_path):
+    pytest.importorskip("c3d")
+    seq = _seq(["A"], units="m")
+    p = tmp_path / "m.c3d"
+    save(seq, p, units="mm")
+    (back,) = load(p)
+    expected = (seq.positions * 1000.0).astype(np.float32).astype(float) * 1e-3
+    np.testing.assert_array_equal(back.positions, expected)
+    with pytest.raises(ValueError, match="one set of points"):
+        save([seq, seq], tmp_path / "two.c3d")
+
+
+def test_new_formats_are_registered():
+    from tobitkf.io import formats, writable_formats
+
+    assert {"openpose", "mediapipe", "azure_kinect", "trc", "c3d"} <= set(formats())
+    assert {"trc", "c3d"} <= set(writable_formats())
+
+
+def test_trc_without_the_coordinate_line(tmp_path):
+    lines = OPENSIM_STYLE.split("\n")
+    del lines[4:6]  # no "X1 Y1 Z1" line, no blank line
+    p = tmp_path / "short.trc"
+    p.write_text("\n".join(lines))
+    (s,) = read_trc(p)
+    assert s.n_frames == 3
+    np.testing.assert_array_equal(s.positions[0, 0], np.array([1.5, 952.25, 120.125]) * 1e-3)
