@@ -11,9 +11,9 @@ one call each. For each method it prints joint-frames per second and the ratio t
 package's Kalman core, ``tk.kalman_filter`` (3-D random walk per joint, A = H = I, on the
 same positions, all joints of all recordings as one batch), measured in the same run.
 The first call of each method is not timed (it loads, or compiles, the robust kernels).
-Live: the per-frame latency of the live default (``robust_online``) through
-``LiveSmoother`` for one body, six bodies in one array and six bodies keyed by id, next to
-a minimal numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
+Live: the per-frame latency of the live default (``robust_online``) and of ``atkf``
+through ``LiveSmoother`` for one body, six bodies in one array and six bodies keyed by id,
+next to a minimal numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
 method) over a folder of small recordings, start-up included, with 1 and 2 processes.
 ``--markdown`` ends with the README's table (``make bench``).
 """
@@ -137,22 +137,22 @@ def minimal_kf_latency(n: int) -> np.ndarray:
     return lat[1:] * 1e6
 
 
-def live_latency(n: int) -> dict[str, np.ndarray]:
-    """Per-frame latency (us) of the live default: one body, six in an array, six keyed."""
+def live_latency(n: int, methods: tuple[str, ...] = ("robust_online", "atkf")) -> dict:
+    """Per-frame latency (us) of live methods (the live default first): one body, six in
+    an array, six keyed by id."""
     if n < 2:
         return {}
     seqs = synthetic_recordings(6, n)
     topo = seqs[0].topology
     one = seqs[0].positions
     six = np.stack([s.positions for s in seqs], axis=1)  # (n, 6, J, 3)
-    out = {"minimal numpy KF update, 1 body": minimal_kf_latency(n)}
-    live = tk.LiveSmoother(topo, fps=30.0)
-    out[f"LiveSmoother ({live.method}), 1 body"] = _latencies(live, list(one), None)
-    live = tk.LiveSmoother(topo, fps=30.0)
-    out[f"LiveSmoother ({live.method}), 6 bodies in one array"] = _latencies(live, list(six), None)
-    live = tk.LiveSmoother(topo, fps=30.0)
     keyed = [{b: six[k, b] for b in range(6)} for k in range(n)]
-    out[f"LiveSmoother ({live.method}), 6 bodies keyed by id"] = _latencies(live, keyed, None)
+    out = {"minimal numpy KF update, 1 body": minimal_kf_latency(n)}
+    for method in methods:
+        for label, frames in (("1 body", list(one)), ("6 bodies in one array", list(six)),
+                              ("6 bodies keyed by id", keyed)):  # fmt: skip
+            live = tk.LiveSmoother(topo, method, fps=30.0)
+            out[f"LiveSmoother ({method}), {label}"] = _latencies(live, frames, None)
     print(f"\nlive, 25 joints, {n} frames (us per frame):")
     for name, lat in out.items():
         print(f"  {name:55s} median {np.median(lat):7.1f}  p99 {np.percentile(lat, 99):7.1f}")
@@ -200,6 +200,14 @@ def print_markdown(table: list, live: dict, files: dict, n_files: int) -> None:
         print("|---|---|---|")
         for name, lat in live.items():
             print(f"| {name} | {np.median(lat):.0f} | {np.percentile(lat, 99):.0f} |")
+        names = list(live)
+        ratios = []
+        for k in range(1, len(names), 3):  # per method: 1 body, 6 in an array, 6 keyed
+            one, arr, keyed = (np.median(live[names[k + i]]) for i in range(3))
+            method = names[k].split("(")[1].split(")")[0]
+            ratios.append(f"{method} {arr / one:.1f}× in one array, {keyed / one:.1f}× keyed by id")
+        print()
+        print("Median per frame, six bodies / one body: " + "; ".join(ratios) + ".")
     if files:
         print()
         rates = ", ".join(f"{v:.0f} files/s with -j {k}" for k, v in files.items())

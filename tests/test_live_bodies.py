@@ -21,7 +21,7 @@ def _body(seed: int, T: int = 120) -> np.ndarray:
     return pos
 
 
-@pytest.mark.parametrize("method", ["atkf", "kf", "one_euro"])
+@pytest.mark.parametrize("method", ["atkf", "kf", "one_euro", "tkfc"])
 def test_each_body_equals_a_smoother_fed_it_alone(method):
     a, b = _body(1), _body(2)
     present_b = np.zeros(len(a), bool)
@@ -44,6 +44,33 @@ def test_each_body_equals_a_smoother_fed_it_alone(method):
     for k in sorted(got_b):
         ref = alone_b.update(b[k], timestamp=k / FPS)
         np.testing.assert_allclose(got_b[k], ref, rtol=0, atol=1e-9, equal_nan=True)
+
+
+@pytest.mark.parametrize("method", ["robust_online", "atkf", "tkf"])
+def test_bodies_that_arrive_together_share_a_stepper_and_stay_independent(method):
+    """Three ids in the first frame (one stepper inside), one with tracking states
+    (INFERRED and NOT_TRACKED joints), one that leaves and is dropped, a fourth arriving
+    later: each equals a LiveSmoother fed it alone, states and all."""
+    T = 90
+    a, b, c, d = _body(5, T), _body(6, T), _body(7, T), _body(8, T)
+    rng = np.random.default_rng(0)
+    st_b = rng.choice(np.array([0, 1, 2], dtype=np.int8), size=(T, a.shape[1]), p=[0.1, 0.2, 0.7])
+    live = tk.LiveSmoother("kinect_v2", method, fps=FPS, max_missing=0.2)
+    got: dict[str, list] = {"a": [], "b": [], "c": [], "d": []}
+    for k in range(T):
+        frame = {"a": a[k], "b": b[k]} | ({"c": c[k]} if k < 30 else {})
+        frame |= {"d": d[k]} if k >= 20 else {}
+        out = live.update(frame, tracking_state={"b": st_b[k]}, timestamp=k / FPS)
+        for key in frame:
+            got[key].append(out[key])
+        assert ("c" in out) == (k < 30 + 0.2 * FPS)  # predicted 0.2 s, then dropped
+    spans = (("a", a, None, 0, T), ("b", b, st_b, 0, T), ("c", c, None, 0, 30),
+             ("d", d, None, 20, T))  # fmt: skip
+    for key, pos, states, start, stop in spans:
+        alone = tk.LiveSmoother("kinect_v2", method, fps=FPS)
+        ref = [alone.update(pos[k], None if states is None else states[k], timestamp=k / FPS)
+               for k in range(start, stop)]  # fmt: skip
+        np.testing.assert_array_equal(np.stack(got[key]), np.stack(ref))
 
 
 def test_a_body_missing_longer_than_max_missing_is_dropped_and_restarts_fresh():

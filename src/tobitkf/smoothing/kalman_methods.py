@@ -59,9 +59,14 @@ from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import paper
 from tobitkf.smoothing.params import limit_vec, optional, positive_float, positive_vec
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
-from tobitkf.smoothing.timebase import elapsed_since_valid, inferred_r_scale
+from tobitkf.smoothing.timebase import (
+    elapsed_since_valid,
+    inferred_r_scale,
+    inferred_sample_scale,
+    readonly,
+)
 
-__all__ = ["atkf_c", "run_kalman"]
+__all__ = ["atkf_c", "run_kalman", "run_kalman_core"]
 
 Array = NDArray[np.float64]
 
@@ -123,11 +128,11 @@ def sample_limits(
 
 
 def warn_contradicted_limits(
-    beyond: NDArray[np.bool_], valid: NDArray[np.bool_], joint_names: Any, method: str
+    count: NDArray[np.int64], n_valid: NDArray[np.int64], joint_names: Any, method: str
 ) -> None:
-    """Warn when the data lie beyond a censoring limit persistently (per joint axis)."""
-    count = beyond.sum(axis=0)  # (*batch, 3)
-    n = np.maximum(valid.sum(axis=0), 1)[..., None]
+    """Warn when the data lie beyond a censoring limit persistently (per joint axis):
+    ``count (*batch, 3)`` samples beyond a limit out of ``n_valid (*batch)`` present."""
+    n = np.maximum(n_valid, 1)[..., None]
     bad = (count >= BEYOND_WARN_COUNT) & (count >= BEYOND_WARN_FRACTION * n)
     if not bad.any():
         return
@@ -175,8 +180,70 @@ def _limits_3d(inp: SmoothInput, params: dict[str, Any]) -> dict[str, tuple[floa
     return out
 
 
+def _vec3(v: Any) -> Array:
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (3,)))
+
+
 def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) -> SmoothOutput:
-    """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3)."""
+    """Kalman-type filtering (+ RTS when ``inp.offline``) of ``inp.ys`` (T, *batch, 3).
+
+    Runs the compiled per-axis kernel (:mod:`tobitkf.smoothing._kalman_kernels`), the same
+    numbers as :func:`run_kalman_core` (the numpy core) to rounding, without its per-frame
+    numpy calls and with no array kept beyond the outputs (and, offline, the variances).
+    """
+    from tobitkf.smoothing import _kalman_kernels as k  # numba: only when a method runs
+
+    ys = inp.ys
+    T = ys.shape[0]
+    bshape = ys.shape[1:-1]
+    flat = readonly(np.ascontiguousarray(ys).reshape(T, -1, 3))  # one compiled version
+    N = flat.shape[1]
+    q = _vec3(params["q"])
+    if inp.is_reference:
+        qs = np.ascontiguousarray(np.broadcast_to(q, (T, 3)))
+    else:
+        qs = q[None] * (inp.steps / paper.REFERENCE_DT)[:, None]
+    scale = inferred_sample_scale(inp.tracking_state, ~inp.missing, inp.inferred_noise_factor)
+    rs = np.empty((0, 0)) if scale is None else scale.reshape(T, -1)
+    used: dict[str, Any] = {}
+    r = _vec3(params["r"])
+    est, std = np.empty((T, N, 3)), np.empty((T, N))
+    clipped = np.zeros((T, N), dtype=bool)
+    var = np.empty((T, N, 3) if inp.offline else (0, 0, 3))
+    work = (var, np.empty((N, 3, 6)), np.empty((N, 2), dtype=np.int64))
+    if kind == "tkf":
+        lower, upper = _vec3(params["lower"]), _vec3(params["upper"])
+        beyond = np.zeros((N, 3), dtype=np.int64)  # samples beyond a limit: used as measured
+        k.tobit_run(variant == "corrected", flat, qs, r, rs, lower, upper, BEYOND_LIMIT_TOL,
+                    bool(inp.offline), est, std, clipped, *work, beyond)  # fmt: skip
+        if beyond.any():
+            warn_contradicted_limits(
+                beyond.reshape((*bshape, 3)), (~inp.missing).sum(axis=0), inp.topology.joints,
+                "tkf" if variant == "standard" else "tkfc",
+            )  # fmt: skip
+    else:
+        c = atkf_c(params, inp.up_axis) if kind == "atkf" else np.full(3, np.inf)
+        if kind == "atkf":
+            used["c"] = tuple(float(v) for v in c)
+        steps = np.ascontiguousarray(inp.steps, dtype=float)
+        k.gaussian_run(kind == "atkf", flat, qs, r, rs, c, steps, np.cumsum(steps),
+                       bool(inp.is_reference), paper.REFERENCE_DT, bool(inp.offline),
+                       est, std, clipped, *work)  # fmt: skip
+    if inp.offline:
+        k.rts_run(est, var, qs, std)
+    k.blank_before_first(est, std, work[2])
+    est = est.reshape(ys.shape)
+    std = std.reshape((T, *bshape))
+    clipped = clipped.reshape((T, *bshape))
+    return SmoothOutput(est, clipped=clipped, params=used, std=std)
+
+
+def run_kalman_core(
+    inp: SmoothInput, kind: str, variant: str | None, **params: Any
+) -> SmoothOutput:
+    """:func:`run_kalman` through the numpy core (``kalman_filter``, ``tobit_filter``,
+    ``adaptive_tobit_filter``, ``rts_smooth``): the reference the compiled kernel is
+    tested against (tests/test_kalman_kernels.py)."""
     ys, missing = inp.ys, inp.missing
     T = ys.shape[0]
     bshape = ys.shape[1:-1]
@@ -221,8 +288,9 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
             kwargs["lower_seq"], kwargs["upper_seq"], beyond = lifted
             lower = upper = None
             warn_contradicted_limits(
-                beyond, valid, inp.topology.joints, "tkf" if variant == "standard" else "tkfc"
-            )
+                beyond.sum(axis=0), valid.sum(axis=0), inp.topology.joints,
+                "tkf" if variant == "standard" else "tkfc",
+            )  # fmt: skip
             del beyond
         result = tobit_filter(
             model, ys, lower, upper, variant=variant, keep_probabilities=False, **kwargs

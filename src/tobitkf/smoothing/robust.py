@@ -115,6 +115,7 @@ from tobitkf.smoothing.timebase import (
     frame_times,
     inferred_r_scale,
     measurements,
+    readonly,
 )
 
 __all__ = ["ROBUST_DEFAULTS", "ROBUST_VALIDATORS", "robust_smooth"]
@@ -276,8 +277,9 @@ def _offline(
     B, J = missing.shape[1:]
     acc = k.gate_run(ys, times, *gate_args, k.new_state(B, J, 0))
     if params["two_pass"]:
-        back = k.gate_run(np.ascontiguousarray(ys[::-1]), np.ascontiguousarray(-times[::-1]),
-                          *gate_args, k.new_state(B, J, 0))  # fmt: skip
+        back = k.gate_run(readonly(np.ascontiguousarray(ys[::-1])),
+                          np.ascontiguousarray(-times[::-1]), *gate_args,
+                          k.new_state(B, J, 0))  # fmt: skip
         acc &= back[::-1]
     if params["min_run"] > 0:
         acc = k.drop_short_runs_run(acc, ~missing & ~acc, times, float(params["min_run"]))
@@ -345,12 +347,12 @@ def _robust_bodies(
         centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
     setup = _Setup(topo, params)
+    ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     # (B, J): the median bone lengths (reported), and what the offline bone gate compares
     # with (2-D from the recording: the centre of the one-sided range)
     L = bone_lengths(ys, topo.parents) if params["bones"] else None
     L_gate = L if centre is None else centre
     k = kernels()
-    ys = np.ascontiguousarray(ys, dtype=float)
     missing = np.ascontiguousarray(missing, dtype=bool)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
@@ -424,7 +426,7 @@ class RobustStepper:
         self.rejected = np.zeros((B, J), dtype=bool)
         self.std = np.empty((B, J))
         k.online_frames(
-            np.ascontiguousarray(ys, dtype=float)[None],
+            readonly(np.ascontiguousarray(ys, dtype=float)[None]),
             np.ascontiguousarray(missing, dtype=bool)[None],
             _inferred_scale(states, missing, self.factor)[None],
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,

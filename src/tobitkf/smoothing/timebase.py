@@ -20,7 +20,9 @@ __all__ = [
     "frame_steps",
     "frame_times",
     "inferred_r_scale",
+    "inferred_sample_scale",
     "measurements",
+    "readonly",
 ]
 
 Array = NDArray[np.float64]
@@ -80,6 +82,15 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
     return ys, missing
 
 
+def readonly(a: NDArray[Any]) -> NDArray[Any]:
+    """A read-only view of ``a``. The compiled kernels get their input samples this way,
+    whether the caller's array is writable or not: numba compiles one version of a
+    function per argument type, and writability is part of an array's type."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
 def any_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """``a.any(axis=-1)``, written out for 3 axes (a reduction over a short last axis is
     slow in numpy)."""
@@ -95,8 +106,10 @@ def all_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return a.all(axis=-1)
 
 
-def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
-    """Measurement-variance multiplier ``(*valid.shape, 3)`` for valid INFERRED joints.
+def inferred_sample_scale(
+    states: Any | None, valid: NDArray[np.bool_], factor: float
+) -> Array | None:
+    """Measurement-variance multiplier ``valid.shape`` for valid INFERRED joints.
 
     ``factor`` where a valid joint is INFERRED, 1 elsewhere; None when nothing is scaled
     (no states, factor 1 or no valid inferred joint), so the filters skip the work.
@@ -106,7 +119,13 @@ def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float
     inferred = (np.asarray(states) == TrackingState.INFERRED) & valid
     if not inferred.any():
         return None
-    return np.repeat(np.where(inferred, factor, 1.0)[..., None], 3, axis=-1)
+    return np.where(inferred, factor, 1.0)
+
+
+def inferred_r_scale(states: Any | None, valid: NDArray[np.bool_], factor: float) -> Array | None:
+    """:func:`inferred_sample_scale` repeated on the 3 axes, ``(*valid.shape, 3)``."""
+    scale = inferred_sample_scale(states, valid, factor)
+    return None if scale is None else np.repeat(scale[..., None], 3, axis=-1)
 
 
 def elapsed_since_valid(steps: Array, valid: NDArray[np.bool_]) -> Array:
