@@ -86,7 +86,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
@@ -149,6 +149,11 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     # (taken from the recording: robust_scale), "auto" (physical for lengths, recording
     # for pixels and unknown units)
     "gates": "auto",
+    # offline: "fit" = noise fitted per recording and body region by maximum likelihood
+    # (robust_fit.py; speed_sd / noise_sd are then its start and bounds), "fixed" = as given
+    "noise": "fit",
+    # offline, noise="fit": at most this many seconds of each recording are fitted on, s
+    "fit_seconds": 5.0,
 }
 
 #: parameter validators (name -> check(name, value) -> value)
@@ -167,12 +172,18 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "min_run": nonneg_float,
     "carry": as_bool,
     "gates": one_of("auto", "physical", "recording"),
+    "noise": one_of("fit", "fixed"),
+    "fit_seconds": positive_or_inf,
 }
 
 #: the parameters :func:`tobitkf.smoothing.robust_scale.recording_gates` derives
 RECORDING_PARAMS = ("noise_sd", "speed_sd", "v_max", "margin", "bone_tol_abs", "bone_tol_rel")
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
+
+#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md)
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
+ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -205,6 +216,7 @@ class _Setup:
         tau = params["tau"]
         # stationary velocity variance of the OU model is q tau / 2
         qa = 2 * self.spd**2 / tau if np.isfinite(tau) else self.spd**2
+        self.groups = topo.joint_groups()
         self.parents, self.order = joint_order(topo.parents)
         self.pj = np.zeros((J, k.N_PJ))
         self.pj[:, k.J_VMAX] = self.vmax
@@ -264,12 +276,14 @@ def _offline(
     setup: _Setup,
     params: dict[str, Any],
     L_fixed: Array,
-) -> tuple[Array, NDArray[np.bool_], Array]:
+    inferred: NDArray[np.bool_],
+) -> tuple[Array, NDArray[np.bool_], Array, Any]:
     """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
 
     One kernel call per stage for all bodies (compiling them as one would take longer).
-    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J))``, ``var`` the
-    smoothed position variance (per axis; the axes share it).
+    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J), fits)``, ``var`` the
+    smoothed position variance (per axis; the axes share it), ``fits`` None (fixed
+    noise) or the fitted per-joint arrays ``(B, J)`` and the per-body region fits.
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
@@ -287,7 +301,13 @@ def _offline(
         acc = k.enforce_chain_run(acc, ys, times, par, order, pj, float(params["margin"]), True)
     rejected = ~missing & ~acc
     yk = np.where(acc[..., None], ys, np.nan)
-    r = pj[:, k.J_R]
+    fits = None
+    sd = np.broadcast_to(pj[:, k.J_SD], missing.shape[1:])
+    if params["noise"] == "fit":
+        # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
+        fits = _fit_noise(yk, acc & ~inferred, rinf, steps, setup, params)
+        sd = fits[0]["noise_sd"]
+    r = sd**2
     rvar = r * rinf
     if params["carry"]:
         pseudo, radius = k.carry_run(ys, acc, par, order, False)
@@ -299,10 +319,22 @@ def _offline(
         yk[carried] = pseudo[carried]
         # standard deviation = the bone length: the joint may have rotated about its parent
         with np.errstate(invalid="ignore"):
-            scale = np.maximum(1.0, (radius / pj[:, k.J_SD]) ** 2)
+            scale = np.maximum(1.0, (radius / sd) ** 2)
         rvar = np.where(carried, r * scale, rvar)
     var = np.empty(missing.shape)
-    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]), var)
+    rvar = np.ascontiguousarray(rvar)
+    if fits is None:
+        est = k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), var)
+    else:
+        f = fits[0]
+        tau = float(params["tau"])
+        q = 2 * f["speed_sd"] ** 2 / tau if np.isfinite(tau) else f["speed_sd"] ** 2
+        # a joint that is not measured (rejected or missing) moves as the physics allows,
+        # not as fitted on the tracked samples: failures come with fast motion and
+        # occlusion, so the physical typical speed is the floor there
+        q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
+        est = fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau,
+                                       f["error_tau"], var)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     before = np.cumsum(~missing, axis=0) == 0
     est[before] = np.nan
@@ -310,7 +342,27 @@ def _offline(
     never = ~acc.any(axis=0)
     est[:, never] = ys[:, never]
     var[:, never] = np.nan  # raw, not smoothed: no posterior
-    return est, rejected, var
+    return est, rejected, var, fits
+
+
+def fit_kernels() -> Any:
+    """The compiled kernels of the fitted-noise smoother (imports numba on first use)."""
+    from tobitkf.smoothing import robust_fit
+
+    return robust_fit.kernels()
+
+
+def _fit_noise(
+    yk: Array, use: NDArray[np.bool_], rinf: Array, steps: Array, setup: _Setup,
+    params: dict[str, Any],
+) -> tuple[dict[str, Array], list[dict[str, Any]]]:  # fmt: skip
+    """Noise per body and region by maximum likelihood (:mod:`.robust_fit`)."""
+    from tobitkf.smoothing.robust_fit import fit_noise_bodies
+
+    return fit_noise_bodies(
+        yk, use, rinf, steps, setup.groups, tau=float(params["tau"]), speed_sd=setup.spd,
+        noise_sd=setup.sd, v_max=setup.vmax, max_seconds=float(params["fit_seconds"]),
+    )  # fmt: skip
 
 
 def step_guard() -> Any:
@@ -352,9 +404,14 @@ def _robust_bodies(
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
     rinf = _inferred_scale(states, missing, factor, confidence)
+    fits = None
     if offline:
         L_fixed = np.full((B, J), np.nan) if L is None else np.ascontiguousarray(L)
-        est, rejected, var = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
+        inferred = np.zeros(missing.shape, dtype=bool)
+        if states is not None:
+            inferred = np.asarray(states) == TrackingState.INFERRED
+        est, rejected, var, fits = _offline(ys, missing, times, steps, rinf, setup, params,
+                                            L_fixed, inferred)  # fmt: skip
     else:
         state = k.new_state(B, J, int(params["lookback"]))
         est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
@@ -375,16 +432,23 @@ def _robust_bodies(
     for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
         if name in derived:
             resolved[name] = float(derived[name])
-    return est, np.sqrt(var), diags, resolved
+    body_params = None
+    if fits is not None:
+        arrays, reports = fits
+        body_params = tuple({name: a[b].tolist() for name, a in arrays.items()} for b in range(B))
+        for b in range(B):
+            diags[b]["noise_fit"] = reports[b]
+    return est, np.sqrt(var), diags, resolved, body_params
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
     """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
-    est, std, diags, resolved = _robust_bodies(
+    est, std, diags, resolved, body_params = _robust_bodies(
         inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
         inp.inferred_noise_factor, offline, inp.confidence, inp.units, inp.n_dims,
     )  # fmt: skip
-    return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {})
+    return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {},
+                        body_params=body_params)  # fmt: skip
 
 
 class RobustStepper:
@@ -519,7 +583,9 @@ def robust_smooth(
         missing = missing | low
         ys = np.where(missing[..., None], np.nan, ys)
     steps = frame_steps(sequence)[0]
-    est, std, diags, resolved = _robust_bodies(
+    if not offline:
+        full = {**full, "noise": ONLINE_VALIDATORS["noise"]("noise", params.get("noise", "fixed"))}
+    est, std, diags, resolved, body_params = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
         frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
         None if conf is None else conf[:, None], "m" if scale is not None else sequence.units,
@@ -528,7 +594,8 @@ def robust_smooth(
     est, std, diag = drop_third_axis(est[:, 0], sequence.n_dims), std[:, 0], diags[0]
     if scale not in (None, 1.0):
         est, std = est / scale, std / scale
-    used = {**full, **resolved, "inferred_noise_factor": factor, "offline": offline}
+    used = {**full, **resolved, **(body_params[0] if body_params else {}),
+            "inferred_noise_factor": factor, "offline": offline}  # fmt: skip
     if conf is not None:
         used["min_confidence"] = min_conf
     filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
@@ -551,8 +618,8 @@ def _register(name: str, offline: bool, description: str) -> None:
     register_method(
         name,
         run,
-        params=ROBUST_DEFAULTS,
-        validators=ROBUST_VALIDATORS,
+        params=ROBUST_DEFAULTS if offline else ONLINE_DEFAULTS,
+        validators=ROBUST_VALIDATORS if offline else ONLINE_VALIDATORS,
         description=description,
         causal=not offline,
         live=None if offline else RobustStepper,
