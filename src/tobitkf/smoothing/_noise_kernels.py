@@ -154,9 +154,11 @@ def smooth_run(
     var: np.ndarray,  # out (T, B, J): smoothed variance of x
 ) -> np.ndarray:
     """Kalman filter + RTS smoother of the three-state model per joint: the estimate of
-    ``x``, ``(T, B, J, 3)``, NaN before a joint's first sample (as
-    :func:`filter_sums`, each joint starts at its first sample; ``v0 = q tau / 2`` with
-    the ``q`` of that frame)."""
+    ``x``, ``(T, B, J, 3)`` (NaN for a joint without samples). As
+    :func:`~tobitkf.smoothing._robust_kernels.ou_smooth_run`, the filter starts at frame
+    0 from the joint's first sample (velocity 0, the prior of :func:`filter_sums` with
+    the ``q`` of that sample's frame) and is then updated with every sample, the first
+    one included: with ``sc2 = 0`` it is exactly that two-state smoother."""
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
     est = np.full((T, B, J, 3), np.nan)
     X = np.empty((T, 3, 3))  # filtered (x, v, c) per axis
@@ -183,8 +185,8 @@ def smooth_run(
             if first < 0:
                 continue
             p00 = p01 = p02 = p11 = p12 = p22 = 0.0
-            for t in range(first, T):
-                if t > first:
+            for t in range(T):
+                if t > 0:
                     a, rr, phi, qq = ou[t, 0], ou[t, 1], phis[t], q[t, b, j]
                     for i in range(3):
                         X[t, i, 0] = X[t - 1, i, 0] + a * X[t - 1, i, 1]
@@ -197,11 +199,12 @@ def smooth_run(
                     n12 = phi * rr * p12
                     n22 = phi * phi * p22 + sj * (1.0 - phi * phi)
                     p00, p01, p11, p02, p12, p22 = n00, n01, n11, n02, n12, n22
-                else:
-                    v0 = q[t, b, j] * tau / 2 if math.isfinite(tau) else 1.0
-                    p00, p01, p02, p11, p12, p22 = rvar[t, b, j] + sj, 0.0, -sj, v0, 0.0, sj
+                else:  # frame 0 starts at the first sample, as ou_smooth_run
+                    v0 = q[first, b, j] * tau / 2 if math.isfinite(tau) else 1.0
+                    rf = rvar[first, b, j]
+                    p00, p01, p02, p11, p12, p22 = rf + sj, 0.0, -sj, v0, 0.0, sj
                     for i in range(3):
-                        X[t, i, 0] = yk[t, b, j, i]
+                        X[t, i, 0] = yk[first, b, j, i]
                         X[t, i, 1] = 0.0
                         X[t, i, 2] = 0.0
                 for i in range(3):
@@ -209,7 +212,7 @@ def smooth_run(
                         Xp[t, i, k] = X[t, i, k]
                 Pp[t, 0], Pp[t, 1], Pp[t, 2] = p00, p01, p02
                 Pp[t, 3], Pp[t, 4], Pp[t, 5] = p11, p12, p22
-                if t > first and math.isfinite(yk[t, b, j, 0]):
+                if math.isfinite(yk[t, b, j, 0]):
                     h0 = p00 + p02
                     h1 = p01 + p12
                     h2 = p02 + p22
@@ -230,7 +233,7 @@ def smooth_run(
             for i in range(3):
                 est[T - 1, b, j, i] = X[T - 1, i, 0]
             var[T - 1, b, j] = s00
-            for t in range(T - 2, first - 1, -1):
+            for t in range(T - 2, -1, -1):
                 a, rr, phi = ou[t + 1, 0], ou[t + 1, 1], phis[t + 1]
                 f00, f01, f02, f11, f12, f22 = Pf[t, 0], Pf[t, 1], Pf[t, 2], Pf[t, 3], \
                     Pf[t, 4], Pf[t, 5]  # fmt: skip
