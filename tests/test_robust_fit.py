@@ -37,7 +37,7 @@ def expm(M: np.ndarray) -> np.ndarray:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _discrete(dt: float, q: float, sc2: float, tau: float, tau_c: float):
     """Exact (A, Q) of the continuous model ``dx = v dt``, ``dv = -v/tau dt + sqrt(q) dW``,
     ``dc = -c/tau_c dt + sqrt(2 sc2 / tau_c) dW'`` by Van Loan's matrix exponential."""
@@ -128,7 +128,8 @@ def test_likelihood_equals_a_brute_force_kalman_likelihood():
     blocks = np.concatenate([np.arange(0, 20), np.arange(26, 44)])  # two blocks
     restart_b = np.zeros(blocks.size, dtype=bool)
     restart_b[[0, 20]] = True
-    for q, r, sc2, tau_c in ((3.0, 1e-4, 4e-5, 0.06), (0.5, 2e-4, 0.0, 0.1), (8.0, 1e-5, 1e-4, 0.15)):
+    cases = ((3.0, 1e-4, 4e-5, 0.06), (0.5, 2e-4, 0.0, 0.1), (8.0, 1e-5, 1e-4, 0.15))
+    for q, r, sc2, tau_c in cases:
         for fr, rs in ((frames, restart), (blocks, restart_b)):
             got, n = nk.loglik(yk, rscale, steps, fr, rs, q, r, sc2, TAU, tau_c)
             want = _brute_loglik(yk, rscale, steps, fr, rs, q, r, sc2, TAU, tau_c)
@@ -146,7 +147,7 @@ def test_profile_likelihood_is_the_likelihood_at_the_closed_form_scale():
     frames, restart = fit_blocks(steps, np.inf)
     ou = rk.ou_table(steps, TAU)
     th = np.array([np.log(40.0), 0.3, np.log(0.05)])
-    se, sl, n = nk.profile_sums(th, yk, rscale, steps, ou, frames, restart, TAU, TAU)
+    se, _, n = nk.profile_sums(th, yk, rscale, steps, ou, frames, restart, TAU, TAU)
     m2 = se / n
     phi = 1 / (1 + np.exp(-th[1]))
     q = 2 * np.exp(th[0]) ** 2 / TAU * m2

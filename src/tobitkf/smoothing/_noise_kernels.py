@@ -32,6 +32,7 @@ from tobitkf.smoothing._robust_kernels import ou_table
 
 _jit = njit(cache=True, nogil=True)
 
+
 @_jit
 def filter_sums(
     yk: np.ndarray,  # (T, N, 3) samples of N tracks, NaN = not used
@@ -241,8 +242,14 @@ def smooth_run(
                 m00, m01, m02 = f00 + a * f01, rr * f01, phi * f02
                 m10, m11, m12 = f01 + a * f11, rr * f11, phi * f12
                 m20, m21, m22 = f02 + a * f12, rr * f12, phi * f22
-                i00, i01, i02, i11, i12, i22 = _inv3s(Pp[t + 1, 0], Pp[t + 1, 1], Pp[t + 1, 2],
-                                                      Pp[t + 1, 3], Pp[t + 1, 4], Pp[t + 1, 5])
+                i00, i01, i02, i11, i12, i22 = _inv3s(
+                    Pp[t + 1, 0],
+                    Pp[t + 1, 1],
+                    Pp[t + 1, 2],
+                    Pp[t + 1, 3],
+                    Pp[t + 1, 4],
+                    Pp[t + 1, 5],
+                )
                 g00 = m00 * i00 + m01 * i01 + m02 * i02
                 g01 = m00 * i01 + m01 * i11 + m02 * i12
                 g02 = m00 * i02 + m01 * i12 + m02 * i22

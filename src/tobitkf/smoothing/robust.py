@@ -57,9 +57,13 @@ Each axis of each joint is an integrated Ornstein–Uhlenbeck velocity model,
 ``dv = -v/tau dt + sqrt(q) dW``, ``dx = v dt``, discretised exactly per time step (so
 irregular timestamps are exact), with ``q = 2 speed_sd² / tau`` (the stationary velocity
 standard deviation is ``speed_sd``, per body region) and measurement noise ``noise_sd``
-(per region), ``H = [1, 0]``.  Offline the RTS smoother runs after the filter; online the
-filter output is returned: across a rejected stretch the OU velocity decays with
-``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
+(per region), ``H = [1, 0]``.  Offline, by default (``noise="fit"``), these noises are
+fitted to the recording per body region by maximum likelihood, with a coloured
+measurement error beside the white one, and the filter is the three-state one of that
+model (:mod:`tobitkf.smoothing.robust_fit`); while a joint is not measured its process
+noise is at least the constant's.  Offline the RTS smoother runs after the filter;
+online (constants) the filter output is returned: across a rejected stretch the OU
+velocity decays with ``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
 held. Online, a joint not accepted yet is returned as measured (its filter starts at its
 first accepted sample; live, nobody knows whether it ever will be), and no output step
 of a joint is larger than the largest step of its input so far
@@ -544,6 +548,12 @@ def robust_smooth(
     carry : rejected joints are carried along with their parent (pseudo-measurement at
         the parent plus the last good offset, standard deviation = that bone's length),
         instead of only being predicted by their own motion model (default True).
+    noise : offline only: ``"fit"`` (default) fits ``speed_sd`` and ``noise_sd`` (given
+        values: the start and bounds) and a coloured error (``error_sd``, ``error_tau``)
+        to the recording per body region (:mod:`tobitkf.smoothing.robust_fit`; the
+        fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
+        uses the values as given (online always).
+    fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``

@@ -13,21 +13,25 @@ smoother's.
 Per recording (body) and per body region (hands, arms, torso, legs: the joints of a
 region share one parameter set), :func:`fit_group` maximises the likelihood of the
 samples the gates accepted (TRACKED ones; INFERRED, rejected, carried and missing
-samples are left out) over ``log speed_sd``, ``log noise_sd``, ``log error_sd`` and
-``log error_tau`` with :func:`scipy.optimize.minimize` (L-BFGS-B), from the physical
-defaults, within bounds that follow from the physics:
+samples are left out). The total measurement variance ``m² = noise_sd² + error_sd²``
+scales every variance of the model, so its maximum is in closed form; the optimiser
+(:func:`scipy.optimize.minimize`, L-BFGS-B, with a compiled forward-difference gradient)
+searches ``log(speed_sd / m)``, ``logit(error_sd² / m²)`` and ``log error_tau``, from the
+physical defaults, within bounds that follow from the physics:
 
 - ``speed_sd`` in ``[default / 100, v_max]``: the rms speed cannot exceed the region's
   largest speed; a still joint may be much slower than the default;
-- ``noise_sd`` and ``error_sd`` in ``[default / 100, 10 default]`` (``error_sd``'s
-  default is ``noise_sd``'s);
+- ``m`` in ``[default noise_sd / 100, 10 √2 default noise_sd]``;
 - ``error_tau`` in ``[one frame, tau]``: an error that stays correlated for longer than
   the body's velocity does is indistinguishable from posture (it would be removed from
   real slow motion), so it is left to the motion model.
 
 ``tau`` stays the given constant (the smoother's time scale of motion). The fit uses at
 most ``fit_seconds`` of each recording (evenly spaced two-second blocks, each track
-restarting at a block: ``inf`` = all of it), so its cost per recording is bounded.
+restarting at a block: ``inf`` = all of it), so its cost per recording is bounded. The
+split of ``m²`` into a white and a coloured part is weakly identified when ``error_tau``
+nears ``tau`` (the likelihood is flat along it; so is the smoother's output), the speed
+and the total well (tests/test_robust_fit.py).
 """
 
 from __future__ import annotations
@@ -110,12 +114,12 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
         restart = np.zeros(T, dtype=bool)
         return frames, restart
     dt = float(np.median(steps[1:]))
-    blen = max(2, int(round(FIT_BLOCK_SECONDS / dt)))
-    nblocks = max(1, int(round(max_seconds / (blen * dt))))
+    blen = max(2, round(FIT_BLOCK_SECONDS / dt))
+    nblocks = max(1, round(max_seconds / (blen * dt)))
     starts = np.unique(np.linspace(0, T - blen, nblocks).round().astype(np.int64))
     frames = (starts[:, None] + np.arange(blen)[None]).ravel()
     restart = np.zeros(frames.size, dtype=bool)
-    restart[:: blen] = True
+    restart[::blen] = True
     keep = np.concatenate([[True], np.diff(frames) > 0])  # overlapping blocks: once
     return np.ascontiguousarray(frames[keep]), np.ascontiguousarray(restart[keep])
 
@@ -203,7 +207,7 @@ def fit_noise_bodies(
     Returns per-joint arrays ``(B, J)`` (``speed_sd``, ``noise_sd``, ``error_sd``,
     ``error_tau``) and, per body, the region fits as dicts.
     """
-    T, B, J = use.shape
+    B, J = use.shape[1:]
     frames, restart = fit_blocks(steps, max_seconds)
     # only the fitted frames: the step before each stays its own
     yk, use, rscale, steps = yk[frames], use[frames], rscale[frames], steps[frames]
