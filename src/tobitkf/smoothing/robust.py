@@ -64,9 +64,9 @@ model (:mod:`tobitkf.smoothing.robust_fit`); while a joint is not measured its p
 noise is at least the constant's.  Offline the RTS smoother runs after the filter;
 online (constants) the filter output is returned: across a rejected stretch the OU
 velocity decays with ``tau`` (0.15 s), so a lost joint is extrapolated by at most about
-``v * tau`` and then held. Online, a joint not accepted yet is returned as measured (its filter starts at its
-first accepted sample; live, nobody knows whether it ever will be), and no output step
-of a joint is larger than the largest step of its input so far
+``v * tau`` and then held. Online, a joint not accepted yet is returned as measured
+(its filter starts at its first accepted sample; live, nobody knows whether it ever
+will be), and no output step of a joint is larger than the largest step of its input so far
 (:mod:`tobitkf.smoothing._step_guard`): after a long rejection the estimate catches up
 over a few frames instead of snapping back in one, and the shift is added to its
 standard deviation.
