@@ -344,3 +344,15 @@ def test_fit_bodies_respects_bounds():
     assert out["speed_sd"][0, 0] >= 0.003 - 1e-15
     assert out["error_tau"][0, 0] <= TAU + 1e-12
     assert rep[0]["torso"]["fitted"]
+
+
+def test_evaluate_scores_a_method_with_other_parameters():
+    from tobitkf.evaluation.scores import resolve_method
+
+    seq = _body(5, 0.005)
+    label, fn = resolve_method("robust[noise=fixed;tau=0.2;fit_seconds=inf]")
+    assert label == "robust[noise=fixed;tau=0.2;fit_seconds=inf]"
+    want = tk.smooth(seq, "robust", noise="fixed", tau=0.2, fit_seconds=np.inf)
+    np.testing.assert_array_equal(fn(seq).positions, want.positions)
+    with pytest.raises(ValueError, match="key=value"):
+        resolve_method("robust[noise]")

@@ -467,7 +467,7 @@ class RobustStepper:
 
     def __init__(self, topology: Topology, up_axis: int, inferred_noise_factor: float,
                  **params: Any) -> None:  # fmt: skip
-        full = dict(ROBUST_DEFAULTS)
+        full = dict(ONLINE_DEFAULTS)
         full.update(params)
         self.setup = _Setup(topology, full)
         self.factor = inferred_noise_factor
@@ -578,8 +578,9 @@ def robust_smooth(
         raise ValueError(
             f"unknown parameters {unknown} for robust_smooth; valid: {sorted(ROBUST_DEFAULTS)}"
         )
-    full = dict(ROBUST_DEFAULTS)
-    full.update({k: ROBUST_VALIDATORS[k](k, v) for k, v in params.items()})
+    full = dict(ROBUST_DEFAULTS if offline else ONLINE_DEFAULTS)
+    checks = ROBUST_VALIDATORS if offline else ONLINE_VALIDATORS
+    full.update({k: checks[k](k, v) for k, v in params.items()})
     T, J = sequence.n_frames, sequence.n_joints
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
@@ -593,8 +594,6 @@ def robust_smooth(
         missing = missing | low
         ys = np.where(missing[..., None], np.nan, ys)
     steps = frame_steps(sequence)[0]
-    if not offline:
-        full = {**full, "noise": ONLINE_VALIDATORS["noise"]("noise", params.get("noise", "fixed"))}
     est, std, diags, resolved, body_params = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
         frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
