@@ -61,6 +61,8 @@ def filter_sums(
     X = np.zeros((N, 9))  # (x, v, c) of the three axes
     P = np.zeros((N, 6))  # p00, p01, p02, p11, p12, p22
     started = np.zeros(N, dtype=np.bool_)
+    lastS = np.full(N, np.nan)
+    lastlog = np.zeros(N)
     for m in range(M):
         t = frames[m]
         if restart[m]:
@@ -107,7 +109,10 @@ def filter_sums(
             f = y1 - X[j, 3] - X[j, 5]
             g = y2 - X[j, 6] - X[j, 8]
             se += (e * e + f * f + g * g) * iS
-            sl += 3 * math.log(S)
+            if S != lastS[j]:  # the covariance settles: most steps repeat the last S
+                lastS[j] = S
+                lastlog[j] = 3 * math.log(S)
+            sl += lastlog[j]
             n += 3
             X[j, 0] += k0 * e
             X[j, 1] += k1 * e

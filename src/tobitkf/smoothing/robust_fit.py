@@ -106,7 +106,7 @@ class GroupFit:
 def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """Frames the fit runs over and where the tracks restart: all frames when the
     recording lasts at most ``max_seconds``, else evenly spaced blocks of
-    :data:`FIT_BLOCK_SECONDS` adding up to about ``max_seconds``."""
+    :data:`FIT_BLOCK_SECONDS` adding up to at most ``max_seconds`` (at least one)."""
     T = steps.shape[0]
     total = float(np.sum(steps[1:])) if T > 1 else 0.0
     if not math.isfinite(max_seconds) or total <= max_seconds or T < 2:
@@ -115,7 +115,7 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
         return frames, restart
     dt = float(np.median(steps[1:]))
     blen = max(2, round(FIT_BLOCK_SECONDS / dt))
-    nblocks = max(1, round(max_seconds / (blen * dt)))
+    nblocks = max(1, math.floor(max_seconds / (blen * dt)))  # at most max_seconds
     starts = np.unique(np.linspace(0, T - blen, nblocks).round().astype(np.int64))
     frames = (starts[:, None] + np.arange(blen)[None]).ravel()
     restart = np.zeros(frames.size, dtype=bool)
