@@ -414,7 +414,7 @@ def test_carried_joint_follows_its_parent_offline_exactly():
     pos += (0.2 * np.sin(np.pi * t))[:, None, None] * np.array([1.0, 0.3, -0.5])
     meas = pos.copy()
     meas[30:50, 1] += OFF
-    est, rej = _run(meas, "robust", v_max=5.0)
+    est, rej = _run(meas, "robust", v_max=5.0, noise="fixed")
     assert _frames(rej[:, 1]) == _span(30, 49)
     q = 2 * 0.6**2 / 0.15  # arms: speed_sd 0.6 m/s, noise_sd 10 mm; tau 0.15 s
     offset = pos[29, 1] - pos[29, 0]
@@ -423,7 +423,7 @@ def test_carried_joint_follows_its_parent_offline_exactly():
     r = np.where(ok, 0.01**2, offset @ offset)
     ref = _ref_filter(y, r, t, 0.15, q, smooth=True)
     np.testing.assert_allclose(est[:, 1], ref, rtol=0, atol=1e-9)
-    held, _ = _run(meas, "robust", v_max=5.0, carry=False)
+    held, _ = _run(meas, "robust", v_max=5.0, carry=False, noise="fixed")
     err = np.linalg.norm(est[30:50, 1] - pos[30:50, 1], axis=-1).max()
     err_held = np.linalg.norm(held[30:50, 1] - pos[30:50, 1], axis=-1).max()
     assert err < 0.7 * err_held  # measured 3.0 cm against 5.0 cm
@@ -568,7 +568,8 @@ def test_offline_smoother_is_the_documented_ou_kalman_rts_smoother():
     states[0, 0] = TRACKED
     seq = _seq(pos, states, timestamps=ts)
     sd, spd, tau, factor = 0.008, 0.4, 0.2, 3.0
-    out = tk.smooth(seq, "robust", noise_sd=sd, speed_sd=spd, tau=tau, inferred_noise_factor=factor)
+    out = tk.smooth(seq, "robust", noise_sd=sd, speed_sd=spd, tau=tau, inferred_noise_factor=factor,
+                    noise="fixed")  # fmt: skip
     assert not out.metadata["diagnostics"]["rejected"].any()
     y = pos[:, 0].copy()
     y[states[:, 0] == NOT_TRACKED] = np.nan

@@ -72,7 +72,32 @@ def resolve_method(spec: MethodLike) -> tuple[str, Callable[[Any], Any]]:
         raise TypeError(f"method spec must be a str or tuple, got {type(spec).__name__}")
     if spec == "raw":
         return "raw", lambda s: s
-    return spec, _smooth(spec, {})
+    name, params = _split_params(spec)
+    return spec, _smooth(name, params)
+
+
+def _split_params(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"robust[noise=fixed;tau=0.2]"`` -> ``("robust", {"noise": "fixed", "tau": 0.2})``
+    (the command line's way to score one method with other parameters; the label stays
+    the text). Values: true / false, numbers, else text."""
+    if not spec.endswith("]") or "[" not in spec:
+        return spec, {}
+    name, _, body = spec[:-1].partition("[")
+    params: dict[str, Any] = {}
+    for item in filter(None, (i.strip() for i in body.split(";"))):
+        key, eq, raw = item.partition("=")
+        if not eq or not key.strip():
+            raise ValueError(f"method {spec!r}: {item!r} is not key=value")
+        value: Any = raw.strip()
+        if value.lower() in ("true", "false"):
+            value = value.lower() == "true"
+        else:
+            try:
+                value = float(value) if any(c in value for c in ".eEn") else int(value)
+            except ValueError:
+                pass
+        params[key.strip()] = value
+    return name.strip(), params
 
 
 def _smooth(name: str, params: Mapping[str, Any]) -> Callable[[Any], Any]:

@@ -463,17 +463,18 @@ def _smooth_group(
     out = []
     for b, s in enumerate(seqs):
         filled = (missing[:, b] | rejected[:, b]) & finite[:, b]
+        used_b = {**used, **(result.body_params[b] if result.body_params else {})}
         diagnostics = {
             **extra[b],
             "clipped_fraction": clipped[:, b].sum(axis=0) / T,
             "filled_fraction": filled.sum(axis=0) / T,
             "method": spec.name,
-            "params": dict(used),
+            "params": used_b,
             **({} if untangled is None else untangled[b]),
         }
         meta = dict(s.metadata)
         meta["diagnostics"] = diagnostics
-        meta["provenance"] = _provenance(spec, used, s.metadata)
+        meta["provenance"] = _provenance(spec, used_b, s.metadata)
         out.append(
             s.replace(
                 positions=est[:, b],

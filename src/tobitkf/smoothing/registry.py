@@ -114,6 +114,8 @@ class SmoothOutput:
     std : (T, B, J) posterior standard deviation of each position (metres, the
         root-mean-square over the axes of the per-axis standard deviations; NaN where
         there is no estimate), or None when the method gives none
+    body_params : one mapping per body of parameters resolved for that body alone (e.g.
+        noise fitted to it), recorded over ``params`` for that body, or None
     """
 
     positions: Array
@@ -121,6 +123,7 @@ class SmoothOutput:
     diagnostics: tuple[dict[str, Any], ...] | None = None
     params: Mapping[str, Any] | None = None
     std: Array | None = None
+    body_params: tuple[Mapping[str, Any], ...] | None = None
 
 
 class LiveStepper(Protocol):

@@ -57,12 +57,16 @@ Each axis of each joint is an integrated Ornstein–Uhlenbeck velocity model,
 ``dv = -v/tau dt + sqrt(q) dW``, ``dx = v dt``, discretised exactly per time step (so
 irregular timestamps are exact), with ``q = 2 speed_sd² / tau`` (the stationary velocity
 standard deviation is ``speed_sd``, per body region) and measurement noise ``noise_sd``
-(per region), ``H = [1, 0]``.  Offline the RTS smoother runs after the filter; online the
-filter output is returned: across a rejected stretch the OU velocity decays with
-``tau`` (0.15 s), so a lost joint is extrapolated by at most about ``v * tau`` and then
-held. Online, a joint not accepted yet is returned as measured (its filter starts at its
-first accepted sample; live, nobody knows whether it ever will be), and no output step
-of a joint is larger than the largest step of its input so far
+(per region), ``H = [1, 0]``.  Offline, by default (``noise="fit"``), these noises are
+fitted to the recording per body region by maximum likelihood, with a coloured
+measurement error beside the white one, and the filter is the three-state one of that
+model (:mod:`tobitkf.smoothing.robust_fit`); while a joint is not measured its process
+noise is at least the constant's.  Offline the RTS smoother runs after the filter;
+online (constants) the filter output is returned: across a rejected stretch the OU
+velocity decays with ``tau`` (0.15 s), so a lost joint is extrapolated by at most about
+``v * tau`` and then held. Online, a joint not accepted yet is returned as measured
+(its filter starts at its first accepted sample; live, nobody knows whether it ever
+will be), and no output step of a joint is larger than the largest step of its input so far
 (:mod:`tobitkf.smoothing._step_guard`): after a long rejection the estimate catches up
 over a few frames instead of snapping back in one, and the shift is added to its
 standard deviation.
@@ -86,7 +90,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
@@ -150,6 +154,11 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     # (taken from the recording: robust_scale), "auto" (physical for lengths, recording
     # for pixels and unknown units)
     "gates": "auto",
+    # offline: "fit" = noise fitted per recording and body region by maximum likelihood
+    # (robust_fit.py; speed_sd / noise_sd are then its start and bounds), "fixed" = as given
+    "noise": "fit",
+    # offline, noise="fit": at most this many seconds of each recording are fitted on, s
+    "fit_seconds": 5.0,
 }
 
 #: parameter validators (name -> check(name, value) -> value)
@@ -168,10 +177,16 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "min_run": nonneg_float,
     "carry": as_bool,
     "gates": one_of("auto", "physical", "recording"),
+    "noise": one_of("fit", "fixed"),
+    "fit_seconds": positive_or_inf,
 }
 
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
+
+#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md)
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
+ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -204,6 +219,7 @@ class _Setup:
         tau = params["tau"]
         # stationary velocity variance of the OU model is q tau / 2
         qa = 2 * self.spd**2 / tau if np.isfinite(tau) else self.spd**2
+        self.groups = topo.joint_groups()
         self.parents, self.order = joint_order(topo.parents)
         self.pj = np.zeros((J, k.N_PJ))
         self.pj[:, k.J_VMAX] = self.vmax
@@ -263,12 +279,14 @@ def _offline(
     setup: _Setup,
     params: dict[str, Any],
     L_fixed: Array,
-) -> tuple[Array, NDArray[np.bool_], Array]:
+    inferred: NDArray[np.bool_],
+) -> tuple[Array, NDArray[np.bool_], Array, Any]:
     """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
 
     One kernel call per stage for all bodies (compiling them as one would take longer).
-    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J))``, ``var`` the
-    smoothed position variance (per axis; the axes share it).
+    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J), fits)``, ``var`` the
+    smoothed position variance (per axis; the axes share it), ``fits`` None (fixed
+    noise) or the fitted per-joint arrays ``(B, J)`` and the per-body region fits.
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
@@ -287,7 +305,13 @@ def _offline(
         acc = k.enforce_chain_run(acc, ys, times, par, order, pj, float(params["margin"]), True)
     rejected = ~missing & ~acc
     yk = np.where(acc[..., None], ys, np.nan)
-    r = pj[:, k.J_R]
+    fits = None
+    sd = np.broadcast_to(pj[:, k.J_SD], missing.shape[1:])
+    if params["noise"] == "fit":
+        # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
+        fits = _fit_noise(yk, acc & ~inferred, rinf, steps, setup, params)
+        sd = fits[0]["noise_sd"]
+    r = sd**2
     rvar = r * rinf
     if params["carry"]:
         pseudo, radius = k.carry_run(ys, acc, par, order, False)
@@ -299,10 +323,22 @@ def _offline(
         yk[carried] = pseudo[carried]
         # standard deviation = the bone length: the joint may have rotated about its parent
         with np.errstate(invalid="ignore"):
-            scale = np.maximum(1.0, (radius / pj[:, k.J_SD]) ** 2)
+            scale = np.maximum(1.0, (radius / sd) ** 2)
         rvar = np.where(carried, r * scale, rvar)
     var = np.empty(missing.shape)
-    est = k.ou_smooth_run(yk, np.ascontiguousarray(rvar), steps, pj, float(params["tau"]), var)
+    rvar = np.ascontiguousarray(rvar)
+    if fits is None:
+        est = k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), var)
+    else:
+        f = fits[0]
+        tau = float(params["tau"])
+        q = 2 * f["speed_sd"] ** 2 / tau if np.isfinite(tau) else f["speed_sd"] ** 2
+        # a joint that is not measured (rejected or missing) moves as the physics allows,
+        # not as fitted on the tracked samples: failures come with fast motion and
+        # occlusion, so the physical typical speed is the floor there
+        q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
+        est = fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau,
+                                       f["error_tau"], var)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     before = np.cumsum(~missing, axis=0) == 0
     est[before] = np.nan
@@ -310,7 +346,27 @@ def _offline(
     never = ~acc.any(axis=0)
     est[:, never] = ys[:, never]
     var[:, never] = np.nan  # raw, not smoothed: no posterior
-    return est, rejected, var
+    return est, rejected, var, fits
+
+
+def fit_kernels() -> Any:
+    """The compiled kernels of the fitted-noise smoother (imports numba on first use)."""
+    from tobitkf.smoothing import robust_fit
+
+    return robust_fit.kernels()
+
+
+def _fit_noise(
+    yk: Array, use: NDArray[np.bool_], rinf: Array, steps: Array, setup: _Setup,
+    params: dict[str, Any],
+) -> tuple[dict[str, Array], list[dict[str, Any]]]:  # fmt: skip
+    """Noise per body and region by maximum likelihood (:mod:`.robust_fit`)."""
+    from tobitkf.smoothing.robust_fit import fit_noise_bodies
+
+    return fit_noise_bodies(
+        yk, use, rinf, steps, setup.groups, tau=float(params["tau"]), speed_sd=setup.spd,
+        noise_sd=setup.sd, v_max=setup.vmax, max_seconds=float(params["fit_seconds"]),
+    )  # fmt: skip
 
 
 def step_guard() -> Any:
@@ -357,9 +413,14 @@ def _robust_bodies(
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
     rinf = _inferred_scale(states, missing, factor, confidence)
+    fits = None
     if offline:
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        est, rejected, var = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed)
+        inferred = np.zeros(missing.shape, dtype=bool)
+        if states is not None:
+            inferred = np.asarray(states) == TrackingState.INFERRED
+        est, rejected, var, fits = _offline(ys, missing, times, steps, rinf, setup, params,
+                                            L_fixed, inferred)  # fmt: skip
     else:
         state = k.new_state(B, J, int(params["lookback"]))
         est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
@@ -380,16 +441,23 @@ def _robust_bodies(
     for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
         if name in derived:
             resolved[name] = float(derived[name])
-    return est, np.sqrt(var), diags, resolved
+    body_params = None
+    if fits is not None:
+        arrays, reports = fits
+        body_params = tuple({name: a[b].tolist() for name, a in arrays.items()} for b in range(B))
+        for b in range(B):
+            diags[b]["noise_fit"] = reports[b]
+    return est, np.sqrt(var), diags, resolved, body_params
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
     """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
-    est, std, diags, resolved = _robust_bodies(
+    est, std, diags, resolved, body_params = _robust_bodies(
         inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
         inp.inferred_noise_factor, offline, inp.confidence, inp.units, inp.n_dims,
     )  # fmt: skip
-    return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {})
+    return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {},
+                        body_params=body_params)  # fmt: skip
 
 
 class RobustStepper:
@@ -404,7 +472,7 @@ class RobustStepper:
 
     def __init__(self, topology: Topology, up_axis: int, inferred_noise_factor: float,
                  **params: Any) -> None:  # fmt: skip
-        full = dict(ROBUST_DEFAULTS)
+        full = dict(ONLINE_DEFAULTS)
         full.update(params)
         self.setup = _Setup(topology, full)
         self.factor = inferred_noise_factor
@@ -485,6 +553,12 @@ def robust_smooth(
     carry : rejected joints are carried along with their parent (pseudo-measurement at
         the parent plus the last good offset, standard deviation = that bone's length),
         instead of only being predicted by their own motion model (default True).
+    noise : offline only: ``"fit"`` (default) fits ``speed_sd`` and ``noise_sd`` (given
+        values: the start and bounds) and a coloured error (``error_sd``, ``error_tau``)
+        to the recording per body region (:mod:`tobitkf.smoothing.robust_fit`; the
+        fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
+        uses the values as given (online always).
+    fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``
@@ -509,8 +583,9 @@ def robust_smooth(
         raise ValueError(
             f"unknown parameters {unknown} for robust_smooth; valid: {sorted(ROBUST_DEFAULTS)}"
         )
-    full = dict(ROBUST_DEFAULTS)
-    full.update({k: ROBUST_VALIDATORS[k](k, v) for k, v in params.items()})
+    full = dict(ROBUST_DEFAULTS if offline else ONLINE_DEFAULTS)
+    checks = ROBUST_VALIDATORS if offline else ONLINE_VALIDATORS
+    full.update({k: checks[k](k, v) for k, v in params.items()})
     T, J = sequence.n_frames, sequence.n_joints
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
@@ -524,7 +599,7 @@ def robust_smooth(
         missing = missing | low
         ys = np.where(missing[..., None], np.nan, ys)
     steps = frame_steps(sequence)[0]
-    est, std, diags, resolved = _robust_bodies(
+    est, std, diags, resolved, body_params = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
         frame_times(sequence, steps), steps, sequence.topology, full, factor, offline,
         None if conf is None else conf[:, None], "m" if scale is not None else sequence.units,
@@ -533,7 +608,8 @@ def robust_smooth(
     est, std, diag = drop_third_axis(est[:, 0], sequence.n_dims), std[:, 0], diags[0]
     if scale not in (None, 1.0):
         est, std = est / scale, std / scale
-    used = {**full, **resolved, "inferred_noise_factor": factor, "offline": offline}
+    used = {**full, **resolved, **(body_params[0] if body_params else {}),
+            "inferred_noise_factor": factor, "offline": offline}  # fmt: skip
     if conf is not None:
         used["min_confidence"] = min_conf
     filled = (missing | diag["rejected"]) & np.isfinite(est).all(axis=-1)
@@ -556,8 +632,8 @@ def _register(name: str, offline: bool, description: str) -> None:
     register_method(
         name,
         run,
-        params=ROBUST_DEFAULTS,
-        validators=ROBUST_VALIDATORS,
+        params=ROBUST_DEFAULTS if offline else ONLINE_DEFAULTS,
+        validators=ROBUST_VALIDATORS if offline else ONLINE_VALIDATORS,
         description=description,
         causal=not offline,
         live=None if offline else RobustStepper,

@@ -1,0 +1,251 @@
+"""The robust smoother's noise, fitted to each recording by maximum likelihood.
+
+The model is the smoother's own (:mod:`tobitkf.smoothing.robust`): per axis of each
+joint an integrated Ornstein–Uhlenbeck velocity (``speed_sd``, ``tau``), measured with
+white noise (``noise_sd``) plus a *coloured* error (``error_sd``, correlation time
+``error_tau``), an OU process of its own (the kernels and the exact likelihood are in
+:mod:`tobitkf.smoothing._noise_kernels`). Why the coloured part: on real recordings the
+error of a tracker against motion capture is not white; a white-noise model attributes
+its slow part to motion (too much process noise, too little smoothing) or, fitted by
+hand, removes real motion with it. With ``error_sd = 0`` the model is exactly the fixed
+smoother's.
+
+Per recording (body) and per body region (hands, arms, torso, legs: the joints of a
+region share one parameter set), :func:`fit_group` maximises the likelihood of the
+samples the gates accepted (TRACKED ones; INFERRED, rejected, carried and missing
+samples are left out). The total measurement variance ``m² = noise_sd² + error_sd²``
+scales every variance of the model, so its maximum is in closed form; the optimiser
+(:func:`scipy.optimize.minimize`, L-BFGS-B, with a compiled forward-difference gradient)
+searches ``log(speed_sd / m)``, ``logit(error_sd² / m²)`` and ``log error_tau``, from the
+physical defaults, within bounds that follow from the physics:
+
+- ``speed_sd`` in ``[default / 100, v_max]``: the rms speed cannot exceed the region's
+  largest speed; a still joint may be much slower than the default;
+- ``m`` in ``[default noise_sd / 100, 10 √2 default noise_sd]``;
+- ``error_tau`` in ``[one frame, tau]``: an error that stays correlated for longer than
+  the body's velocity does is indistinguishable from posture (it would be removed from
+  real slow motion), so it is left to the motion model.
+
+``tau`` stays the given constant (the smoother's time scale of motion). The fit uses at
+most ``fit_seconds`` of each recording (evenly spaced two-second blocks, each track
+restarting at a block: ``inf`` = all of it), so its cost per recording is bounded. The
+split of ``m²`` into a white and a coloured part is weakly identified when ``error_tau``
+nears ``tau`` (the likelihood is flat along it; so is the smoother's output), the speed
+and the total well (tests/test_robust_fit.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["FIT_BLOCK_SECONDS", "GroupFit", "fit_blocks", "fit_group", "fit_noise_bodies"]
+
+Array = NDArray[np.float64]
+
+#: length of the blocks the fit samples from a long recording, s
+FIT_BLOCK_SECONDS = 2.0
+#: a region with fewer fitted joint-frames keeps its default noise
+MIN_FIT_SAMPLES = 60
+#: bounds relative to the defaults (module docstring)
+SPEED_LOWER, NOISE_LOWER, NOISE_UPPER = 0.01, 0.01, 10.0
+#: the share of the coloured error in the measurement variance stays in (0, 1)
+LOGIT_MAX = 12.0
+#: relative tolerance of the optimiser on the mean negative log-likelihood per sample
+FIT_FTOL = 1e-6
+
+
+def _one_blas_thread() -> Any:
+    """The optimiser's tiny BLAS calls on one thread: on a busy machine, waking BLAS
+    threads for 4 x 4 products costs milliseconds per iteration. Uses threadpoolctl when
+    it is installed (it usually is, with scikit-learn or dask), else does nothing."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - depends on the environment
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(1, user_api="blas")
+
+
+def kernels() -> Any:
+    """The compiled noise kernels (imports numba on first use)."""
+    from tobitkf.smoothing import _noise_kernels
+
+    return _noise_kernels
+
+
+@dataclass(frozen=True)
+class GroupFit:
+    """Fitted noise of one body region of one recording (SI units: m, m/s, s).
+
+    ``fitted`` is False when the region had fewer than ``MIN_FIT_SAMPLES`` usable
+    joint-frames (the defaults are kept, ``error_sd = 0``); ``at_bound`` names the
+    parameters that ended on a bound; ``n`` counts scalar samples (three per joint-frame).
+    """
+
+    speed_sd: float
+    noise_sd: float
+    error_sd: float
+    error_tau: float
+    loglik: float
+    n: int
+    fitted: bool
+    at_bound: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["at_bound"] = list(self.at_bound)
+        return d
+
+
+def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """Frames the fit runs over and where the tracks restart: all frames when the
+    recording lasts at most ``max_seconds``, else evenly spaced blocks of
+    :data:`FIT_BLOCK_SECONDS` adding up to at most ``max_seconds`` (at least one)."""
+    T = steps.shape[0]
+    total = float(np.sum(steps[1:])) if T > 1 else 0.0
+    if not math.isfinite(max_seconds) or total <= max_seconds or T < 2:
+        frames = np.arange(T, dtype=np.int64)
+        restart = np.zeros(T, dtype=bool)
+        return frames, restart
+    dt = float(np.median(steps[1:]))
+    blen = max(2, round(FIT_BLOCK_SECONDS / dt))
+    nblocks = max(1, math.floor(max_seconds / (blen * dt)))  # at most max_seconds
+    starts = np.unique(np.linspace(0, T - blen, nblocks).round().astype(np.int64))
+    frames = (starts[:, None] + np.arange(blen)[None]).ravel()
+    restart = np.zeros(frames.size, dtype=bool)
+    restart[::blen] = True
+    keep = np.concatenate([[True], np.diff(frames) > 0])  # overlapping blocks: once
+    return np.ascontiguousarray(frames[keep]), np.ascontiguousarray(restart[keep])
+
+
+def fit_group(
+    yk: Array,
+    rscale: Array,
+    steps: Array,
+    frames: NDArray[np.int64],
+    restart: NDArray[np.bool_],
+    *,
+    tau: float,
+    speed_sd: float,
+    noise_sd: float,
+    v_max: float,
+) -> GroupFit:
+    """Maximum-likelihood noise of one group of tracks (module docstring).
+
+    ``yk (T, N, 3)`` the samples (NaN = not used), ``rscale (T, N)`` their variance
+    multipliers, ``steps (T,)``; ``speed_sd``, ``noise_sd`` the physical defaults (start
+    and bounds), ``v_max`` the upper bound of ``speed_sd``.
+    """
+    from scipy.optimize import minimize
+
+    k = kernels()
+    yk = np.ascontiguousarray(yk, dtype=float)
+    rscale = np.ascontiguousarray(rscale, dtype=float)
+    steps = np.ascontiguousarray(steps, dtype=float)
+    used = int(np.isfinite(yk[frames, :, 0]).sum())
+    if used < MIN_FIT_SAMPLES:
+        return GroupFit(speed_sd, noise_sd, 0.0, math.nan, math.nan, 0, False)
+    dt = float(np.median(steps[1:])) if steps.size > 1 else float(steps[0])
+    tau_q = tau if math.isfinite(tau) else 1.0  # q = 2 spd² / tau (spd² for tau = inf)
+    hi_tau = tau if math.isfinite(tau) else 10.0  # a coloured error longer than this: posture
+    ou = k.ou_table(steps, tau)
+    # total measurement error m² = noise_sd² + error_sd²; the likelihood is maximised over
+    # m² in closed form (it scales every variance), numerically over
+    # theta = (log speed_sd / m, logit error_sd² / m², log error_tau)
+    m_lo, m_hi = noise_sd * NOISE_LOWER, noise_sd * NOISE_UPPER * math.sqrt(2)
+    s_lo, s_hi = speed_sd * SPEED_LOWER, max(v_max, speed_sd)
+    lo = np.array([math.log(s_lo / m_hi), -LOGIT_MAX, math.log(min(dt, hi_tau))])
+    hi = np.array([math.log(s_hi / m_lo), LOGIT_MAX, math.log(hi_tau)])
+    m0 = noise_sd * math.sqrt(2)
+    x0 = np.clip([math.log(speed_sd / m0), 0.0, math.log(math.sqrt(dt * hi_tau))], lo, hi)
+
+    args = (yk, rscale, steps, ou, frames, restart, tau, tau_q)
+    res = minimize(k.profile_nll_grad, x0, args=(lo, hi, *args), jac=True, method="L-BFGS-B",
+                   bounds=list(zip(lo, hi, strict=True)), options={"ftol": FIT_FTOL})  # fmt: skip
+    th = np.clip(res.x, lo, hi)
+    se, _, n = k.profile_sums(th, *args)
+    ratio, phi = math.exp(th[0]), 1 / (1 + math.exp(-th[1]))
+    m = math.sqrt(se / n)
+    edge = [nm for nm, v, a, b in zip(("speed_sd", "error_sd", "error_tau"), th, lo, hi,
+                                      strict=True) if v <= a + 1e-6 or v >= b - 1e-6]  # fmt: skip
+    if not m_lo <= m <= m_hi:
+        m = min(max(m, m_lo), m_hi)
+        edge.append("noise_sd")
+    spd = ratio * m
+    if not s_lo <= spd <= s_hi:
+        spd = min(max(spd, s_lo), s_hi)
+        edge.append("speed_sd")
+    sd, esd, etau = m * math.sqrt(1 - phi), m * math.sqrt(phi), math.exp(th[2])
+    ll, n = k.loglik(yk, rscale, steps, frames, restart, 2 * spd**2 / tau_q, sd**2, esd**2,
+                     tau, etau)  # fmt: skip
+    return GroupFit(spd, sd, esd, etau, float(ll), int(n), True, tuple(sorted(set(edge))))
+
+
+def fit_noise_bodies(
+    yk: Array,
+    use: NDArray[np.bool_],
+    rscale: Array,
+    steps: Array,
+    groups: dict[str, list[int]],
+    *,
+    tau: float,
+    speed_sd: Array,
+    noise_sd: Array,
+    v_max: Array,
+    max_seconds: float,
+) -> tuple[dict[str, Array], list[dict[str, dict[str, Any]]]]:
+    """Fit every region of every body: ``yk (T, B, J, 3)``, ``use (T, B, J)`` the samples
+    to fit on, ``rscale (T, B, J)``; ``speed_sd``, ``noise_sd``, ``v_max`` the per-joint
+    defaults ``(J,)``.
+
+    Returns per-joint arrays ``(B, J)`` (``speed_sd``, ``noise_sd``, ``error_sd``,
+    ``error_tau``) and, per body, the region fits as dicts.
+    """
+    B, J = use.shape[1:]
+    frames, restart = fit_blocks(steps, max_seconds)
+    # only the fitted frames: the step before each stays its own
+    yk, use, rscale, steps = yk[frames], use[frames], rscale[frames], steps[frames]
+    frames = np.arange(frames.size, dtype=np.int64)
+    out = {
+        "speed_sd": np.broadcast_to(speed_sd, (B, J)).copy(),
+        "noise_sd": np.broadcast_to(noise_sd, (B, J)).copy(),
+        "error_sd": np.zeros((B, J)),
+        "error_tau": np.full((B, J), tau if math.isfinite(tau) else 1.0),
+    }
+    reports: list[dict[str, dict[str, Any]]] = []
+    with _one_blas_thread():
+        _fit_all(yk, use, rscale, steps, groups, tau, speed_sd, noise_sd, v_max, frames,
+                 restart, out, reports)  # fmt: skip
+    return out, reports
+
+
+def _fit_all(yk: Array, use: NDArray[np.bool_], rscale: Array, steps: Array,
+             groups: dict[str, list[int]], tau: float, speed_sd: Array, noise_sd: Array,
+             v_max: Array, frames: NDArray[np.int64], restart: NDArray[np.bool_],
+             out: dict[str, Array], reports: list[dict[str, dict[str, Any]]]) -> None:  # fmt: skip
+    B = use.shape[1]
+    for b in range(B):
+        rep: dict[str, dict[str, Any]] = {}
+        for g, idx in groups.items():
+            if not idx:
+                continue
+            ix = np.asarray(idx)
+            y = np.where(use[:, b, ix, None], yk[:, b, ix], np.nan)
+            fit = fit_group(
+                y, rscale[:, b, ix], steps, frames, restart, tau=tau,
+                speed_sd=float(speed_sd[ix[0]]), noise_sd=float(noise_sd[ix[0]]),
+                v_max=float(v_max[ix[0]]),
+            )  # fmt: skip
+            rep[g] = fit.to_dict()
+            if fit.fitted:
+                out["speed_sd"][b, ix] = fit.speed_sd
+                out["noise_sd"][b, ix] = fit.noise_sd
+                out["error_sd"][b, ix] = fit.error_sd
+                out["error_tau"][b, ix] = fit.error_tau
+        reports.append(rep)
