@@ -371,8 +371,39 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
     )
 
 
-def _run_job_star(args: tuple[Job, str, dict[str, Any], bool]) -> FileSummary:
-    return run_job(*args)
+def run_task(
+    job: Job,
+    method: str,
+    params: dict[str, Any],
+    offline: bool = False,
+    expect: str | None = None,
+) -> FileSummary:
+    """:func:`run_job` with the input's size and sha256 in the summary's ``extra`` (for
+    the manifest, :mod:`tobitkf.app.manifest`). When ``expect`` (the sha256 a manifest
+    recorded for a finished output) is the input's, nothing is read or written: the
+    summary is ok with ``extra["skipped"]`` true. The per-file work of every run, local
+    pool or Dask cluster.
+    """
+    from tobitkf.app.manifest import file_digest
+
+    start = time.perf_counter()
+    try:
+        size, sha = file_digest(job.source)
+    except OSError:  # run_job says why it cannot be read
+        size, sha = None, None
+    extra: dict[str, Any] = {"size": size, "sha256": sha, "planned_output": str(job.output)}
+    if expect is not None and sha == expect:
+        extra["skipped"] = True
+        return FileSummary(
+            str(job.source), str(job.output), True, seconds=time.perf_counter() - start, extra=extra
+        )
+    summary = run_job(job, method, params, offline)
+    summary.extra.update(extra)
+    return summary
+
+
+def _run_job_star(args: tuple[Job, str, dict[str, Any], bool, str | None]) -> FileSummary:
+    return run_task(*args)
 
 
 def run_jobs(
@@ -383,15 +414,20 @@ def run_jobs(
     offline: bool = False,
     n_jobs: int = 1,
     on_done: Callable[[FileSummary], None] | None = None,
+    expect: Sequence[str | None] | None = None,
 ) -> list[FileSummary]:
     """Run every job, in parallel processes when ``n_jobs > 1``; results in input order.
+
+    ``expect[i]``, when given, is the sha256 a manifest recorded for job ``i``'s finished
+    output: the job is passed over when its input still has it (:func:`run_task`).
 
     Ctrl-C raises :class:`~tobitkf.app.pool.Interrupted` with the summaries finished so
     far (``done``: job index -> FileSummary). With several processes a job whose worker
     process dies is retried once alone; if it kills that worker too it is reported as
     failed and the others go on (:mod:`tobitkf.app.pool`).
     """
-    args = [(job, method, params, offline) for job in jobs]
+    hashes = list(expect) if expect is not None else [None] * len(jobs)
+    args = [(job, method, params, offline, h) for job, h in zip(jobs, hashes, strict=True)]
 
     def report(i: int, summary: FileSummary) -> None:
         if on_done:
