@@ -67,6 +67,7 @@ _EXPORTS: dict[str, str] = {
     "generate_motion": "tobitkf.evaluation.synthetic",
     "corrupt": "tobitkf.evaluation.corruption",
     # files
+    "smooth_files": "tobitkf.app.runner",
     "load": "tobitkf.io",
     "save": "tobitkf.io",
     "detect_format": "tobitkf.io",

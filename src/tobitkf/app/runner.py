@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tobitkf.app import batch
 from tobitkf.app.batch import (
     FileSummary,
     Job,
@@ -23,7 +24,6 @@ from tobitkf.app.batch import (
     not_a_recording,
     plan_jobs,
     remove_partial_outputs,
-    run_jobs,
     smoothing_output_method,
 )
 from tobitkf.app.manifest import MANIFEST_NAME, Manifest, make_entry, run_settings
@@ -140,7 +140,7 @@ def run_planned(
             return summary
 
         if client is None:
-            results = run_jobs(
+            results = batch.run_jobs(  # looked up at call time (tests patch it)
                 jobs, method, params, offline=offline, n_jobs=n_jobs, on_done=done, expect=expect
             )
             results = [
