@@ -63,12 +63,14 @@ def write_ntu_like(
     frames: tuple[int, int] = (60, 300),
     bodies: tuple[int, int] = (1, 2),
     per_folder: int = 1000,
+    start: int = 0,
 ) -> list[NtuLikeFile]:
     """Write ``n`` NTU-like files into ``folder`` (``S###/`` subfolders of ``per_folder``
     files, names in the NTU style ``S001C001P001R001A001.skeleton``); file ``i`` uses
-    seed ``seed + i``."""
+    seed ``seed + i``. ``start``: the index of the first file (a large set can be written
+    in parts, in parallel)."""
     out = []
-    for i in range(n):
+    for i in range(start, start + n):
         sub = Path(folder) / f"S{i // per_folder + 1:03d}"
         sub.mkdir(parents=True, exist_ok=True)
         name = f"S{i // per_folder + 1:03d}C001P{i % 40 + 1:03d}R001A{i % per_folder + 1:03d}"
