@@ -90,3 +90,31 @@ def test_without_dask_the_cluster_option_says_how_to_install_it(src, tmp_path, m
     assert not (tmp_path / "o" / MANIFEST_NAME).exists()  # nothing started
     res = CliRunner().invoke(app, [*args[:4], "--workers", "2"])
     assert res.exit_code == 2 and "--cluster local" in res.output
+
+
+def test_inputs_and_outputs_named_by_urls(src, tmp_path):
+    fsspec = pytest.importorskip("fsspec", reason="fsspec is not installed")
+    memory = fsspec.filesystem("memory")
+    root = f"memory://tobitkf-test-{tmp_path.name}"
+    try:
+        for p in sorted(src.rglob("*.skeleton")):
+            memory.pipe(f"{root}/in/{p.relative_to(src).as_posix()}", p.read_bytes())
+        local = tk.smooth_files(src, tmp_path / "local", METHOD, output_format="csv")
+        remote = tk.smooth_files(f"{root}/in", f"{root}/out", METHOD, output_format="csv")
+        assert [r.ok for r in remote] == [True] * len(local)
+        for r, here in zip(remote, local, strict=True):
+            # the same table; the sidecar names the URL as the source
+            assert memory.cat(r.output) == open(here.output, "rb").read()
+            sidecar = json.loads(memory.cat(r.output[: -len(".csv")] + ".json"))
+            assert sidecar["provenance"]["source"]["path"] == r.source
+            assert r.source.startswith("memory://") and r.output.startswith("memory://")
+        lines = memory.cat(f"{root}/out/{MANIFEST_NAME}").decode().splitlines()
+        assert sorted(json.loads(line)["input"] for line in lines) == sorted(
+            r.source for r in remote
+        )
+        memory.rm(remote[0].output[: -len(".csv")] + ".json")  # a side file gone: redone
+        again = tk.smooth_files(f"{root}/in", f"{root}/out", METHOD, output_format="csv")
+        assert [r.source for r in again if not r.extra.get("skipped")] == [remote[0].source]
+    finally:
+        if memory.exists(root):
+            memory.rm(root, recursive=True)

@@ -27,12 +27,14 @@ _COMPOUND = (".txt.gz", ".csv.gz", ".tsv.gz")
 
 @dataclass(frozen=True)
 class Job:
-    """One input file and where its output goes."""
+    """One input file and where its output goes (``source_label``: what the output's
+    provenance names as its source, when not ``source`` itself: a staged copy's URL)."""
 
     source: Path
     output: Path
     output_format: str
     input_format: str = "auto"
+    source_label: str | None = None
 
 
 @dataclass(frozen=True)
@@ -342,7 +344,10 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
             raise ValueError("the file holds no skeleton")
         smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
-            s.metadata["provenance"]["source"] = {"path": str(job.source), "format": in_fmt}
+            s.metadata["provenance"]["source"] = {
+                "path": job.source_label or str(job.source),
+                "format": in_fmt,
+            }
         atomic_save(smoothed, job.output, job.output_format)
     except Exception as exc:  # reported per file; the run goes on
         return FileSummary(
@@ -382,9 +387,13 @@ def run_task(
     the manifest, :mod:`tobitkf.app.manifest`). When ``expect`` (the sha256 a manifest
     recorded for a finished output) is the input's, nothing is read or written: the
     summary is ok with ``extra["skipped"]`` true. The per-file work of every run, local
-    pool or Dask cluster.
+    pool or Dask cluster. A job that is not a :class:`Job` but has a ``run`` method (a
+    job on remote storage, :mod:`tobitkf.app.remote`) runs itself.
     """
     from tobitkf.app.manifest import file_digest
+
+    if not isinstance(job, Job):
+        return job.run(method, params, offline, expect)
 
     start = time.perf_counter()
     try:
@@ -445,6 +454,8 @@ def remove_partial_outputs(jobs: Sequence[Job]) -> list[Path]:
     killed while writing); returns what was removed. Finished outputs are not touched."""
     by_dir: dict[Path, set[str]] = {}
     for job in jobs:
+        if not isinstance(job, Job):  # remote storage: nothing staged here
+            continue
         by_dir.setdefault(job.output.parent, set()).add(job.output.name)
     removed = []
     for folder, names in by_dir.items():

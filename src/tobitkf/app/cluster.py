@@ -68,7 +68,7 @@ def connect(address: str, workers: int | None = None) -> Iterator[Any]:
                 n_workers=workers or os.cpu_count() or 1,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=":0",  # any free port (no clash with a running one)
                 silence_logs=logging.ERROR,
             )
         try:

@@ -227,6 +227,15 @@ def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
     return out
 
 
+class _InputPath(click.Path):
+    """A path that must exist, or an fsspec URL (``s3://...``), checked when listed."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and "://" in value:
+            return value
+        return super().convert(value, param, ctx)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="tobitkf")
 def app() -> None:
@@ -235,7 +244,7 @@ def app() -> None:
 
 # --------------------------------------------------------------------------- smooth
 @app.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True))
+@click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
 @click.option(
     "-o",
     "--outdir",
@@ -333,12 +342,11 @@ def smooth(
 
     OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input); a re-run passes
     over inputs done before with the same method and parameters (--overwrite redoes them).
+    Inputs and OUTDIR may be fsspec URLs (s3://bucket/folder; docs/cluster.md).
     """
-    from tobitkf.app.batch import plan_jobs
     from tobitkf.app.manifest import ManifestBusy
     from tobitkf.app.pool import Interrupted
-    from tobitkf.app.runner import discover_recordings, run_planned
-    from tobitkf.io import detect_format
+    from tobitkf.app.runner import plan_run, run_planned
     from tobitkf.smoothing.api import check_params, get_method
 
     kwargs = _parse_params(params)
@@ -350,17 +358,22 @@ def smooth(
     if offline and not get_method(method).offline_ok:
         _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
     _check_cluster_options(cluster, workers, jobs)
-    _writable_folder(outdir, "the outputs")  # once, before any file is read
+    if "://" not in outdir:
+        _writable_folder(outdir, "the outputs")  # once, before any file is read
     try:
-        found = discover_recordings(inputs, pattern)
-    except FileNotFoundError as exc:
+        plan = plan_run(
+            inputs,
+            outdir,
+            method,
+            pattern=pattern,
+            output_format=output_format,
+            input_format=input_format,
+            overwrite=overwrite,
+        )
+    except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
-    pairs, problems, ours, passed_over = (
-        found.pairs,
-        found.problems,
-        found.ours,
-        found.passed_over,
-    )
+    problems, ours, passed_over = plan.found.problems, plan.found.ours, plan.found.passed_over
+    job_list, refused = plan.jobs, plan.refused
     if not as_json:
         for path, why in problems:
             err_console.print(f"[yellow]skipped[/yellow] {escape(str(path))}: {escape(why)}")
@@ -378,17 +391,8 @@ def smooth(
             f"passed over {len(passed_over)} file(s) that are not recordings or are read "
             f"together with one: {names}{more}"
         )
-    if not pairs:
+    if not job_list and not refused:
         _fail("no input files found")
-    job_list, refused = plan_jobs(
-        pairs,
-        outdir,
-        method=method,
-        output_format=output_format,
-        detect=detect_format,
-        input_format=input_format,
-        overwrite=overwrite,
-    )
     with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
         task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
         frames = [0]

@@ -14,6 +14,11 @@ parameters and version, the same output, and that output (with its side files) e
 the worker that would process it first hashes the input and passes over it when the hash
 is the recorded one (:func:`~tobitkf.app.batch.run_task`). ``--overwrite`` redoes
 everything. One module for the local pool and for a Dask cluster.
+
+An output folder named by an fsspec URL (``s3://bucket/out``) keeps its manifest there
+too; object stores cannot append, so the file is rewritten whole every
+:data:`REMOTE_FLUSH_SECONDS` and at the end (a killed client loses the record of at most
+that many seconds of files, which a re-run does again), and there is no lock.
 """
 
 from __future__ import annotations
@@ -22,7 +27,8 @@ import hashlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Mapping
+import time
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -36,6 +42,8 @@ __all__ = [
 
 #: file name of the manifest in the output folder
 MANIFEST_NAME = "tobitkf-manifest.jsonl"
+#: how often the manifest of a remote output folder is rewritten, seconds
+REMOTE_FLUSH_SECONDS = 10.0
 #: entry fields that must equal the current run's for an input to be passed over
 _SAME = ("method", "params", "tobitkf_version", "output")
 
@@ -84,8 +92,10 @@ def run_settings(
     return {"method": method, "params": _plain(full), "tobitkf_version": __version__}
 
 
-def _key(path: str | os.PathLike[str]) -> str:
-    return os.path.abspath(os.fspath(path))
+def input_key(path: str | os.PathLike[str]) -> str:
+    """How the manifest names a file: its absolute path, or its URL."""
+    text = os.fspath(path)
+    return text if "://" in text else os.path.abspath(text)
 
 
 class Manifest:
@@ -96,12 +106,34 @@ class Manifest:
     """
 
     def __init__(self, outdir: str | os.PathLike[str]) -> None:
-        self.path = Path(outdir) / MANIFEST_NAME
-        self.entries: dict[str, dict[str, Any]] = read_entries(self.path)
+        self._remote: tuple[Any, str] | None = None
+        if isinstance(outdir, str) and "://" in outdir:
+            import fsspec
+
+            fs, root = fsspec.core.url_to_fs(outdir)
+            self._remote = (fs, f"{root.rstrip('/')}/{MANIFEST_NAME}")
+            self.path = Path(MANIFEST_NAME)  # not used for a remote folder
+        else:
+            self.path = Path(outdir) / MANIFEST_NAME
+        self.entries: dict[str, dict[str, Any]] = self._read()
         self._file: IO[str] | None = None
+        self._open = False
+        self._flushed = time.monotonic()
+
+    def _read(self) -> dict[str, dict[str, Any]]:
+        if self._remote is None:
+            return read_entries(self.path)
+        fs, path = self._remote
+        if not fs.exists(path):
+            return {}
+        return parse_entries(fs.cat_file(path).decode("utf-8").splitlines())
 
     # -- the run's file --------------------------------------------------------
     def __enter__(self) -> Manifest:
+        self._open = True
+        if self._remote is not None:
+            self.entries = self._read()
+            return self
         self.path.parent.mkdir(parents=True, exist_ok=True)
         f = open(self.path, "a+", encoding="utf-8")
         try:
@@ -131,6 +163,9 @@ class Manifest:
 
     def close(self) -> None:
         """Rewrite the file with the latest line of each input, then release the lock."""
+        if self._remote is not None and self._open:
+            self._open = False
+            self._rewrite_remote()
         if self._file is None:
             return
         try:
@@ -143,10 +178,20 @@ class Manifest:
     def record(self, entry: Mapping[str, Any]) -> None:
         """Append one entry (a line, flushed at once)."""
         entry = _plain(dict(entry))
+        self.entries.pop(entry["input"], None)
         self.entries[entry["input"]] = entry
         if self._file is not None:
             self._file.write(json.dumps(entry, sort_keys=True) + "\n")
             self._file.flush()
+        elif self._remote is not None and self._open:
+            if time.monotonic() - self._flushed > REMOTE_FLUSH_SECONDS:
+                self._rewrite_remote()
+
+    def _rewrite_remote(self) -> None:
+        fs, path = self._remote
+        lines = [json.dumps(self.entries[k], sort_keys=True) + "\n" for k in sorted(self.entries)]
+        fs.pipe_file(path, "".join(lines).encode("utf-8"))
+        self._flushed = time.monotonic()
 
     # -- resume ----------------------------------------------------------------
     def done_digest(
@@ -155,23 +200,27 @@ class Manifest:
         output: str | os.PathLike[str],
         side_files: Iterable[str | os.PathLike[str]],
         settings: Mapping[str, Any],
+        *,
+        size: int | None = None,
+        exists: Callable[[Any], bool] = os.path.isfile,
     ) -> str | None:
         """The recorded sha256 of ``source`` when its latest entry says it was done with
         these settings into ``output`` and that output still exists (with its side files)
         at the recorded size of the input; None when it must be (re)done. The caller
-        still compares the hash with the file's (a worker does)."""
-        entry = self.entries.get(_key(source))
+        still compares the hash with the file's (a worker does). For remote storage,
+        ``size`` is the input's size and ``exists`` says whether an output is there."""
+        entry = self.entries.get(input_key(source))
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
             return None
-        want = {**settings, "output": _key(output)}
+        want = {**settings, "output": input_key(output)}
         if any(entry.get(k) != want[k] for k in _SAME):
             return None
         try:
-            if os.path.getsize(source) != entry.get("size"):
+            if (os.path.getsize(source) if size is None else size) != entry.get("size"):
                 return None
         except OSError:
             return None
-        if not all(os.path.isfile(p) for p in (output, *side_files)):
+        if not all(exists(p) for p in (output, *side_files)):
             return None
         return str(entry["sha256"])
 
@@ -181,16 +230,16 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
     with ``extra["size"]`` and ``extra["sha256"]`` when the input could be read)."""
     extra = summary.extra or {}
     size = extra.get("size")
-    if size is None:
+    if size is None and "://" not in summary.source:
         try:
             size = os.path.getsize(summary.source)
         except OSError:
             size = None
     return {
-        "input": _key(summary.source),
+        "input": input_key(summary.source),
         "size": size,
         "sha256": extra.get("sha256"),
-        "output": _key(summary.output) if summary.output else extra.get("planned_output"),
+        "output": input_key(summary.output) if summary.output else extra.get("planned_output"),
         "status": "ok" if summary.ok else "failed",
         "error": summary.error,
         **settings,
@@ -203,20 +252,25 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
 def read_entries(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """Input path -> latest entry, from a manifest file (missing file: empty). Lines
     that are not whole JSON objects (cut short by a kill) are ignored."""
-    out: dict[str, dict[str, Any]] = {}
     try:
         f = open(path, encoding="utf-8")
     except FileNotFoundError:
-        return out
+        return {}
     with f:
-        for line in f:
-            try:
-                entry = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(entry, dict) and isinstance(entry.get("input"), str):
-                out.pop(entry["input"], None)  # latest last
-                out[entry["input"]] = entry
+        return parse_entries(f)
+
+
+def parse_entries(lines: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """Input path -> latest entry, from manifest lines (broken lines ignored)."""
+    out: dict[str, dict[str, Any]] = {}
+    for line in lines:
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(entry, dict) and isinstance(entry.get("input"), str):
+            out.pop(entry["input"], None)  # latest last
+            out[entry["input"]] = entry
     return out
 
 

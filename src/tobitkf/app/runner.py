@@ -26,9 +26,9 @@ from tobitkf.app.batch import (
     remove_partial_outputs,
     smoothing_output_method,
 )
-from tobitkf.app.manifest import MANIFEST_NAME, Manifest, make_entry, run_settings
+from tobitkf.app.manifest import MANIFEST_NAME, Manifest, input_key, make_entry, run_settings
 
-__all__ = ["Discovered", "discover_recordings", "run_planned", "smooth_files"]
+__all__ = ["Discovered", "Plan", "discover_recordings", "plan_run", "run_planned", "smooth_files"]
 
 
 @dataclass
@@ -77,6 +77,89 @@ def discover_recordings(inputs: Sequence[str | os.PathLike[str]], pattern: str =
     return found
 
 
+@dataclass
+class Plan:
+    """The jobs of a run, the inputs refused, and what discovery passed over."""
+
+    jobs: list[Any]
+    refused: list[FileSummary]
+    found: Discovered
+
+
+def is_remote(inputs: Sequence[Any], outdir: Any) -> bool:
+    """True when an input or the output folder is named by a URL (``s3://...``)."""
+    return any(isinstance(p, str) and "://" in p for p in (*inputs, outdir))
+
+
+def plan_run(
+    inputs: Sequence[str | os.PathLike[str]],
+    outdir: str | os.PathLike[str],
+    method: str,
+    *,
+    pattern: str = "*",
+    output_format: str = "auto",
+    input_format: str = "auto",
+    overwrite: bool = False,
+) -> Plan:
+    """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
+    :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
+
+    Raises FileNotFoundError when an input does not exist.
+    """
+    if is_remote(inputs, outdir):
+        from tobitkf.app.remote import plan_remote
+
+        jobs, refused = plan_remote(
+            [os.fspath(p) for p in inputs],
+            os.fspath(outdir),
+            method=method,
+            pattern=pattern,
+            output_format=output_format,
+            input_format=input_format,
+        )
+        return Plan(list(jobs), refused, Discovered([]))
+    from tobitkf.io import detect_format
+
+    found = discover_recordings(inputs, pattern)
+    jobs, refused = plan_jobs(
+        found.pairs,
+        outdir,
+        method=method,
+        output_format=output_format,
+        detect=detect_format,
+        input_format=input_format,
+        overwrite=overwrite,
+    )
+    return Plan(list(jobs), refused, found)
+
+
+def _expected(manifest: Manifest, jobs: Sequence[Any], outdir: Any, settings: dict) -> list:
+    """The recorded sha256 of each job done before (None: to be done)."""
+    from tobitkf.io import output_files
+
+    if any(not isinstance(j, Job) for j in jobs):
+        from tobitkf.app.remote import remote_outputs
+
+        there = remote_outputs(os.fspath(outdir))
+        return [
+            manifest.done_digest(
+                j.source,
+                j.output,
+                j.side_outputs(),
+                settings,
+                size=j.size,
+                exists=there.__contains__,
+            )
+            for j in jobs
+        ]
+    return [
+        manifest.done_digest(
+            j.source, j.output, output_files(j.output, j.output_format)[1:], settings
+        )
+        for j in jobs
+    ]
+
+
 def _skipped(summary: FileSummary, entry: dict[str, Any] | None) -> FileSummary:
     """A passed-over file's summary with the frames and bodies its manifest entry has."""
     entry = entry or {}
@@ -109,8 +192,6 @@ def run_planned(
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
     writes to ``outdir``.
     """
-    from tobitkf.io import output_files
-
     settings = run_settings(
         method,
         params,
@@ -119,20 +200,13 @@ def run_planned(
         input_format=input_format,
     )
     with Manifest(outdir) as manifest:
-        expect = [
-            None
-            if overwrite
-            else manifest.done_digest(
-                j.source, j.output, output_files(j.output, j.output_format)[1:], settings
-            )
-            for j in jobs
-        ]
+        expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
         for r in refused:
             manifest.record(make_entry(r, settings))
 
         def done(summary: FileSummary) -> FileSummary:
             if summary.extra.get("skipped"):
-                summary = _skipped(summary, manifest.entries.get(os.path.abspath(summary.source)))
+                summary = _skipped(summary, manifest.entries.get(input_key(summary.source)))
             else:
                 manifest.record(make_entry(summary, settings))
             if on_done is not None:
@@ -144,7 +218,7 @@ def run_planned(
                 jobs, method, params, offline=offline, n_jobs=n_jobs, on_done=done, expect=expect
             )
             results = [
-                _skipped(r, manifest.entries.get(os.path.abspath(r.source)))
+                _skipped(r, manifest.entries.get(input_key(r.source)))
                 if r.extra.get("skipped")
                 else r
                 for r in results
@@ -189,9 +263,9 @@ def smooth_files(
 
     Parameters
     ----------
-    inputs : path or list of paths
-    out_dir : folder for the outputs (created); it also gets the run's manifest,
-        ``tobitkf-manifest.jsonl`` (:mod:`tobitkf.app.manifest`).
+    inputs : path or list of paths; fsspec URLs (``s3://bucket/ntu/``) work too.
+    out_dir : folder for the outputs (created), a path or an fsspec URL; it also gets the
+        run's manifest, ``tobitkf-manifest.jsonl`` (:mod:`tobitkf.app.manifest`).
     method : registered smoothing method (default :data:`tobitkf.DEFAULT_METHOD`).
     params : method parameters (``tobitkf methods`` lists them).
     client : an existing :class:`distributed.Client`: the files run as tasks on its
@@ -208,7 +282,6 @@ def smooth_files(
         holds the input's ``size`` and ``sha256`` and ``skipped`` (done by an earlier
         run, passed over).
     """
-    from tobitkf.io import detect_format
     from tobitkf.smoothing.api import DEFAULT_METHOD
 
     method = method or DEFAULT_METHOD
@@ -216,22 +289,21 @@ def smooth_files(
     offline = bool(params.pop("offline", False)) or offline
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
-    found = discover_recordings(inputs, pattern)
-    plan, refused = plan_jobs(
-        found.pairs,
+    plan = plan_run(
+        list(inputs),
         out_dir,
-        method=method,
+        method,
+        pattern=pattern,
         output_format=output_format,
-        detect=detect_format,
         input_format=input_format,
         overwrite=overwrite,
     )
     refused = [
-        *refused,
-        *(FileSummary(str(p), None, False, why) for p, why in found.problems),
+        *plan.refused,
+        *(FileSummary(str(p), None, False, why) for p, why in plan.found.problems),
     ]
     return run_planned(
-        plan,
+        plan.jobs,
         refused,
         out_dir,
         method,
