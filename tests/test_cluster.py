@@ -217,3 +217,11 @@ def test_a_file_that_kills_its_workers_is_failed_after_two_deaths(client, data, 
     assert [Path(r.source).stem for r in bad] == [KILLER]
     assert "died" in bad[0].error and "2 times" in bad[0].error
     assert sum(r.ok for r in results) == 4
+
+
+def test_a_wrong_cluster_address_is_one_clear_message(tmp_path):
+    write_ntu_like(tmp_path / "in", 1)
+    one = next((tmp_path / "in").rglob("*.skeleton"))
+    res = CliRunner().invoke(app, ["smooth", str(one), "-o", str(tmp_path / "o"), "--cluster", "x"])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert "expected a scheduler address" in " ".join(res.output.split())

@@ -211,6 +211,11 @@ def _dask_client(cluster: str | None, workers: int | None):
             _fail(str(exc))
         except OSError as exc:  # timeouts included: no scheduler there
             _fail(f"cannot connect to the Dask scheduler at {cluster}: {exc}")
+        except ValueError as exc:  # not an address
+            _fail(
+                f"--cluster {cluster}: {exc}; expected a scheduler address (tcp://host:8786), "
+                "a scheduler file (*.json) or local"
+            )
         yield client
 
 
