@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -79,7 +78,7 @@ class HandStarted:
     def __init__(self, workers: int, tmp: Path) -> None:
         self.file = tmp / "scheduler.json"
         self.procs = []
-        log = open(tmp / "dask.log", "w")  # noqa: SIM115 - closed in stop()
+        log = open(tmp / "dask.log", "w")
         self.log = log
         dask = _dask_command()
         self.procs.append(subprocess.Popen(
