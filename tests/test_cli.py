@@ -45,9 +45,15 @@ def test_smooth_folder_writes_outputs_atomically_and_reports_bad_files(tmp_path)
     assert res.exit_code == 1, res.output  # one bad file -> non-zero status
     assert "broken.csv" in res.output
     produced = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
-    # each output with its sidecar, no temporary files left behind
+    # each output with its sidecar, the run's manifest, no temporary files left behind
     # the default method is robust
-    assert produced == ["a.robust.csv", "a.robust.json", "sub/b.robust.csv", "sub/b.robust.json"]
+    assert produced == [
+        "a.robust.csv",
+        "a.robust.json",
+        "sub/b.robust.csv",
+        "sub/b.robust.json",
+        "tobitkf-manifest.jsonl",
+    ]
     # the spike is removed: the output's largest hand jump is far below the input's 0.6 m
     hand = get_topology("kinect_v2").index("HandRight")
     smoothed = load(out / "a.robust.csv")[0].positions[:, hand]

@@ -194,8 +194,10 @@ def test_smooth_never_replaces_a_foreign_file_and_skips_its_own_outputs(tmp_path
         "a.json",
         "a.robust.csv",
         "a.robust.json",
+        "tobitkf-manifest.jsonl",  # the run's manifest, not taken as an input either
     ]
     assert "tobitkf outputs of an earlier run" in " ".join(res.output.split())
+    assert "not recordings" not in " ".join(res.output.split())
 
 
 def test_outputs_get_the_umask_mode(tmp_path):

@@ -405,7 +405,11 @@ def test_cli_smooth_writes_the_sidecar_with_provenance(tmp_path):
               "-p", "q=0.005"],
     )  # fmt: skip
     assert res.exit_code == 0, res.output
-    assert sorted(p.name for p in out.iterdir()) == ["rec.kf.csv", "rec.kf.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "rec.kf.csv",
+        "rec.kf.json",
+        "tobitkf-manifest.jsonl",
+    ]
     doc = json.loads((out / "rec.kf.json").read_text())
     assert doc["provenance"]["params"]["q"] == 0.005
     assert doc["provenance"]["source"]["path"] == str(src / "rec.npz")

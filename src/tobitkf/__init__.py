@@ -69,6 +69,7 @@ _EXPORTS: dict[str, str] = {
     "generate_motion": "tobitkf.evaluation.synthetic",
     "corrupt": "tobitkf.evaluation.corruption",
     # files
+    "smooth_files": "tobitkf.app.runner",
     "load": "tobitkf.io",
     "save": "tobitkf.io",
     "detect_format": "tobitkf.io",

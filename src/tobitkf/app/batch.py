@@ -28,12 +28,14 @@ _COMPOUND = (".txt.gz", ".csv.gz", ".tsv.gz")
 
 @dataclass(frozen=True)
 class Job:
-    """One input file and where its output goes."""
+    """One input file and where its output goes (``source_label``: what the output's
+    provenance names as its source, when not ``source`` itself: a staged copy's URL)."""
 
     source: Path
     output: Path
     output_format: str
     input_format: str = "auto"
+    source_label: str | None = None
 
 
 @dataclass(frozen=True)
@@ -369,7 +371,10 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
             smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
         said = tuple(dict.fromkeys(str(w.message) for w in caught))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
-            s.metadata["provenance"]["source"] = {"path": str(job.source), "format": in_fmt}
+            s.metadata["provenance"]["source"] = {
+                "path": job.source_label or str(job.source),
+                "format": in_fmt,
+            }
         atomic_save(smoothed, job.output, job.output_format)
     except Exception as exc:  # reported per file; the run goes on
         return FileSummary(
@@ -399,8 +404,43 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
     )
 
 
-def _run_job_star(args: tuple[Job, str, dict[str, Any], bool]) -> FileSummary:
-    return run_job(*args)
+def run_task(
+    job: Job,
+    method: str,
+    params: dict[str, Any],
+    offline: bool = False,
+    expect: str | None = None,
+) -> FileSummary:
+    """:func:`run_job` with the input's size and sha256 in the summary's ``extra`` (for
+    the manifest, :mod:`tobitkf.app.manifest`). When ``expect`` (the sha256 a manifest
+    recorded for a finished output) is the input's, nothing is read or written: the
+    summary is ok with ``extra["skipped"]`` true. The per-file work of every run, local
+    pool or Dask cluster. A job that is not a :class:`Job` but has a ``run`` method (a
+    job on remote storage, :mod:`tobitkf.app.remote`) runs itself.
+    """
+    from tobitkf.app.manifest import file_digest
+
+    if not isinstance(job, Job):
+        return job.run(method, params, offline, expect)
+
+    start = time.perf_counter()
+    try:
+        size, sha = file_digest(job.source)
+    except OSError:  # run_job says why it cannot be read
+        size, sha = None, None
+    extra: dict[str, Any] = {"size": size, "sha256": sha, "planned_output": str(job.output)}
+    if expect is not None and sha == expect:
+        extra["skipped"] = True
+        return FileSummary(
+            str(job.source), str(job.output), True, seconds=time.perf_counter() - start, extra=extra
+        )
+    summary = run_job(job, method, params, offline)
+    summary.extra.update(extra)
+    return summary
+
+
+def _run_job_star(args: tuple[Job, str, dict[str, Any], bool, str | None]) -> FileSummary:
+    return run_task(*args)
 
 
 def run_jobs(
@@ -411,15 +451,20 @@ def run_jobs(
     offline: bool = False,
     n_jobs: int = 1,
     on_done: Callable[[FileSummary], None] | None = None,
+    expect: Sequence[str | None] | None = None,
 ) -> list[FileSummary]:
     """Run every job, in parallel processes when ``n_jobs > 1``; results in input order.
+
+    ``expect[i]``, when given, is the sha256 a manifest recorded for job ``i``'s finished
+    output: the job is passed over when its input still has it (:func:`run_task`).
 
     Ctrl-C raises :class:`~tobitkf.app.pool.Interrupted` with the summaries finished so
     far (``done``: job index -> FileSummary). With several processes a job whose worker
     process dies is retried once alone; if it kills that worker too it is reported as
     failed and the others go on (:mod:`tobitkf.app.pool`).
     """
-    args = [(job, method, params, offline) for job in jobs]
+    hashes = list(expect) if expect is not None else [None] * len(jobs)
+    args = [(job, method, params, offline, h) for job, h in zip(jobs, hashes, strict=True)]
 
     def report(i: int, summary: FileSummary) -> None:
         if on_done:
@@ -437,6 +482,8 @@ def remove_partial_outputs(jobs: Sequence[Job]) -> list[Path]:
     killed while writing); returns what was removed. Finished outputs are not touched."""
     by_dir: dict[Path, set[str]] = {}
     for job in jobs:
+        if not isinstance(job, Job):  # remote storage: nothing staged here
+            continue
         by_dir.setdefault(job.output.parent, set()).add(job.output.name)
     removed = []
     for folder, names in by_dir.items():

@@ -6,7 +6,7 @@ import os
 import signal
 import sys
 import tempfile
-from contextlib import contextmanager, nullcontext
+from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -185,6 +185,40 @@ def _sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
+def _check_cluster_options(cluster: str | None, workers: int | None, jobs: int) -> None:
+    if workers is not None and cluster != "local":
+        raise click.BadParameter("goes with --cluster local", param_hint="--workers")
+    if cluster is not None and jobs != 1:
+        raise click.BadParameter(
+            "is the local process pool; with --cluster the cluster's workers run the files",
+            param_hint="--jobs",
+        )
+
+
+@contextmanager
+def _dask_client(cluster: str | None, workers: int | None):
+    """A Dask client for --cluster (None without it), with a clear message when Dask is
+    missing or the scheduler cannot be reached."""
+    if cluster is None:
+        yield None
+        return
+    from tobitkf.app.cluster import connect
+
+    with ExitStack() as stack:
+        try:
+            client = stack.enter_context(connect(cluster, workers))
+        except ImportError as exc:
+            _fail(str(exc))
+        except OSError as exc:  # timeouts included: no scheduler there
+            _fail(f"cannot connect to the Dask scheduler at {cluster}: {exc}")
+        except ValueError as exc:  # not an address
+            _fail(
+                f"--cluster {cluster}: {exc}; expected a scheduler address (tcp://host:8786), "
+                "a scheduler file (*.json) or local"
+            )
+        yield client
+
+
 def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
     from tobitkf.app.batch import parse_param
 
@@ -198,6 +232,15 @@ def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
     return out
 
 
+class _InputPath(click.Path):
+    """A path that must exist, or an fsspec URL (``s3://...``), checked when listed."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and "://" in value:
+            return value
+        return super().convert(value, param, ctx)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="tobitkf")
 def app() -> None:
@@ -206,7 +249,7 @@ def app() -> None:
 
 # --------------------------------------------------------------------------- smooth
 @app.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True))
+@click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
 @click.option(
     "-o",
     "--outdir",
@@ -272,6 +315,18 @@ def app() -> None:
     type=click.IntRange(1, 64),
     help="Files processed in parallel.",
 )
+@click.option(
+    "--cluster",
+    metavar="ADDRESS",
+    help="Run the files as tasks on a Dask cluster: a scheduler address "
+    "(tcp://host:8786), a scheduler file (*.json), or 'local' (a LocalCluster on this "
+    "machine). Needs the dask extra; see docs/cluster.md.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 1024),
+    help="Worker processes of --cluster local (default: one per core).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def smooth(
     inputs,
@@ -284,18 +339,19 @@ def smooth(
     offline,
     pattern,
     jobs,
+    cluster,
+    workers,
     as_json,
 ):
-    """Smooth skeleton recordings (files or folders, searched recursively)."""
-    from tobitkf.app.batch import (
-        discover_inputs,
-        not_a_recording,
-        plan_jobs,
-        run_jobs,
-        smoothing_output_method,
-    )
+    """Smooth skeleton recordings (files or folders, searched recursively).
+
+    OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input); a re-run passes
+    over inputs done before with the same method and parameters (--overwrite redoes them).
+    Inputs and OUTDIR may be fsspec URLs (s3://bucket/folder; docs/cluster.md).
+    """
+    from tobitkf.app.manifest import ManifestBusy
     from tobitkf.app.pool import Interrupted
-    from tobitkf.io import detect_format
+    from tobitkf.app.runner import plan_run, run_planned
     from tobitkf.smoothing.api import check_params, get_method
 
     kwargs = _parse_params(params)
@@ -306,27 +362,23 @@ def smooth(
         raise click.BadParameter(str(exc), param_hint="--param") from exc
     if offline and not get_method(method).offline_ok:
         _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
-    _writable_folder(outdir, "the outputs")  # once, before any file is read
-    passed_over: list[Path] = []
-    problems: list[tuple[Path, str]] = []
-    ours: list[Path] = []
-
-    def skip(path: Path) -> bool:
-        if not_a_recording(path):
-            return True
-        if smoothing_output_method(path):  # an earlier run's output, e.g. smoothing in place
-            ours.append(path)
-            return True
-        return False
-
+    _check_cluster_options(cluster, workers, jobs)
+    if "://" not in outdir:
+        _writable_folder(outdir, "the outputs")  # once, before any file is read
     try:
-        pairs = discover_inputs(inputs, pattern, skip=skip, skipped=passed_over, problems=problems)
-    except FileNotFoundError as exc:
+        plan = plan_run(
+            inputs,
+            outdir,
+            method,
+            pattern=pattern,
+            output_format=output_format,
+            input_format=input_format,
+            overwrite=overwrite,
+        )
+    except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
-    from tobitkf.io import is_companion_file
-
-    # files read with a recording (a CSV's sidecar, UI-PRMD angles) need no mention
-    passed_over = [p for p in passed_over if not is_companion_file(p) and p not in ours]
+    problems, ours, passed_over = plan.found.problems, plan.found.ours, plan.found.passed_over
+    job_list, refused = plan.jobs, plan.refused
     if not as_json:
         for path, why in problems:
             err_console.print(f"[yellow]skipped[/yellow] {escape(str(path))}: {escape(why)}")
@@ -344,17 +396,8 @@ def smooth(
             f"passed over {len(passed_over)} file(s) that are not recordings or are read "
             f"together with one: {names}{more}"
         )
-    if not pairs:
+    if not job_list and not refused:
         _fail("no input files found")
-    job_list, refused = plan_jobs(
-        pairs,
-        outdir,
-        method=method,
-        output_format=output_format,
-        detect=detect_format,
-        input_format=input_format,
-        overwrite=overwrite,
-    )
     with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
         task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
         frames = [0]
@@ -364,15 +407,29 @@ def smooth(
             progress.update(task, advance=1, frames=frames[0])
 
         interrupted = None
-        with _sigterm_as_interrupt():
+        with _sigterm_as_interrupt(), _dask_client(cluster, workers) as client:
             try:
-                results = run_jobs(
-                    job_list, method, kwargs, offline=offline, n_jobs=jobs, on_done=done
+                results = run_planned(
+                    job_list,
+                    refused,
+                    outdir,
+                    method,
+                    kwargs,
+                    offline=offline,
+                    output_format=output_format,
+                    input_format=input_format,
+                    overwrite=overwrite,
+                    n_jobs=jobs,
+                    client=client,
+                    on_done=done,
                 )
+            except ManifestBusy as exc:
+                _fail(str(exc))
             except Interrupted as stop:  # Ctrl-C / SIGTERM: summarise what was done
                 interrupted = stop
-                results = [stop.done[i] for i in sorted(stop.done)]
-    results = list(results) + refused
+                results = [stop.done[i] for i in sorted(stop.done)] + refused
+    skipped = [r for r in results if r.extra.get("skipped")]
+    results = [r for r in results if not r.extra.get("skipped")]
     failed = [r for r in results if not r.ok]
     if as_json:
         click.echo(dumps([r.__dict__ for r in results]))
@@ -390,12 +447,26 @@ def smooth(
             for r in results
             if r.ok
         ]
-        _print_table(
-            f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
-            ["file", "bodies", "frames", "joints", "% clipped/rejected", "% missing", "seconds"],
-            rows,
-        )
-        if rows:
+        if rows or not skipped:
+            _print_table(
+                f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
+                [
+                    "file",
+                    "bodies",
+                    "frames",
+                    "joints",
+                    "% clipped/rejected",
+                    "% missing",
+                    "seconds",
+                ],
+                rows,
+            )
+        if skipped:
+            err_console.print(
+                f"passed over {len(skipped)} file(s) done by an earlier run with the same "
+                "method and parameters (manifest in the output folder; --overwrite redoes them)"
+            )
+        if rows or skipped:
             console.print(f"outputs in {Path(outdir).resolve()}")
         for r in results:
             for w in r.warnings:

@@ -61,8 +61,8 @@ FIT_FTOL = 1e-6
 
 def _one_blas_thread() -> Any:
     """The optimiser's tiny BLAS calls on one thread: on a busy machine, waking BLAS
-    threads for 4 x 4 products costs milliseconds per iteration. Uses threadpoolctl when
-    it is installed (it usually is, with scikit-learn or dask), else does nothing."""
+    threads for 4 x 4 products costs milliseconds per iteration. Uses threadpoolctl (a
+    dependency of tobitkf); without it (a stripped install) does nothing."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - depends on the environment

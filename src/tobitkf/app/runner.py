@@ -1,0 +1,318 @@
+"""Smoothing whole folders, locally or on a Dask cluster, with a manifest and resume.
+
+:func:`smooth_files` is the Python face of ``tobitkf smooth``; :func:`run_planned` is
+the part both share: the manifest opened in the output folder, finished inputs passed
+over, the files run in the local process pool (:func:`~tobitkf.app.batch.run_jobs`) or
+on a Dask cluster (:func:`~tobitkf.app.cluster.run_on_cluster`), and each file recorded
+as it finishes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tobitkf.app import batch
+from tobitkf.app.batch import (
+    FileSummary,
+    Job,
+    discover_inputs,
+    not_a_recording,
+    plan_jobs,
+    remove_partial_outputs,
+    smoothing_output_method,
+)
+from tobitkf.app.manifest import MANIFEST_NAME, Manifest, input_key, make_entry, run_settings
+
+__all__ = ["Discovered", "Plan", "discover_recordings", "plan_run", "run_planned", "smooth_files"]
+
+
+@dataclass
+class Discovered:
+    """The inputs found, and what was passed over and why."""
+
+    pairs: list[tuple[Path, Path]]
+    #: earlier tobitkf outputs found in the input folders (not smoothed again)
+    ours: list[Path] = field(default_factory=list)
+    #: files that are not recordings (companion files left out)
+    passed_over: list[Path] = field(default_factory=list)
+    #: folders and links that could not be read or followed, with the reason
+    problems: list[tuple[Path, str]] = field(default_factory=list)
+
+
+def discover_recordings(inputs: Sequence[str | os.PathLike[str]], pattern: str = "*") -> Discovered:
+    """The recordings among files and folders (folders searched recursively), passing
+    over earlier tobitkf outputs, manifests and files that are not recordings.
+
+    Raises FileNotFoundError when an input does not exist.
+    """
+    from tobitkf.io import is_companion_file
+
+    found = Discovered([])
+    skipped: list[Path] = []
+
+    def skip(path: Path) -> bool:
+        if path.name == MANIFEST_NAME:
+            return True
+        if not_a_recording(path):
+            return True
+        if smoothing_output_method(path):  # an earlier run's output, e.g. smoothing in place
+            found.ours.append(path)
+            return True
+        return False
+
+    found.pairs = discover_inputs(
+        [Path(p) for p in inputs], pattern, skip=skip, skipped=skipped, problems=found.problems
+    )
+    # files read with a recording (a CSV's sidecar, UI-PRMD angles) need no mention
+    found.passed_over = [
+        p
+        for p in skipped
+        if not is_companion_file(p) and p not in found.ours and p.name != MANIFEST_NAME
+    ]
+    return found
+
+
+@dataclass
+class Plan:
+    """The jobs of a run, the inputs refused, and what discovery passed over."""
+
+    jobs: list[Any]
+    refused: list[FileSummary]
+    found: Discovered
+
+
+def is_remote(inputs: Sequence[Any], outdir: Any) -> bool:
+    """True when an input or the output folder is named by a URL (``s3://...``)."""
+    return any(isinstance(p, str) and "://" in p for p in (*inputs, outdir))
+
+
+def plan_run(
+    inputs: Sequence[str | os.PathLike[str]],
+    outdir: str | os.PathLike[str],
+    method: str,
+    *,
+    pattern: str = "*",
+    output_format: str = "auto",
+    input_format: str = "auto",
+    overwrite: bool = False,
+) -> Plan:
+    """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
+    :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
+
+    Raises FileNotFoundError when an input does not exist.
+    """
+    if is_remote(inputs, outdir):
+        from tobitkf.app.remote import plan_remote
+
+        jobs, refused = plan_remote(
+            [os.fspath(p) for p in inputs],
+            os.fspath(outdir),
+            method=method,
+            pattern=pattern,
+            output_format=output_format,
+            input_format=input_format,
+        )
+        return Plan(list(jobs), refused, Discovered([]))
+    from tobitkf.io import detect_format
+
+    found = discover_recordings(inputs, pattern)
+    jobs, refused = plan_jobs(
+        found.pairs,
+        outdir,
+        method=method,
+        output_format=output_format,
+        detect=detect_format,
+        input_format=input_format,
+        overwrite=overwrite,
+    )
+    return Plan(list(jobs), refused, found)
+
+
+def _expected(manifest: Manifest, jobs: Sequence[Any], outdir: Any, settings: dict) -> list:
+    """The recorded sha256 of each job done before (None: to be done)."""
+    from tobitkf.io import output_files
+
+    if any(not isinstance(j, Job) for j in jobs):
+        from tobitkf.app.remote import remote_outputs
+
+        there = remote_outputs(os.fspath(outdir))
+        return [
+            manifest.done_digest(
+                j.source,
+                j.output,
+                j.side_outputs(),
+                settings,
+                size=j.size,
+                exists=there.__contains__,
+            )
+            for j in jobs
+        ]
+    return [
+        manifest.done_digest(
+            j.source, j.output, output_files(j.output, j.output_format)[1:], settings
+        )
+        for j in jobs
+    ]
+
+
+def _skipped(summary: FileSummary, entry: dict[str, Any] | None) -> FileSummary:
+    """A passed-over file's summary with the frames and bodies its manifest entry has."""
+    entry = entry or {}
+    return dataclasses.replace(
+        summary, frames=int(entry.get("frames") or 0), bodies=int(entry.get("bodies") or 0)
+    )
+
+
+def run_planned(
+    jobs: Sequence[Job],
+    refused: Sequence[FileSummary],
+    outdir: str | os.PathLike[str],
+    method: str,
+    params: dict[str, Any],
+    *,
+    offline: bool = False,
+    output_format: str = "auto",
+    input_format: str = "auto",
+    overwrite: bool = False,
+    n_jobs: int = 1,
+    client: Any = None,
+    on_done: Callable[[FileSummary], None] | None = None,
+) -> list[FileSummary]:
+    """Run planned jobs with the output folder's manifest; summaries in job order, then
+    the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
+    has ``extra["skipped"]`` true. ``client``: a :class:`distributed.Client` (the files
+    run on its cluster) or None (the local pool of ``n_jobs`` processes).
+
+    Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
+    file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
+    writes to ``outdir``.
+    """
+    settings = run_settings(
+        method,
+        params,
+        offline=offline,
+        output_format=output_format,
+        input_format=input_format,
+    )
+    with Manifest(outdir) as manifest:
+        expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
+        for r in refused:
+            manifest.record(make_entry(r, settings))
+
+        def done(summary: FileSummary) -> FileSummary:
+            if summary.extra.get("skipped"):
+                summary = _skipped(summary, manifest.entries.get(input_key(summary.source)))
+            else:
+                manifest.record(make_entry(summary, settings))
+            if on_done is not None:
+                on_done(summary)
+            return summary
+
+        if client is None:
+            results = batch.run_jobs(  # looked up at call time (tests patch it)
+                jobs, method, params, offline=offline, n_jobs=n_jobs, on_done=done, expect=expect
+            )
+            results = [
+                _skipped(r, manifest.entries.get(input_key(r.source)))
+                if r.extra.get("skipped")
+                else r
+                for r in results
+            ]
+        else:
+            from tobitkf.app.cluster import run_on_cluster
+
+            found: dict[int, FileSummary] = {}
+            try:
+                run_on_cluster(
+                    client,
+                    jobs,
+                    method,
+                    params,
+                    offline=offline,
+                    expect=expect,
+                    on_result=lambda i, s: found.__setitem__(i, done(s)),
+                )
+            finally:  # a worker killed mid-write leaves its temporary file
+                remove_partial_outputs(jobs)
+            results = [found[i] for i in range(len(jobs))]
+    return [*results, *refused]
+
+
+def smooth_files(
+    inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+    out_dir: str | os.PathLike[str],
+    method: str | None = None,
+    *,
+    params: dict[str, Any] | None = None,
+    client: Any = None,
+    jobs: int = 1,
+    offline: bool = False,
+    output_format: str = "auto",
+    input_format: str = "auto",
+    pattern: str = "*",
+    overwrite: bool = False,
+    on_done: Callable[[FileSummary], None] | None = None,
+) -> list[FileSummary]:
+    """Smooth every recording in ``inputs`` (files or folders, searched recursively) into
+    ``out_dir``, as ``tobitkf smooth`` does, and return one summary per input.
+
+    Parameters
+    ----------
+    inputs : path or list of paths; fsspec URLs (``s3://bucket/ntu/``) work too.
+    out_dir : folder for the outputs (created), a path or an fsspec URL; it also gets the
+        run's manifest, ``tobitkf-manifest.jsonl`` (:mod:`tobitkf.app.manifest`).
+    method : registered smoothing method (default :data:`tobitkf.DEFAULT_METHOD`).
+    params : method parameters (``tobitkf methods`` lists them).
+    client : an existing :class:`distributed.Client`: the files run as tasks on its
+        cluster, whose workers read and write the files themselves (they must see the
+        same paths). None: the local pool of ``jobs`` processes.
+    overwrite : redo inputs the manifest says are done, and replace files at the output
+        names that are not tobitkf outputs.
+    on_done : called with each file's summary as it finishes (e.g. a progress bar).
+
+    Returns
+    -------
+    list of :class:`~tobitkf.app.batch.FileSummary`
+        ``ok``, ``error``, ``output``, ``frames``, ``bodies``, ``seconds``; ``extra``
+        holds the input's ``size`` and ``sha256`` and ``skipped`` (done by an earlier
+        run, passed over).
+    """
+    from tobitkf.smoothing.api import DEFAULT_METHOD
+
+    method = method or DEFAULT_METHOD
+    params = dict(params or {})
+    offline = bool(params.pop("offline", False)) or offline
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    plan = plan_run(
+        list(inputs),
+        out_dir,
+        method,
+        pattern=pattern,
+        output_format=output_format,
+        input_format=input_format,
+        overwrite=overwrite,
+    )
+    refused = [
+        *plan.refused,
+        *(FileSummary(str(p), None, False, why) for p, why in plan.found.problems),
+    ]
+    return run_planned(
+        plan.jobs,
+        refused,
+        out_dir,
+        method,
+        params,
+        offline=offline,
+        output_format=output_format,
+        input_format=input_format,
+        overwrite=overwrite,
+        n_jobs=jobs,
+        client=client,
+        on_done=on_done,
+    )

@@ -1,0 +1,120 @@
+"""The run manifest and resume, on the local pool (no Dask needed)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import pytest
+from click.testing import CliRunner
+
+import tobitkf as tk
+from tobitkf.app.commands import app
+from tobitkf.app.manifest import MANIFEST_NAME, Manifest, ManifestBusy, read_entries
+from tobitkf.evaluation.ntu_like import write_ntu_like
+
+METHOD = "kf"
+
+
+@pytest.fixture
+def src(tmp_path):
+    write_ntu_like(tmp_path / "in", 4, frames=(30, 50))
+    return tmp_path / "in"
+
+
+def _skipped(results) -> list[str]:
+    return sorted(r.source for r in results if r.extra.get("skipped"))
+
+
+def test_a_rerun_passes_over_what_is_done_and_redoes_what_changed(src, tmp_path):
+    out = tmp_path / "out"
+    first = tk.smooth_files(src, out, METHOD, jobs=2)
+    inputs = sorted(r.source for r in first)
+    assert all(r.ok for r in first) and _skipped(first) == []
+    again = tk.smooth_files(src, out, METHOD)
+    assert _skipped(again) == inputs
+    assert [r.frames for r in again] == [r.frames for r in first]  # from the manifest
+    # an input changed (same size: only its hash tells), an output deleted
+    changed = sorted(src.rglob("*.skeleton"))[0]
+    text = changed.read_bytes()
+    i = text.index(b"\n25\n") + 7  # a digit of the first joint's x coordinate
+    assert text[i : i + 1].isdigit()
+    changed.write_bytes(text[:i] + (b"5" if text[i : i + 1] != b"5" else b"6") + text[i + 1 :])
+    assert len(changed.read_bytes()) == len(text)
+    gone = next(r for r in first if r.source != str(changed))
+    (out / gone.output).unlink()
+    third = tk.smooth_files(src, out, METHOD)
+    assert sorted(set(inputs) - set(_skipped(third))) == sorted([str(changed), gone.source])
+    entry = read_entries(out / MANIFEST_NAME)[str(changed.resolve())]
+    assert entry["sha256"] == hashlib.sha256(changed.read_bytes()).hexdigest()
+    # other parameters, --overwrite: everything again
+    assert _skipped(tk.smooth_files(src, out, METHOD, params={"q": 0.01})) == []
+    assert _skipped(tk.smooth_files(src, out, METHOD, params={"q": 0.01})) == inputs
+    assert _skipped(tk.smooth_files(src, out, METHOD, params={"q": 0.01}, overwrite=True)) == []
+    assert len((out / MANIFEST_NAME).read_text().splitlines()) == len(inputs)
+
+
+def test_the_command_says_what_it_passed_over(src, tmp_path):
+    out = tmp_path / "out"
+    args = ["smooth", str(src), "-o", str(out), "-m", METHOD]
+    assert CliRunner().invoke(app, args).exit_code == 0
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert "passed over 4 file(s) done by an earlier run" in " ".join(res.output.split())
+
+
+def test_a_line_cut_short_by_a_kill_is_ignored_and_the_next_starts_clean(tmp_path):
+    path = tmp_path / MANIFEST_NAME
+    whole = {"input": "/a", "status": "ok"}
+    path.write_text(json.dumps(whole) + "\n" + '{"input": "/b", "stat')
+    assert list(read_entries(path)) == ["/a"]
+    with Manifest(tmp_path) as m:
+        m.record({"input": "/c", "status": "ok"})
+        assert set(read_entries(path)) == {"/a", "/c"}  # appended on a line of its own
+    assert [json.loads(line)["input"] for line in path.read_text().splitlines()] == ["/a", "/c"]
+
+
+def test_two_runs_cannot_write_one_manifest(tmp_path):
+    with Manifest(tmp_path), pytest.raises(ManifestBusy, match="another tobitkf run"):
+        Manifest(tmp_path).__enter__()
+
+
+def test_without_dask_the_cluster_option_says_how_to_install_it(src, tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import fails
+    args = ["smooth", str(src), "-o", str(tmp_path / "o"), "--cluster", "local"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 1
+    assert "pip install 'tobitkf[dask]'" in " ".join(res.output.split())
+    assert not (tmp_path / "o" / MANIFEST_NAME).exists()  # nothing started
+    res = CliRunner().invoke(app, [*args[:4], "--workers", "2"])
+    assert res.exit_code == 2 and "--cluster local" in res.output
+
+
+def test_inputs_and_outputs_named_by_urls(src, tmp_path):
+    fsspec = pytest.importorskip("fsspec", reason="fsspec is not installed")
+    memory = fsspec.filesystem("memory")
+    root = f"memory://tobitkf-test-{tmp_path.name}"
+    try:
+        for p in sorted(src.rglob("*.skeleton")):
+            memory.pipe(f"{root}/in/{p.relative_to(src).as_posix()}", p.read_bytes())
+        local = tk.smooth_files(src, tmp_path / "local", METHOD, output_format="csv")
+        remote = tk.smooth_files(f"{root}/in", f"{root}/out", METHOD, output_format="csv")
+        assert [r.ok for r in remote] == [True] * len(local)
+        for r, here in zip(remote, local, strict=True):
+            # the same table; the sidecar names the URL as the source
+            assert memory.cat(r.output) == open(here.output, "rb").read()
+            sidecar = json.loads(memory.cat(r.output[: -len(".csv")] + ".json"))
+            assert sidecar["provenance"]["source"]["path"] == r.source
+            assert r.source.startswith("memory://") and r.output.startswith("memory://")
+        lines = memory.cat(f"{root}/out/{MANIFEST_NAME}").decode().splitlines()
+        assert sorted(json.loads(line)["input"] for line in lines) == sorted(
+            r.source for r in remote
+        )
+        memory.rm(remote[0].output[: -len(".csv")] + ".json")  # a side file gone: redone
+        again = tk.smooth_files(f"{root}/in", f"{root}/out", METHOD, output_format="csv")
+        assert [r.source for r in again if not r.extra.get("skipped")] == [remote[0].source]
+    finally:
+        if memory.exists(root):
+            memory.rm(root, recursive=True)
