@@ -149,7 +149,7 @@ def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     p = Path(path)
     xr = require("xarray", "reading movement netCDF files")
     try:
-        with xr.open_dataset(p) as ds:
+        with xr.open_dataset(p, engine=_engine_for(p)) as ds:
             ds.load()
             kind = ds.attrs.get("ds_type", "poses")
             if kind != "poses":
@@ -163,16 +163,32 @@ def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
         raise ReadError(p, None, f"not a movement poses netCDF file ({exc})") from None
 
 
+def _h5netcdf() -> str | None:
+    try:
+        import h5netcdf  # noqa: F401
+    except ImportError:
+        return None
+    return "h5netcdf"
+
+
+def _engine_for(path: Path) -> str | None:
+    """h5netcdf for netCDF-4 (HDF5) files when installed: the netCDF4 package bundles its
+    own HDF5 library, which clashes with h5py's in the same process (a RuntimeError once
+    h5py has been used, e.g. by a DeepLabCut or SLEAP reader); scipy for classic files."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        return None
+    if head.decode("latin-1").startswith(_NETCDF3_MAGIC):
+        return "scipy"
+    return _h5netcdf()
+
+
 def write_movement(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
     """Write sequences as a movement poses dataset in a netCDF file."""
     ds = to_movement(list(sequences))
-    try:
-        import h5netcdf  # noqa: F401
-
-        engine = "h5netcdf"
-    except ImportError:
-        engine = None
-    ds.to_netcdf(Path(path), engine=engine)
+    ds.to_netcdf(Path(path), engine=_h5netcdf())
 
 
 def sniff_movement(path: Path, head: str) -> int:
