@@ -225,3 +225,17 @@ def test_a_wrong_cluster_address_is_one_clear_message(tmp_path):
     res = CliRunner().invoke(app, ["smooth", str(one), "-o", str(tmp_path / "o"), "--cluster", "x"])
     assert res.exit_code == 1 and "Traceback" not in res.output
     assert "expected a scheduler address" in " ".join(res.output.split())
+
+
+def test_a_run_leaves_the_users_dask_defaults_alone(client, data, tmp_path):
+    # a client started by tobitkf must not become dask's default scheduler: that broke
+    # the user's later dask work in the same process (xarray's to_netcdf asked for a
+    # distributed Client that had gone)
+    import dask
+    import distributed
+
+    root, _, _ = data
+    tk.smooth_files(root / "in", tmp_path / "out", METHOD, client=client)
+    with pytest.raises(ValueError, match="No clients found"):
+        distributed.default_client()
+    assert dask.base.get_scheduler() is None

@@ -72,7 +72,7 @@ def connect(address: str, workers: int | None = None) -> Iterator[Any]:
                 silence_logs=logging.ERROR,
             )
         try:
-            with distributed.Client(cluster) as client:
+            with distributed.Client(cluster, set_as_default=False) as client:
                 yield client
         finally:
             cluster.close()
@@ -80,10 +80,10 @@ def connect(address: str, workers: int | None = None) -> Iterator[Any]:
     if workers is not None:
         raise ValueError("--workers goes with --cluster local (a running cluster has its own)")
     if address.endswith(".json") and os.path.isfile(address):
-        with distributed.Client(scheduler_file=address) as client:
+        with distributed.Client(scheduler_file=address, set_as_default=False) as client:
             yield client
         return
-    with distributed.Client(address) as client:
+    with distributed.Client(address, set_as_default=False) as client:
         yield client
 
 
@@ -152,7 +152,7 @@ def run_on_cluster(
 
     order = list(range(len(jobs)))
     futures = [submit(order[k : k + per_task]) for k in range(0, len(order), per_task)]
-    pending = distributed.as_completed(futures)
+    pending = distributed.as_completed(futures, loop=client.loop)  # not the default client
     try:
         for fut in pending:
             idx = members.pop(fut)
