@@ -17,6 +17,12 @@ reappears after missing frames widen with the time elapsed since its last measur
 (``c · elapsed / (1/30)``); otherwise a joint that moved during an occlusion would crawl
 back at ``gain · c`` per frame.
 
+Pauses. A time step so long that the random walk's variance would exceed 100 R (13.3 s
+with the paper's Q and R) is a new start: every joint restarts at its next measurement
+(x0 = that measurement, P0 = R) and, offline, nothing is smoothed across the pause; live,
+the stepper restarts alike. (A per-joint gap of missing frames is still predicted
+through.)
+
 Up axis. The vertical entry of ``c`` goes on the topology's ``up_axis`` (y for Kinect
 camera space, z for most optical systems); ``up_axis=`` overrides it. An explicit
 ``c=(cx, cy, cz)`` is used as given, in the sequence's axes. The Kinect device limits of
@@ -43,6 +49,8 @@ the position is NaN. For the Tobit filters it is the Gaussian approximation's va
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import warnings
 from collections.abc import Mapping
 from typing import Any
@@ -182,6 +190,53 @@ def _limits_3d(inp: SmoothInput, params: dict[str, Any]) -> dict[str, tuple[floa
 
 def _vec3(v: Any) -> Array:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (3,)))
+
+
+#: a pause (one time step) after which the random walk's variance exceeds this many R
+#: restarts every joint at its next measurement, as at its first (13.3 s with the paper's
+#: Q and R): the Tobit updates are linear in y, and extrapolated from a prior wider than
+#: the device they threw a joint 79 m away after a 10^5 s pause (issue 14 point 5)
+RESTART_VARIANCE_RATIO = 100.0
+
+
+def pause_seconds(params: Mapping[str, Any]) -> float:
+    """The pause after which :func:`run_across_pauses` restarts the filters."""
+    ratio = np.min(np.asarray(params["r"], dtype=float) / np.asarray(params["q"], dtype=float))
+    return float(RESTART_VARIANCE_RATIO * ratio * paper.REFERENCE_DT)
+
+
+def run_across_pauses(
+    inp: SmoothInput, kind: str, variant: str | None, params: dict[str, Any]
+) -> SmoothOutput:
+    """:func:`run_kalman` on each stretch between pauses longer than
+    :func:`pause_seconds`: nothing is carried across a pause (a new start, x0 = the
+    first measurement after it and P0 = R; offline, no smoothing across it)."""
+    T = inp.ys.shape[0]
+    cuts = [0, *(int(k) for k in np.nonzero(inp.steps[1:] > pause_seconds(params))[0] + 1), T]
+    if len(cuts) == 2:
+        return run_kalman(inp, kind, variant, **params)
+    parts = []
+    for a, b in itertools.pairwise(cuts):
+        steps = np.array(inp.steps[a:b], dtype=float)
+        steps[0] = inp.steps[0]  # the nominal step, as for a recording's first frame
+        part = dataclasses.replace(
+            inp,
+            positions=inp.positions[a:b],
+            ys=inp.ys[a:b],
+            missing=inp.missing[a:b],
+            tracking_state=None if inp.tracking_state is None else inp.tracking_state[a:b],
+            steps=steps,
+            times=inp.times[a:b],
+            is_reference=bool(inp.is_reference or np.all(steps == paper.REFERENCE_DT)),
+            confidence=None if inp.confidence is None else inp.confidence[a:b],
+        )
+        parts.append(run_kalman(part, kind, variant, **params))
+    cat = np.concatenate
+    clipped = None if parts[0].clipped is None else cat([p.clipped for p in parts])
+    std = None if parts[0].std is None else cat([p.std for p in parts])
+    return SmoothOutput(
+        cat([p.positions for p in parts]), clipped=clipped, params=parts[0].params, std=std
+    )
 
 
 def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) -> SmoothOutput:
@@ -355,7 +410,11 @@ class KalmanStepper:
     def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float) -> Array:
         valid = ~missing
         self._time += dt
+        if self._filter is not None and dt > pause_seconds(self.params):
+            self._filter = None  # a pause: a new start, as run_across_pauses does
+            dt = self._first_dt
         if self._filter is None:
+            self._first_dt = dt
             self._filter = self._make_filter(ys, valid)
             self._started = valid.copy()
             self._last_valid_time = np.full(valid.shape, np.nan)
@@ -398,7 +457,7 @@ def _register(
         if kind == "tkf":
             _check_device_limits(name, inp, params)
             params = {**params, **_limits_3d(inp, params)}
-        return run_kalman(inp, kind, variant, **params)
+        return run_across_pauses(inp, kind, variant, params)
 
     def live(topology: Topology, up_axis: int, inferred_noise_factor: float, **params: Any):
         return KalmanStepper(kind, variant, topology, up_axis, inferred_noise_factor, **params)
