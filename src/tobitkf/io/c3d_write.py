@@ -21,14 +21,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from tobitkf.io._marker_writer import one_3d_sequence
 from tobitkf.io.c3d import _import_c3d
-from tobitkf.io.errors import OptionError
 from tobitkf.io.registry import get_format, register_format
-from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
+from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = ["write_c3d"]
-
-_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
 
 def _check_label(name: str) -> str:
@@ -57,28 +55,7 @@ def write_c3d(
         (default: the sequence's own). A sequence in unknown units (None) needs
         ``units``, which labels them without conversion.
     """
-    seqs = list(sequences)
-    if len(seqs) != 1:
-        raise ValueError(
-            f"a C3D file holds one set of points; found {len(seqs)} sequences (write each "
-            "body to its own file)"
-        )
-    (seq,) = seqs
-    if seq.positions.shape[2] != 3:
-        raise ValueError(f"C3D holds 3-D points; the positions are {seq.positions.shape[2]}-D")
-    if units is not None and units not in _UNITS:
-        raise OptionError(f"units must be one of {sorted(_UNITS)}, found {units!r}")
-    if seq.units is None:
-        if units is None:
-            raise ValueError(
-                "the sequence's units are unknown: pass units='m', 'cm' or 'mm' to label them"
-            )
-        scale = 1.0
-    elif seq.units in _UNITS:
-        units = units or seq.units
-        scale = KNOWN_UNITS[seq.units] / _UNITS[units]
-    else:
-        raise ValueError(f"C3D holds lengths; the sequence's units are {seq.units!r}")
+    seq, units, scale = one_3d_sequence(sequences, "C3D", "points", units)
     labels = [_check_label(n) for n in seq.joint_names]
     if seq.fps is not None:
         rate = float(seq.fps)

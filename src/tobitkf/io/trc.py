@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._marker_writer import MARKER_UNITS, one_3d_sequence
 from tobitkf.io._text import (
     check_positions,
     check_rate,
@@ -48,14 +49,13 @@ from tobitkf.io._text import (
     parse_rows,
     read_lines,
 )
-from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
+from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
 __all__ = ["read_trc", "sniff_trc", "write_trc"]
 
-_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 _HEADER_KEYS = (
     "DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units", "OrigDataRate",
     "OrigDataStartFrame", "OrigNumFrames",
@@ -83,7 +83,7 @@ def read_trc(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     rate = parse_number(path, 3, header["DataRate"], "DataRate")
     fps = check_rate(path, 3, rate, "DataRate", header["DataRate"])
     unit = header["Units"].lower()
-    if unit not in _UNITS:
+    if unit not in MARKER_UNITS:
         raise ReadError(path, 3, f"expected Units mm, cm or m, found {header['Units'][:20]!r}")
     names_row = lines[3].split("\t")
     if [f.strip() for f in names_row[:2]] != ["Frame#", "Time"]:
@@ -125,7 +125,7 @@ def read_trc(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     )
     times = data[:, 1].copy()
     check_times(path, times, numbers, "Time value")
-    positions = np.ascontiguousarray(data[:, 2:].reshape(-1, m, 3)) * _UNITS[unit]
+    positions = np.ascontiguousarray(data[:, 2:].reshape(-1, m, 3)) * MARKER_UNITS[unit]
     check_positions(path, positions, numbers, implausible, names=names)
     seq = SkeletonSequence(
         positions=positions,
@@ -196,28 +196,7 @@ def write_trc(
         the sequence's own units. A sequence in unknown units (None) is written as they
         are, labelled ``units`` (which is then required).
     """
-    seqs = list(sequences)
-    if len(seqs) != 1:
-        raise ValueError(
-            f"a TRC file holds one set of markers; found {len(seqs)} sequences (write each "
-            "body to its own file)"
-        )
-    (seq,) = seqs
-    if seq.positions.shape[2] != 3:
-        raise ValueError(f"TRC holds 3-D markers; the positions are {seq.positions.shape[2]}-D")
-    if units is not None and units not in _UNITS:
-        raise OptionError(f"units must be one of {sorted(_UNITS)}, found {units!r}")
-    if seq.units is None:
-        if units is None:
-            raise ValueError(
-                "the sequence's units are unknown: pass units='m', 'cm' or 'mm' to label them"
-            )
-        scale = 1.0
-    elif seq.units in _UNITS:
-        units = units or seq.units
-        scale = KNOWN_UNITS[seq.units] / _UNITS[units]
-    else:
-        raise ValueError(f"TRC holds lengths; the sequence's units are {seq.units!r}")
+    seq, units, scale = one_3d_sequence(sequences, "TRC", "markers", units)
     names = [_check_name(n) for n in seq.joint_names]
     rate = _rate(seq)
     T, M = seq.n_frames, seq.n_joints
