@@ -51,6 +51,10 @@ def _workers_alive(marker: str) -> list[int]:
     return pids
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(tmp_path: Path, n_files: int, *extra: str) -> tuple[subprocess.Popen, Path]:
     src = tmp_path / "in"
     _recordings(src, n_files)
@@ -59,7 +63,10 @@ def _start(tmp_path: Path, n_files: int, *extra: str) -> tuple[subprocess.Popen,
     # on a loaded machine (with the compiled kf kernel, 120 files took about a second)
     cmd = [sys.executable, "-m", "tobitkf", "smooth", str(src), "-o", str(out), "-m", "robust",
            "-j", "2", *extra]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # as from a terminal: Ctrl-C not ignored, whatever this test process inherited (a child
+    # keeps an ignored SIGINT across exec, and Python then installs no handler for it)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)  # fmt: skip
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and len(_outputs(out)) < 3:
         time.sleep(0.05)  # wait until the run is well under way
