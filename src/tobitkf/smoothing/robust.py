@@ -493,17 +493,16 @@ class RobustStepper:
         out = np.empty((1, B, J, 3))
         self.rejected = np.zeros((B, J), dtype=bool)
         self.std = np.empty((B, J))
+        # one read-only frame for both kernels: the types of the batch call, so nothing
+        # compiles twice
+        y1 = readonly(np.ascontiguousarray(ys, dtype=float)[None])
+        m1 = np.ascontiguousarray(missing, dtype=bool)[None]
         k.online_frames(
-            readonly(np.ascontiguousarray(ys, dtype=float)[None]),
-            np.ascontiguousarray(missing, dtype=bool)[None],
-            _inferred_scale(states, missing, self.factor)[None],
+            y1, m1, _inferred_scale(states, missing, self.factor)[None],
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
             *self._scratch, out, self.rejected[None], self.std[None],
         )  # fmt: skip
-        step_guard().guard_frames(
-            np.ascontiguousarray(ys, dtype=float)[None],
-            np.ascontiguousarray(missing, dtype=bool)[None], out, self.std[None], *self._guard,
-        )  # fmt: skip
+        step_guard().guard_frames(y1, m1, out, self.std[None], *self._guard)
         np.sqrt(self.std, out=self.std)
         return out[0]
 
