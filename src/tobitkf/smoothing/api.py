@@ -71,8 +71,7 @@ from tobitkf.smoothing.keypoints import (
     check_min_confidence,
     drop_third_axis,
     length_scale,
-    low_confidence,
-    pad_third_axis,
+    method_view,
 )
 from tobitkf.smoothing.params import as_bool, check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import (
@@ -90,7 +89,6 @@ from tobitkf.smoothing.timebase import (
     all_last,
     frame_steps,
     frame_times,
-    measurements,
 )
 from tobitkf.smoothing.untangle import untangle_sequences
 
@@ -389,21 +387,14 @@ def _smooth_group(
         else np.stack([s.positions for s in seqs], axis=1)
     )
     n_dims = positions.shape[-1]
-    scale = length_scale(ref.units)  # metres per unit; None: pixels / unknown
-    if scale is not None and scale != 1.0:
-        positions = positions * scale
-    positions = pad_third_axis(positions)
     states = None
     if ref.tracking_state is not None:
         states = np.stack([s.tracking_state for s in seqs], axis=1)
     confidence = None
     if ref.confidence is not None:
         confidence = np.stack([s.confidence for s in seqs], axis=1)
-    ys, missing = measurements(positions, states)
-    low = low_confidence(confidence, min_conf)
-    if low is not None and (low & ~missing).any():
-        missing = missing | low
-        ys = np.where(missing[..., None], np.nan, ys)
+    # scale: metres per unit; None: pixels / unknown
+    scale, positions, ys, missing = method_view(positions, ref.units, states, confidence, min_conf)
     positions, ys = _read_only(positions), _read_only(ys)  # a method must not write into them
     inp = SmoothInput(
         positions=positions,

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from tobitkf.skeleton.sequence import KNOWN_UNITS
 from tobitkf.smoothing.params import nonneg_float
+from tobitkf.smoothing.timebase import measurements
 
 __all__ = [
     "DEFAULT_MIN_CONFIDENCE",
@@ -65,6 +66,25 @@ def low_confidence(confidence: Array | None, threshold: float) -> NDArray[np.boo
         return None
     with np.errstate(invalid="ignore"):
         return np.asarray(confidence) < threshold
+
+
+def method_view(
+    positions: Array, units: str | None, states: Any, confidence: Array | None, min_conf: float
+) -> tuple[float | None, Array, Array, NDArray[np.bool_]]:
+    """What a method sees of ``positions (T, ..., D)``: lengths in metres, three axes,
+    samples below ``min_conf`` missing. Returns the metres per unit (None: pixels or
+    unknown units, left as they are), the converted positions, the measurements (NaN where
+    missing, NOT_TRACKED or below ``min_conf``) and the missing mask."""
+    scale = length_scale(units)
+    if scale is not None and scale != 1.0:
+        positions = positions * scale
+    positions = pad_third_axis(positions)
+    ys, missing = measurements(positions, states)
+    low = low_confidence(confidence, min_conf)
+    if low is not None and (low & ~missing).any():
+        missing = missing | low
+        ys = np.where(missing[..., None], np.nan, ys)
+    return scale, positions, ys, missing
 
 
 def pad_third_axis(positions: Array) -> Array:

@@ -96,9 +96,7 @@ from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
     drop_third_axis,
-    length_scale,
-    low_confidence,
-    pad_third_axis,
+    method_view,
 )
 from tobitkf.smoothing.params import (
     as_bool,
@@ -118,7 +116,6 @@ from tobitkf.smoothing.timebase import (
     frame_steps,
     frame_times,
     inferred_r_scale,
-    measurements,
     readonly,
 )
 
@@ -589,14 +586,8 @@ def robust_smooth(
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})
     states = sequence.tracking_state
-    scale = length_scale(sequence.units)
-    positions = sequence.positions if scale in (None, 1.0) else sequence.positions * scale
-    ys, missing = measurements(pad_third_axis(positions), states)
     conf = sequence.confidence
-    low = low_confidence(conf, min_conf)
-    if low is not None and (low & ~missing).any():
-        missing = missing | low
-        ys = np.where(missing[..., None], np.nan, ys)
+    scale, _, ys, missing = method_view(sequence.positions, sequence.units, states, conf, min_conf)
     steps = frame_steps(sequence)[0]
     est, std, diags, resolved, body_params = _robust_bodies(
         ys[:, None], missing[:, None], None if states is None else states[:, None],
