@@ -12,6 +12,7 @@ $(PY):
 
 $(STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
+	$(VENV)/bin/tobitkf warmup --jobs 2  # compile the numba kernels once, into the cache
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -8,7 +8,9 @@ processes that import tobitkf and time their first ``tk.smooth`` call (a 10 s sy
 recording): the first compiles the method's kernels (cold), the second loads them from
 the cache (warm). Printed: the best cold and warm wall times (the machine is shared), the
 cold one also in CPU seconds (which other work on the machine inflates less).
-``import tobitkf`` is not included.
+``import tobitkf`` is not included. Then (every method only) the wall time of
+``tobitkf.warmup(jobs=2)`` in an empty cache: what ``make install`` and ``tobitkf
+warmup`` pay once.
 """
 
 from __future__ import annotations
@@ -41,6 +43,24 @@ def first_call(method: str, cache: str) -> tuple[float, float]:
     return float(wall), float(cpu)
 
 
+WARMUP = """
+import time
+import tobitkf as tk
+t0 = time.perf_counter()
+tk.warmup(jobs=2)
+print(time.perf_counter() - t0)
+"""
+
+
+def warmup_seconds() -> float:
+    """Wall seconds of ``tobitkf.warmup(jobs=2)`` (every method) in an empty cache."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        res = subprocess.run([sys.executable, "-c", WARMUP], check=True, env=env,
+                             capture_output=True, text=True)  # fmt: skip
+    return float(res.stdout.split()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-m", "--method", action="append", help="only these methods")
@@ -59,6 +79,9 @@ def main() -> None:
         c, w = min(cold), min(warm)  # best wall time (with its CPU time)
         rows.append((name, c, w))
         print(f"{name:>14} {c[0]:9.2f} {c[1]:9.2f} {w[0]:9.2f}")
+    warm_all = None if args.method else warmup_seconds()
+    if warm_all is not None:
+        print(f"tobitkf warmup --jobs 2, every method, empty cache: {warm_all:.1f} s")
     if args.markdown:
         from bench_filters import machine  # benchmarks/ is on the path here
 
@@ -69,6 +92,12 @@ def main() -> None:
         print("|---|---|---|")
         for name, c, w in rows:
             print(f"| {name} | {c[0]:.1f} ({c[1]:.1f}) | {w[0]:.2f} |")
+        if warm_all is not None:
+            print()
+            print(
+                f"`tobitkf warmup --jobs 2` (every method's kernels into an empty cache; "
+                f"`make install` runs it): {warm_all:.0f} s."
+            )
 
 
 if __name__ == "__main__":

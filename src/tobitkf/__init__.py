@@ -61,6 +61,7 @@ _EXPORTS: dict[str, str] = {
     "SmoothOutput": "tobitkf.smoothing.registry",
     "LiveSmoother": "tobitkf.smoothing.live",
     "live_methods": "tobitkf.smoothing.live",
+    "warmup": "tobitkf.smoothing.warmup",
     # evaluation against ground truth, synthetic benchmark
     "prepare_truth": "tobitkf.evaluation.evaluate",
     "evaluate_methods": "tobitkf.evaluation.evaluate",

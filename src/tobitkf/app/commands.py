@@ -398,6 +398,8 @@ def smooth(
         )
     if not job_list and not refused:
         _fail("no input files found")
+    if job_list and (cluster is None or cluster == "local"):
+        _warm_kernels(method, as_json)
     with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
         task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
         frames = [0]
@@ -484,6 +486,21 @@ def smooth(
         sys.exit(1)
 
 
+def _warm_kernels(method: str, quiet: bool) -> None:
+    """Compile ``method``'s kernels once here, before the files (parallel workers then
+    load them instead of each compiling them), and say so when it takes a while."""
+    from tobitkf.smoothing.warmup import warm
+
+    def notice():
+        if not quiet:
+            err_console.print(
+                f"compiling the kernels of {method} for this machine (first run only: "
+                "they are cached for later runs; `tobitkf warmup` does it ahead)"
+            )
+
+    warm(method, on_compile=notice)
+
+
 # --------------------------------------------------------------------------- info
 @app.command()
 @click.argument("path", type=click.Path(exists=True))
@@ -542,6 +559,42 @@ def methods():
         "units: positions in metres; q, r are variances (m², q per 1/30 s step), c and "
         "limits in metres, speeds in m/s, times in seconds, windows in frames, cut-offs in Hz"
     )
+
+
+@app.command()
+@click.option(
+    "-m", "--method", "names", multiple=True, type=click.Choice(_method_names()),
+    help="Only this method (repeatable); default: every registered method.",
+)  # fmt: skip
+@click.option(
+    "-j", "--jobs", default=2, show_default=True, type=click.IntRange(1),
+    help="Methods compiled at once, each in its own process.",
+)  # fmt: skip
+def warmup(names, jobs):
+    """Compile the methods' kernels into numba's cache, ahead of the work.
+
+    The first run of a compiled method on a machine (or after an upgrade) compiles its
+    kernels: seconds, about ten for the default method. Later processes load them from
+    the cache. Run this once after installing, or on each node of a cluster whose cache
+    is not shared (NUMBA_CACHE_DIR sets where the cache is).
+    """
+    from tobitkf.smoothing.warmup import warmup as run_warmup
+
+    names = list(names) or None
+    rows = []
+    with _progress(False, "{task.fields[now]}", transient=True) as progress:
+        total = len(names) if names else len(_method_names())
+        task = progress.add_task("compiling", total=total, now="")
+
+        def done(name, seconds):
+            rows.append([name, seconds])
+            progress.update(task, advance=1, now=name)
+
+        run_warmup(names, jobs=jobs, on_done=done)
+    rows.sort()
+    _print_table("tobitkf warmup: kernels compiled and cached", ["method", "compile seconds"],
+                 [[n, round(s, 1)] for n, s in rows])  # fmt: skip
+    console.print("0 seconds: the method's kernels were in the cache already, or it has none")
 
 
 #: units of the built-in methods' parameters, shown by `tobitkf methods`

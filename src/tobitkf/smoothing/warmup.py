@@ -1,0 +1,162 @@
+"""Compile the methods' kernels ahead of the work (``tobitkf warmup``).
+
+The compiled methods (the robust pair, the Kalman-type ones, the Kinect and 1€ filters)
+are numba kernels, cached on disk (numba's cache: ``__pycache__`` beside the package, or
+``NUMBA_CACHE_DIR``). The first call on a new machine, or after an upgrade, compiles them:
+seconds for the Kalman methods, about ten for ``robust``, whose noise fit has kernels of
+its own; every later process loads them from the cache in well under a second.
+
+:func:`warm` runs a method on a small built-in recording (and, for causal methods with a
+live stepper, a few live frames), so its kernels are compiled and cached before the real
+work starts, and says when something had to be compiled (``on_compile``).
+``tobitkf smooth`` calls it before it reads the first file, so that parallel workers
+(``--jobs``) load the kernels instead of each compiling them, and the person waiting
+sees why the first run is slow. :func:`warmup` does it for many methods, in parallel
+processes (``make install`` runs ``tobitkf warmup``).
+
+The kernels' types do not depend on the recording (every array reaches them as C-ordered
+float64, bool or int), so warming on the small recording covers real files.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from typing import Any
+
+import numpy as np
+
+from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.topology import get_topology
+
+# importing api registers the built-in methods
+from tobitkf.smoothing.api import get_method, method_names, smooth
+
+__all__ = ["tiny_recording", "warm", "warmup"]
+
+#: frames of the built-in recording: long enough for every rule to run (gaps, rejections,
+#: the noise fit), short enough to cost nothing once compiled
+TINY_FRAMES = 90
+
+
+def tiny_recording() -> SkeletonSequence:
+    """A 3 s Kinect V2 recording at 30 fps with tracking states, gaps and a glitch."""
+    topo = get_topology("kinect_v2")
+    rng = np.random.default_rng(0)
+    T, J = TINY_FRAMES, topo.n_joints
+    base = rng.normal(0.0, 0.3, size=(J, 3)) + np.array([0.0, 0.0, 2.5])
+    walk = np.cumsum(rng.normal(0.0, 0.004, size=(T, J, 3)), axis=0)
+    pos = base + walk + rng.normal(0.0, 0.005, size=(T, J, 3))
+    pos[40:44, J - 1] += 0.6  # a sustained glitch on the last joint
+    pos[10:13, 5] = np.nan  # a gap
+    states = np.full((T, J), TrackingState.TRACKED, dtype=np.int8)
+    states[20:25, 7] = TrackingState.INFERRED
+    states[60:62, 9] = TrackingState.NOT_TRACKED
+    return SkeletonSequence(positions=pos, topology=topo, fps=30.0, tracking_state=states)
+
+
+class _Watch:
+    """Listens to numba's compile events: the time spent compiling, and a first-compile
+    callback (top-level compilations only; nested ones are inside their caller's)."""
+
+    def __init__(self, on_compile: Callable[[], Any] | None) -> None:
+        self.on_compile = on_compile
+        self.depth = 0
+        self.started = 0.0
+        self.seconds = 0.0
+        self.count = 0
+
+    def listener(self) -> Any:
+        from numba.core import event
+
+        watch = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev: Any) -> None:
+                if watch.depth == 0:
+                    watch.started = time.perf_counter()
+                    if watch.count == 0 and watch.on_compile is not None:
+                        watch.on_compile()
+                watch.depth += 1
+                watch.count += 1
+
+            def on_end(self, ev: Any) -> None:
+                watch.depth -= 1
+                if watch.depth == 0:
+                    watch.seconds += time.perf_counter() - watch.started
+
+        return Listener()
+
+
+def _run_tiny(method: str) -> None:
+    from tobitkf.smoothing.live import LiveSmoother, live_methods
+
+    seq = tiny_recording()
+    smooth(seq, method=method)
+    if get_method(method).live is not None and method in live_methods():
+        live = LiveSmoother(seq.topology, method=method, fps=30.0)
+        for t in range(5):
+            live.update(seq.positions[t], tracking_state=seq.tracking_state[t])
+
+
+def warm(method: str, on_compile: Callable[[], Any] | None = None) -> float:
+    """Run ``method`` on :func:`tiny_recording` so that its kernels are compiled and
+    cached; returns the seconds spent compiling (0 when everything came from the cache).
+
+    ``on_compile`` is called once, when the first kernel starts compiling (e.g. to tell
+    the person waiting why).
+    """
+    get_method(method)  # an unknown name fails here, with the list of methods
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - numba is a dependency; a method may not use it
+        _run_tiny(method)
+        return 0.0
+    watch = _Watch(on_compile)
+    with event.install_listener("numba:compile", watch.listener()):
+        _run_tiny(method)
+    return watch.seconds
+
+
+def _warm_in_child(method: str) -> tuple[str, float]:
+    return method, warm(method)
+
+
+def warmup(
+    methods: Iterable[str] | None = None,
+    jobs: int = 1,
+    on_done: Callable[[str, float], Any] | None = None,
+) -> dict[str, float]:
+    """Compile and cache the kernels of ``methods`` (default: every registered method).
+
+    ``jobs`` > 1 warms methods in that many new processes at once (numba compiles in one
+    thread; the cache is shared on disk). ``on_done(method, seconds)`` is called as each
+    method is ready. Returns the compile seconds per method.
+    """
+    names = list(method_names() if methods is None else methods)
+    for name in names:
+        get_method(name)
+    done: dict[str, float] = {}
+    if jobs <= 1 or len(names) <= 1:
+        for name in names:
+            done[name] = warm(name)
+            if on_done is not None:
+                on_done(name, done[name])
+        return done
+    # user methods registered in this process would be unknown to a fresh one
+    builtin = [n for n in names if get_method(n).run.__module__.startswith("tobitkf.")]
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
+        futures = [pool.submit(_warm_in_child, n) for n in builtin]
+        for fut in as_completed(futures):
+            name, seconds = fut.result()
+            done[name] = seconds
+            if on_done is not None:
+                on_done(name, seconds)
+    for name in names:
+        if name not in done:
+            done[name] = warm(name)
+            if on_done is not None:
+                on_done(name, done[name])
+    return {n: done[n] for n in names}

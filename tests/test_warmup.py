@@ -1,0 +1,125 @@
+"""Kernels compiled ahead of the work: ``tobitkf warmup`` and the notice of ``smooth``.
+
+Compilation is observed through numba's own compile events, not through our timings: a
+kernel that compiles during a call is a kernel the cache did not have.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("click")
+
+import tobitkf as tk
+from conftest import data_file
+from tobitkf.smoothing.warmup import tiny_recording, warm
+
+
+def test_tiny_recording_exercises_the_rules():
+    seq = tiny_recording()
+    out = tk.smooth(seq)  # robust: the glitch is rejected, the gap and INFERRED are there
+    assert (out.sample_state == tk.SampleState.REJECTED).any()
+    assert (out.sample_state == tk.SampleState.MISSING).any()
+    assert (seq.tracking_state == tk.TrackingState.INFERRED).any()
+
+
+COVER = r"""
+import json, sys
+import tobitkf as tk
+from numba.core import event
+from tobitkf.smoothing.warmup import warm
+
+method, files = sys.argv[1], sys.argv[2:]
+warm(method)
+seen = []
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        seen.append(ev.data["dispatcher"].py_func.__name__)
+
+    def on_end(self, ev):
+        pass
+
+with event.install_listener("numba:compile", Listener()):
+    for path in files:
+        for seq in tk.load(path):
+            tk.smooth(seq, method=method)
+    if tk.methods()[method].live is not None and method in tk.live_methods():
+        seq = tk.load(files[0])[0]
+        live = tk.LiveSmoother(seq.topology, method=method, fps=seq.fps or 30.0)
+        for t in range(3):
+            live.update(seq.positions[t], tracking_state=seq.tracking_state[t])
+print(json.dumps(seen))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+@pytest.mark.parametrize("method", ["robust", "robust_online", "atkf", "tkfc", "kinect"])
+def test_warming_on_the_tiny_recording_covers_real_files(method, tmp_path):
+    # in an empty cache: after warm(), real recordings (other lengths, tracking states
+    # or none, other formats, live frames) need no further compilation
+    files = [
+        data_file(rel)
+        for rel in (
+            "kimore/JointPositionExercise1.csv",
+            "keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt",
+            "krajjat/sequence_ainhoa_trimmed.tsv",
+            "cmu-mocap/scaled_131_01.bvh",
+        )
+    ]
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONWARNINGS="ignore")
+    res = subprocess.run([sys.executable, "-c", COVER, method, *map(str, files)], env=env,
+                         capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout.splitlines()[-1]) == []
+
+
+def test_warm_reports_compilation_once_and_only_when_compiling():
+    calls = []
+    warm("kf")  # now cached, whatever it was before
+    assert warm("kf", on_compile=lambda: calls.append(1)) == 0.0
+    assert calls == []
+
+
+def _cli(args: list[str], cache: Path, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    code = "import sys; from tobitkf.app.cli import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.run([sys.executable, "-c", code, *args], env=env, cwd=cwd,
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_empty_cache_compiles_once_says_so_then_loads(tmp_path):
+    cache = tmp_path / "numba-cache"
+    seq = tiny_recording()
+    tk.save([seq], tmp_path / "rec.csv", format="csv")
+    first = _cli(["smooth", "rec.csv", "-o", "out", "-m", "kf"], cache, tmp_path)
+    assert first.returncode == 0, first.stderr
+    assert "compiling the kernels of kf" in first.stderr
+    assert any(cache.rglob("*.nbi"))  # numba wrote its cache
+    again = _cli(["smooth", "rec.csv", "-o", "out", "-m", "kf", "--overwrite"], cache, tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert "compiling" not in again.stderr
+    # the warmup command in a new cache: kf compiles (seconds > 0), then nothing does
+    cache2 = tmp_path / "other-cache"
+    w1 = _cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path)
+    w2 = _cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path)
+    assert w1.returncode == 0 and w2.returncode == 0, w1.stderr + w2.stderr
+    row1 = next(ln for ln in w1.stdout.splitlines() if " kf " in ln)
+    row2 = next(ln for ln in w2.stdout.splitlines() if " kf " in ln)
+    assert float(row1.split()[-2]) > 0
+    assert float(row2.split()[-2]) == 0
+
+
+def test_warmup_rejects_unknown_methods():
+    from tobitkf.smoothing.warmup import warmup
+
+    with pytest.raises(ValueError, match="unknown method"):
+        warmup(["no-such-method"])
