@@ -123,3 +123,18 @@ def test_warmup_rejects_unknown_methods():
 
     with pytest.raises(ValueError, match="unknown method"):
         warmup(["no-such-method"])
+
+
+def test_help_imports_no_numerics():
+    # `tobitkf --help` must stay quick: the method lists are read only when a command
+    # runs (the registry imports numpy, scipy and every method module)
+    code = (
+        "import sys\n"
+        "from tobitkf.app.cli import main\n"
+        "main(['--help'])\n"
+        "loaded = [m for m in ('tobitkf.smoothing.api', 'scipy', 'numba') if m in sys.modules]\n"
+        "print(loaded)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines()[-1] == "[]"

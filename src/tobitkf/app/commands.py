@@ -563,7 +563,7 @@ def methods():
 
 @app.command()
 @click.option(
-    "-m", "--method", "names", multiple=True, type=click.Choice(_method_names()),
+    "-m", "--method", "names", multiple=True, type=_RegistryChoice(_method_names),
     help="Only this method (repeatable); default: every registered method.",
 )  # fmt: skip
 @click.option(
