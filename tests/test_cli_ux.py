@@ -21,7 +21,7 @@ from click.testing import CliRunner  # noqa: E402
 from rich.console import Console  # noqa: E402
 
 from test_cli import _recording  # noqa: E402
-from tobitkf.app import commands  # noqa: E402
+from tobitkf.app.commands import _common as commands  # noqa: E402
 from tobitkf.app.commands import app  # noqa: E402
 from tobitkf.io import save  # noqa: E402
 

@@ -1,0 +1,261 @@
+"""What every command shares: the click group, consoles, tables, progress, checks."""
+
+from __future__ import annotations
+
+import os
+import signal
+import tempfile
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+console = Console()
+if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
+    console = Console(width=160)
+err_console = Console(stderr=True)
+
+
+def _fail(message: str) -> None:
+    raise click.ClickException(message)
+
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if value != value:  # NaN
+            return "-"
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: int = 2) -> None:
+    table = Table(title=title, title_justify="left")
+    for i, col in enumerate(columns):
+        # long file names fold onto a second line instead of being cut to "JointPositi…"
+        table.add_column(col, justify="left" if i == 0 else "right", overflow="fold")
+    for row in rows:
+        table.add_row(*[_fmt(v, digits) for v in row])
+    console.print(table)
+
+
+class _RegistryChoice(click.Choice):
+    """A ``click.Choice`` whose values are read from a registry when first needed, so
+    that a method or format registered by a plugin is a valid choice and ``--help`` of
+    the other commands does not pay for loading the registry."""
+
+    def __init__(self, load: Any, extra: tuple[str, ...] = ()) -> None:
+        self._load, self._extra = load, extra
+        self.case_sensitive = True
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        return (*self._extra, *self._load())
+
+
+def _method_names() -> list[str]:
+    from tobitkf.smoothing.api import method_names
+
+    return method_names()
+
+
+def _writable_formats() -> list[str]:
+    from tobitkf.io import writable_formats
+
+    return writable_formats()
+
+
+def _readable_formats() -> list[str]:
+    from tobitkf.io import formats
+
+    return sorted(n for n, spec in formats().items() if spec.reader is not None)
+
+
+def _input_format_option(
+    *names: str, dest: str = "input_format", help: str = "Input format of every TRACK/PATH."
+) -> Any:
+    return click.option(
+        *names,
+        dest,
+        default="auto",
+        show_default=True,
+        type=_RegistryChoice(_readable_formats, extra=("auto",)),
+        help=help + " Auto-detected by default.",
+    )
+
+
+def _os_reason(exc: OSError) -> str:
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    if isinstance(exc, FileExistsError):
+        return "a file of that name exists (not a folder)"
+    if isinstance(exc, NotADirectoryError):
+        return "part of the path is a file, not a folder"
+    return exc.strerror or str(exc)
+
+
+def _writable_folder(folder: str | Path, what: str) -> Path:
+    """Create ``folder`` if needed and check that a file can be written in it, before any
+    work is done: one clear message instead of a traceback after minutes of work."""
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=path, prefix=".tobitkf-write-check-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        _fail(f"cannot write {what} in {path}: {_os_reason(exc)}")
+    return path
+
+
+def _writable_file(path: str | Path, what: str) -> Path:
+    """Check that ``path`` can be written (its folder writable, no folder in the way)."""
+    target = Path(path)
+    if target.is_dir():
+        _fail(f"cannot write {what} {target}: it is a folder")
+    _writable_folder(target.parent, what)
+    return target
+
+
+def _need_matplotlib(what: str) -> None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        _fail(f"{what} needs matplotlib, which is not installed: pip install 'tobitkf[plot]'")
+
+
+@contextmanager
+def _progress(quiet: bool = False, field: str = "{task.fields[now]}", transient: bool = True):
+    """A progress display on stderr, shown only on a terminal (pipes and logs get none)."""
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn(field),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=transient,
+        disable=quiet or not err_console.is_terminal,
+    ) as progress:
+        yield progress
+
+
+def _ticking(specs: list[Any], progress: Any, task: Any) -> list[Any]:
+    """Method specs that advance ``task`` after each method has run (name shown)."""
+    from tobitkf.evaluation.evaluate import resolve_method
+
+    wrapped = []
+    for spec in specs:
+        label, fn = resolve_method(spec)
+
+        def run(seq, _fn=fn, _label=label):
+            progress.update(task, now=_label)
+            out = _fn(seq)
+            progress.advance(task)
+            return out
+
+        wrapped.append((label, run))
+    return wrapped
+
+
+@contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM stops a run like Ctrl-C does (workers terminated, summary printed)."""
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. a test runner's thread): leave it
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _check_cluster_options(cluster: str | None, workers: int | None, jobs: int) -> None:
+    if workers is not None and cluster != "local":
+        raise click.BadParameter("goes with --cluster local", param_hint="--workers")
+    if cluster is not None and jobs != 1:
+        raise click.BadParameter(
+            "is the local process pool; with --cluster the cluster's workers run the files",
+            param_hint="--jobs",
+        )
+
+
+@contextmanager
+def _dask_client(cluster: str | None, workers: int | None):
+    """A Dask client for --cluster (None without it), with a clear message when Dask is
+    missing or the scheduler cannot be reached."""
+    if cluster is None:
+        yield None
+        return
+    from tobitkf.app.cluster import connect
+
+    with ExitStack() as stack:
+        try:
+            client = stack.enter_context(connect(cluster, workers))
+        except ImportError as exc:
+            _fail(str(exc))
+        except OSError as exc:  # timeouts included: no scheduler there
+            _fail(f"cannot connect to the Dask scheduler at {cluster}: {exc}")
+        except ValueError as exc:  # not an address
+            _fail(
+                f"--cluster {cluster}: {exc}; expected a scheduler address (tcp://host:8786), "
+                "a scheduler file (*.json) or local"
+            )
+        yield client
+
+
+def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
+    from tobitkf.app.batch import parse_param
+
+    out: dict[str, Any] = {}
+    for text in params:
+        try:
+            key, value = parse_param(text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--param") from exc
+        out[key] = value
+    return out
+
+
+class _InputPath(click.Path):
+    """A path that must exist, or an fsspec URL (``s3://...``), checked when listed."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and "://" in value:
+            return value
+        return super().convert(value, param, ctx)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="tobitkf")
+def app() -> None:
+    """Tobit Kalman filtering of censored measurements, and skeleton-track smoothing."""
+
+
+def _load_one(path: str, what: str, input_format: str = "auto"):
+    from tobitkf.app.batch import readable_problem
+    from tobitkf.io import load
+
+    problem = readable_problem(path)
+    if problem:
+        _fail(f"{what} {path}: {problem}")
+    try:
+        seqs = load(path, format=input_format)
+    except (ValueError, OSError, ImportError) as exc:
+        _fail(f"cannot read {what} {path}: {exc}")
+    if not seqs:
+        _fail(f"{what} {path} holds no skeleton")
+    if len(seqs) > 1:
+        err_console.print(f"{path}: {len(seqs)} bodies; using the first ({seqs[0].body_id})")
+    return seqs[0]

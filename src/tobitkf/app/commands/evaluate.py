@@ -1,0 +1,375 @@
+"""``tobitkf evaluate``, ``report`` and ``benchmark``: methods against a truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.markup import escape
+
+from tobitkf.app.commands._common import (
+    _fail,
+    _input_format_option,
+    _load_one,
+    _need_matplotlib,
+    _print_table,
+    _progress,
+    _ticking,
+    _writable_file,
+    _writable_folder,
+    app,
+    console,
+    err_console,
+)
+from tobitkf.core.jsonable import dumps
+
+
+# --------------------------------------------------------------------------- evaluate
+def _method_list(text: str | None) -> list[str] | None:
+    from tobitkf.evaluation.evaluate import resolve_method
+
+    if not text:
+        return None
+    names = [m.strip() for m in text.split(",") if m.strip()]
+    if not names:
+        raise click.BadParameter("no method named", param_hint="--methods")
+    for name in names:  # an unknown name fails before any file is read or fitted
+        try:
+            resolve_method(name)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--methods") from exc
+    return names
+
+
+@app.command()
+@click.argument("tracks", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-t",
+    "--truth",
+    "truths",
+    multiple=True,
+    type=click.Path(exists=True, dir_okay=False),
+    help="Motion-capture file, one per TRACK, in the same order.",
+)
+@click.option(
+    "--truth-replace",
+    nargs=2,
+    metavar="OLD NEW",
+    default=None,
+    help="Find each TRACK's motion-capture file by replacing OLD with NEW in its path "
+    "(e.g. --truth-replace /Kinect/ /Vicon/), instead of --truth.",
+)
+@click.option(
+    "--methods",
+    default=None,
+    help="Comma-separated methods (default: raw,kf,atkf,atkf2016,sgf,kf+rts,"
+    "one_euro,kinect and our robust methods). `<name>+rts` = offline smoother.",
+)
+@click.option(
+    "--pairs",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="CSV pairing table: track_joint,mocap_point[+mocap_point...].",
+)
+@click.option(
+    "--fixed-delay",
+    default=0,
+    show_default=True,
+    help="Delay (frames) used for every method in the fixed-delay angle RMSE.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON.")
+@click.option(
+    "--markdown",
+    "as_markdown",
+    is_flag=True,
+    help="Print Markdown tables (pooled, per recording, warnings), as in the docs.",
+)
+@click.option(
+    "-o",
+    "--out",
+    "outdir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Also write results.json (and per-recording tables) here.",
+)
+@_input_format_option("--format", help="Input format of every TRACK.")
+@_input_format_option(
+    "--truth-format", dest="truth_format", help="Input format of every --truth file."
+)
+def evaluate(
+    tracks,
+    truths,
+    truth_replace,
+    methods,
+    pairs,
+    fixed_delay,
+    as_json,
+    as_markdown,
+    outdir,
+    input_format,
+    truth_format,
+):
+    """Score smoothing methods on TRACK against motion capture (or without it).
+
+    With --truth: per-method RMSE (pooled, per joint group, by raw glitch class), p95,
+    max, frames over 10 cm, smoothness M, hand lag and joint-angle RMSE; several
+    TRACK/--truth pairs also get a pooled table. Without --truth: the paper's Table 3
+    (smoothness M) and the largest jumps.
+    """
+    from tobitkf.evaluation.evaluate import (
+        default_methods,
+        evaluate_methods,
+        evaluate_without_truth,
+        pool_scores,
+        prepare_truth,
+    )
+
+    method_specs = _method_list(methods) or default_methods()
+    if truth_replace:
+        if truths:
+            _fail("give --truth or --truth-replace, not both")
+        old, new = truth_replace
+        truths = tuple(p.replace(old, new) for p in tracks)
+        missing = [
+            t for t, p in zip(truths, tracks, strict=True) if t == p or not Path(t).is_file()
+        ]
+        if missing:
+            _fail(f"--truth-replace {old!r} {new!r}: no motion-capture file {missing[0]}")
+    if truths and len(truths) != len(tracks):
+        _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
+    if as_markdown and not truths:
+        _fail("--markdown prints the tables against ground truth: give --truth")
+    if outdir:  # before the work, not after it
+        _writable_folder(outdir, "results.json")
+    quiet = as_json or as_markdown
+    results: dict[str, Any] = {}
+    tables = []
+    warned: list[tuple[str, str]] = []
+    with _progress() as progress:
+        task = progress.add_task("evaluating", total=len(tracks) * len(method_specs), now="")
+        for i, path in enumerate(tracks):
+            progress.update(task, description=f"{Path(path).name} ({i + 1}/{len(tracks)})")
+            specs = _ticking(method_specs, progress, task)
+            track = _load_one(path, "track", input_format)
+            try:
+                if truths:
+                    mocap = _load_one(truths[i], "truth", truth_format)
+                    gt = prepare_truth(track, mocap, pairs=pairs)
+                    for warning in gt.notes.get("warnings", []):
+                        err_console.print(
+                            f"[yellow]warning[/yellow] {escape(path)}: {escape(warning)}"
+                        )
+                        warned.append((path, warning))
+                    table = evaluate_methods(track, gt, specs, fixed_delay=fixed_delay)
+                    tables.append(table)
+                else:
+                    table = evaluate_without_truth(track, specs)
+            except (ValueError, KeyError) as exc:
+                _fail(f"{path}: {exc}")
+            results[path] = table.to_dict()
+            if not quiet:
+                console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
+                console.print(table.to_text(), highlight=False, soft_wrap=True)
+    pooled = pool_scores(tables) if len(tables) > 1 else None
+    if pooled is not None:
+        results["pooled"] = pooled
+        if not quiet:
+            cols = [c for c in pooled[0] if c != "method"]
+            scale = {"M": 1e3}  # M is in m²; shown in 1e-3 m²
+            names = {"M": "M e-3"}
+            _print_table(
+                f"pooled over {len(tables)} recordings (cm)",
+                ["method", *[names.get(c, c.removesuffix("_cm")) for c in cols]],
+                [[r["method"], *[_scaled(r[c], scale.get(c, 1.0)) for c in cols]] for r in pooled],
+            )
+    if outdir:
+        out = Path(outdir)
+        (out / "results.json").write_text(dumps(results))
+        if not quiet:
+            console.print(f"wrote {out / 'results.json'}")
+    if as_json:
+        click.echo(dumps(results))
+    elif as_markdown:
+        from tobitkf.evaluation.markdown import evaluation_markdown
+
+        click.echo(evaluation_markdown(tables, list(tracks), pooled, warned), nl=False)
+
+
+def _scaled(value: Any, factor: float) -> Any:
+    return value * factor if isinstance(value, float) and factor != 1.0 else value
+
+
+# --------------------------------------------------------------------------- report
+@app.command()
+@click.argument("track", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-t",
+    "--truth",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="Motion-capture file recorded together with TRACK.",
+)
+@click.option(
+    "-o",
+    "--output",
+    default="report.html",
+    show_default=True,
+    type=click.Path(dir_okay=False),
+    help="HTML file to write.",
+)
+@click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
+@click.option(
+    "--pairs",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="CSV pairing table for --truth.",
+)
+@click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
+@_input_format_option("--format", help="Input format of TRACK.")
+@_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
+def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
+    """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
+    from tobitkf.app.report import track_report
+    from tobitkf.evaluation.evaluate import default_methods
+
+    specs = _method_list(methods) or default_methods()
+    _need_matplotlib("the report's figures")
+    _writable_file(output, "the report")  # before seconds of evaluating and drawing
+    raw = _load_one(track, "track", input_format)
+    mocap = _load_one(truth, "truth", truth_format) if truth else None
+    with console.status("evaluating and drawing..."):
+        try:
+            path, table = track_report(
+                raw, output, mocap=mocap, methods=specs, pairs=pairs, gif=not no_gif
+            )
+        except ImportError as exc:
+            _fail(str(exc))
+        except (ValueError, KeyError) as exc:
+            _fail(f"{track}: {exc}")
+    for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
+        err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
+    console.print(table.to_text(), highlight=False, soft_wrap=True)
+    console.print(f"report written to {Path(path).resolve()}")
+
+
+# --------------------------------------------------------------------------- benchmark
+@app.command()
+@click.option("--seed", default=0, show_default=True, help="Seed of motion and corruption.")
+@click.option(
+    "--seeds",
+    default=1,
+    show_default=True,
+    type=click.IntRange(1, 1000),
+    help="Repeat over this many consecutive seeds and average.",
+)
+@click.option(
+    "--motion",
+    default="mixed",
+    show_default=True,
+    type=click.Choice(["mixed", "walk", "arms", "squat"]),
+)
+@click.option(
+    "--source",
+    default="generator",
+    show_default=True,
+    help="'generator' (built in) or the path of a BVH file.",
+)
+@click.option("--duration", default=10.0, show_default=True, help="Seconds of motion.")
+@click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@click.option("--markdown", "as_markdown", is_flag=True, help="Print a Markdown table.")
+@click.option(
+    "--kind",
+    default="kinect",
+    show_default=True,
+    type=click.Choice(["kinect", "pose2d"]),
+    help="kinect: 3-D Kinect-like corruption (cm); pose2d: two people's 2-D keypoints "
+    "in pixels with confidence, glitches and identity / left-right swaps (px).",
+)
+def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind):
+    """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
+    if kind == "pose2d":
+        _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown)
+        return
+    from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
+    from tobitkf.evaluation.evaluate import default_methods
+
+    specs = _method_list(methods) or default_methods()
+    tables = _over_seeds(
+        "benchmark",
+        seed,
+        seeds,
+        lambda s: run_benchmark(
+            seed=s, methods=specs, motion=motion, source=source, duration=duration
+        ),
+    )
+    if as_json:
+        click.echo(dumps([t.to_dict() for t in tables]))
+        return
+    spread = seed_spread(tables)
+    if as_markdown:
+        from tobitkf.evaluation.markdown import benchmark_markdown
+
+        click.echo(benchmark_markdown(spread, list(range(seed, seed + seeds))), nl=False)
+        return
+    if seeds == 1:
+        console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
+        return
+    keys = [k for k in spread[0] if k != "method"]
+    rows = [
+        [r["method"], *[f"{100 * r[k][0]:.2f} ± {100 * r[k][1]:.2f}" for k in keys]] for r in spread
+    ]
+    _print_table(
+        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}", ["method", *keys], rows
+    )
+
+
+def _over_seeds(label: str, seed: int, seeds: int, run: Any) -> list[Any]:
+    """``run(s)`` for the consecutive seeds, with progress; a bad input fails cleanly."""
+    tables = []
+    with _progress() as progress:
+        task = progress.add_task(label, total=seeds, now="")
+        for s in range(seed, seed + seeds):
+            progress.update(task, now=f"seed {s}")
+            try:
+                tables.append(run(s))
+            except (ValueError, OSError) as exc:
+                _fail(str(exc))
+            progress.advance(task)
+    return tables
+
+
+def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
+    """``benchmark --kind pose2d``: the 2-D pose-estimator benchmark (docs/pose.md)."""
+    from tobitkf.evaluation.pose2d import (
+        POSE2D_METHODS,
+        pose2d_markdown,
+        pose2d_spread,
+        run_pose2d_benchmark,
+    )
+
+    if str(source) != "generator":
+        _fail("--kind pose2d projects the built-in motions; --source must be 'generator'")
+    specs = _method_list(methods) or list(POSE2D_METHODS)
+    tables = _over_seeds(
+        "pose2d benchmark",
+        seed,
+        seeds,
+        lambda s: run_pose2d_benchmark(seed=s, methods=specs, motion=motion, duration=duration),
+    )
+    if as_json:
+        click.echo(dumps([t.to_dict() for t in tables]))
+        return
+    spread = pose2d_spread(tables)
+    seed_list = list(range(seed, seed + seeds))
+    if as_markdown:
+        click.echo(pose2d_markdown(spread, seed_list), nl=False)
+        return
+    keys = [k for k in spread[0] if k != "method"]
+    rows = [[r["method"], *[f"{r[k][0]:.2f} ± {r[k][1]:.2f}" for k in keys]] for r in spread]
+    _print_table(
+        f"RMSE (px), mean ± sd over seeds {seed}..{seed + seeds - 1}",
+        ["method", *(k.removesuffix("_px") for k in keys)],
+        rows,
+    )

@@ -1,0 +1,319 @@
+"""``tobitkf smooth`` (files and folders, locally or on a Dask cluster) and ``tobitkf warmup``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+from rich.markup import escape
+
+from tobitkf.app.commands._common import (
+    _check_cluster_options,
+    _dask_client,
+    _fail,
+    _input_format_option,
+    _InputPath,
+    _method_names,
+    _parse_params,
+    _print_table,
+    _progress,
+    _RegistryChoice,
+    _sigterm_as_interrupt,
+    _writable_folder,
+    _writable_formats,
+    app,
+    console,
+    err_console,
+)
+from tobitkf.core.jsonable import dumps
+
+
+# --------------------------------------------------------------------------- smooth
+@app.command()
+@click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
+@click.option(
+    "-o",
+    "--outdir",
+    default="smoothed",
+    show_default=True,
+    type=click.Path(),
+    help="Folder for the outputs (created if needed). Inputs are never overwritten.",
+)
+@click.option(
+    "-m",
+    "--method",
+    default="robust",
+    show_default=True,
+    type=_RegistryChoice(_method_names),
+    metavar="NAME",
+    help="Smoothing method (see `tobitkf methods`). The default, robust, rejects "
+    "physically impossible samples and smooths the rest; atkf is the 2020 paper's filter, "
+    "which does not beat raw Kinect against Vicon (docs/evaluation.md).",
+)
+@click.option(
+    "-f",
+    "--format",
+    "output_format",
+    default="auto",
+    show_default=True,
+    type=_RegistryChoice(_writable_formats, extra=("auto",)),
+    help="Output format; auto keeps NTU as NTU and writes CSV otherwise.",
+)
+@_input_format_option(
+    "-F", "--input-format", help="Input format of every file read (-f is the output's)."
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace files at the output names that are not earlier tobitkf outputs "
+    "(earlier outputs are always replaced).",
+)
+@click.option(
+    "-p",
+    "--param",
+    "params",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Method parameter, e.g. -p q=0.001 -p c=0.3,0.2,0.3 (repeatable).",
+)
+@click.option(
+    "--offline",
+    is_flag=True,
+    help="Run the RTS smoother after Kalman-type methods (uses future frames).",
+)
+@click.option(
+    "--glob",
+    "pattern",
+    default="*",
+    show_default=True,
+    help="File-name pattern for files found in input folders.",
+)
+@click.option(
+    "-j",
+    "--jobs",
+    default=1,
+    show_default=True,
+    type=click.IntRange(1, 64),
+    help="Files processed in parallel.",
+)
+@click.option(
+    "--cluster",
+    metavar="ADDRESS",
+    help="Run the files as tasks on a Dask cluster: a scheduler address "
+    "(tcp://host:8786), a scheduler file (*.json), or 'local' (a LocalCluster on this "
+    "machine). Needs the dask extra; see docs/cluster.md.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 1024),
+    help="Worker processes of --cluster local (default: one per core).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def smooth(
+    inputs,
+    outdir,
+    method,
+    output_format,
+    input_format,
+    overwrite,
+    params,
+    offline,
+    pattern,
+    jobs,
+    cluster,
+    workers,
+    as_json,
+):
+    """Smooth skeleton recordings (files or folders, searched recursively).
+
+    OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input); a re-run passes
+    over inputs done before with the same method and parameters (--overwrite redoes them).
+    Inputs and OUTDIR may be fsspec URLs (s3://bucket/folder; docs/cluster.md).
+    """
+    from tobitkf.app.manifest import ManifestBusy
+    from tobitkf.app.pool import Interrupted
+    from tobitkf.app.runner import plan_run, run_planned
+    from tobitkf.smoothing.api import check_params, get_method
+
+    kwargs = _parse_params(params)
+    offline = bool(kwargs.pop("offline", False)) or offline  # -p offline=true == --offline
+    try:
+        check_params(method, kwargs)
+    except (ValueError, TypeError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--param") from exc
+    if offline and not get_method(method).offline_ok:
+        _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
+    _check_cluster_options(cluster, workers, jobs)
+    if "://" not in outdir:
+        _writable_folder(outdir, "the outputs")  # once, before any file is read
+    try:
+        plan = plan_run(
+            inputs,
+            outdir,
+            method,
+            pattern=pattern,
+            output_format=output_format,
+            input_format=input_format,
+            overwrite=overwrite,
+        )
+    except (FileNotFoundError, ImportError) as exc:
+        _fail(str(exc))
+    problems, ours, passed_over = plan.found.problems, plan.found.ours, plan.found.passed_over
+    job_list, refused = plan.jobs, plan.refused
+    if not as_json:
+        for path, why in problems:
+            err_console.print(f"[yellow]skipped[/yellow] {escape(str(path))}: {escape(why)}")
+        if ours:
+            names = ", ".join(p.name for p in ours[:3])
+            more = f" and {len(ours) - 3} more" if len(ours) > 3 else ""
+            err_console.print(
+                f"passed over {len(ours)} file(s) that are tobitkf outputs of an earlier "
+                f"run (smoothing them again would write *.{method}.{method}.*): {names}{more}"
+            )
+    if passed_over and not as_json:
+        names = ", ".join(p.name for p in passed_over[:3])
+        more = f" and {len(passed_over) - 3} more" if len(passed_over) > 3 else ""
+        err_console.print(
+            f"passed over {len(passed_over)} file(s) that are not recordings or are read "
+            f"together with one: {names}{more}"
+        )
+    if not job_list and not refused:
+        _fail("no input files found")
+    if job_list and (cluster is None or cluster == "local"):
+        _warm_kernels(method, as_json)
+    with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
+        task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
+        frames = [0]
+
+        def done(summary):
+            frames[0] += summary.frames
+            progress.update(task, advance=1, frames=frames[0])
+
+        interrupted = None
+        with _sigterm_as_interrupt(), _dask_client(cluster, workers) as client:
+            try:
+                results = run_planned(
+                    job_list,
+                    refused,
+                    outdir,
+                    method,
+                    kwargs,
+                    offline=offline,
+                    output_format=output_format,
+                    input_format=input_format,
+                    overwrite=overwrite,
+                    n_jobs=jobs,
+                    client=client,
+                    on_done=done,
+                )
+            except ManifestBusy as exc:
+                _fail(str(exc))
+            except Interrupted as stop:  # Ctrl-C / SIGTERM: summarise what was done
+                interrupted = stop
+                results = [stop.done[i] for i in sorted(stop.done)] + refused
+    skipped = [r for r in results if r.extra.get("skipped")]
+    results = [r for r in results if not r.extra.get("skipped")]
+    failed = [r for r in results if not r.ok]
+    if as_json:
+        click.echo(dumps([r.__dict__ for r in results]))
+    else:
+        rows = [
+            [
+                Path(r.source).name,
+                r.bodies,
+                r.frames,
+                r.joints,
+                r.clipped_percent,
+                r.missing_percent,
+                r.seconds,
+            ]
+            for r in results
+            if r.ok
+        ]
+        if rows or not skipped:
+            _print_table(
+                f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
+                [
+                    "file",
+                    "bodies",
+                    "frames",
+                    "joints",
+                    "% clipped/rejected",
+                    "% missing",
+                    "seconds",
+                ],
+                rows,
+            )
+        if skipped:
+            err_console.print(
+                f"passed over {len(skipped)} file(s) done by an earlier run with the same "
+                "method and parameters (manifest in the output folder; --overwrite redoes them)"
+            )
+        if rows or skipped:
+            console.print(f"outputs in {Path(outdir).resolve()}")
+        for r in results:
+            for w in r.warnings:
+                err_console.print(f"[yellow]warning[/yellow] {escape(r.source)}: {escape(w)}")
+        for r in failed:
+            err_console.print(f"[red]FAILED[/red] {escape(r.source)}: {escape(str(r.error))}")
+    if interrupted is not None:
+        left = len(job_list) - len(interrupted.done)
+        err_console.print(
+            f"[yellow]interrupted[/yellow]: {len(interrupted.done)} of {len(job_list)} "
+            f"file(s) done, {left} not started or stopped; every output written is complete"
+        )
+        sys.exit(130)
+    if failed:
+        sys.exit(1)
+
+
+def _warm_kernels(method: str, quiet: bool) -> None:
+    """Compile ``method``'s kernels once here, before the files (parallel workers then
+    load them instead of each compiling them), and say so when it takes a while."""
+    from tobitkf.smoothing.warmup import warm
+
+    def notice():
+        if not quiet:
+            err_console.print(
+                f"compiling the kernels of {method} for this machine (first run only: "
+                "they are cached for later runs; `tobitkf warmup` does it ahead)"
+            )
+
+    warm(method, on_compile=notice)
+
+
+@app.command()
+@click.option(
+    "-m", "--method", "names", multiple=True, type=_RegistryChoice(_method_names),
+    help="Only this method (repeatable); default: every registered method.",
+)  # fmt: skip
+@click.option(
+    "-j", "--jobs", default=2, show_default=True, type=click.IntRange(1),
+    help="Methods compiled at once, each in its own process.",
+)  # fmt: skip
+def warmup(names, jobs):
+    """Compile the methods' kernels into numba's cache, ahead of the work.
+
+    The first run of a compiled method on a machine (or after an upgrade) compiles its
+    kernels: seconds, about ten for the default method. Later processes load them from
+    the cache. Run this once after installing, or on each node of a cluster whose cache
+    is not shared (NUMBA_CACHE_DIR sets where the cache is).
+    """
+    from tobitkf.smoothing.warmup import warmup as run_warmup
+
+    names = list(names) or None
+    rows = []
+    with _progress(False, "{task.fields[now]}", transient=True) as progress:
+        total = len(names) if names else len(_method_names())
+        task = progress.add_task("compiling", total=total, now="")
+
+        def done(name, seconds):
+            rows.append([name, seconds])
+            progress.update(task, advance=1, now=name)
+
+        run_warmup(names, jobs=jobs, on_done=done)
+    rows.sort()
+    _print_table("tobitkf warmup: kernels compiled and cached", ["method", "compile seconds"],
+                 [[n, round(s, 1)] for n, s in rows])  # fmt: skip
+    console.print("0 seconds: the method's kernels were in the cache already, or it has none")
