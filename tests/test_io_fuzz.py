@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import gzip
 
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import DATA_DIR
+from fuzzing import SETTINGS, check_reader, reader_fuzz_tests
 from tobitkf.io import ReadError, load
 from tobitkf.io.bvh import read_bvh
 from tobitkf.io.c3d import read_c3d
@@ -22,7 +22,6 @@ from tobitkf.io.npz import read_npz
 from tobitkf.io.ntu import read_ntu
 from tobitkf.io.qualisys import read_qualisys
 from tobitkf.io.uiprmd import read_uiprmd_kinect, read_uiprmd_vicon
-from tobitkf.skeleton.sequence import SkeletonSequence
 
 READERS = {
     "ntu": (read_ntu, ".skeleton"),
@@ -95,41 +94,7 @@ TOKENS = st.sampled_from(
 TEXTISH = st.lists(TOKENS, max_size=80).map("".join)
 
 
-def _check(reader, path):
-    try:
-        result = reader(path)
-    except ReadError as exc:
-        assert str(path) in str(exc)
-        return
-    assert isinstance(result, list)
-    for s in result:
-        assert isinstance(s, SkeletonSequence)
-        assert not np.isinf(s.positions).any()
-
-
-SETTINGS = settings(
-    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
-
-
-@pytest.mark.parametrize("name", sorted(READERS))
-@SETTINGS
-@given(data=st.binary(max_size=400))
-def test_arbitrary_bytes(tmp_path, name, data):
-    reader, ext = READERS[name]
-    p = tmp_path / f"f{ext}"
-    p.write_bytes(data)
-    _check(reader, p)
-
-
-@pytest.mark.parametrize("name", sorted(READERS))
-@SETTINGS
-@given(text=TEXTISH)
-def test_token_soup(tmp_path, name, text):
-    reader, ext = READERS[name]
-    p = tmp_path / f"f{ext}"
-    p.write_text(text, encoding="utf-8")
-    _check(reader, p)
+test_arbitrary_bytes, test_token_soup = reader_fuzz_tests(READERS, TEXTISH)
 
 
 @SETTINGS
@@ -175,7 +140,7 @@ def test_mutated_real_files(tmp_path, rel, reader, data):
         raw[k] = data.draw(st.sampled_from(b"0x,\t \n.-e\x00\xff9"))
     p = tmp_path / f"m{src.suffix}"
     p.write_bytes(bytes(raw))
-    _check(reader, p)
+    check_reader(reader, p)
 
 
 GRIDS = {  # reader name -> (values per row, separator, trailing text)
@@ -209,4 +174,4 @@ def test_numeric_grids_with_bad_cells(tmp_path, name, data):
         rows.append(sep.join(cells) + tail)
     p = tmp_path / f"g{ext}"
     p.write_text("\n".join(rows), encoding="utf-8")
-    _check(reader, p)
+    check_reader(reader, p)

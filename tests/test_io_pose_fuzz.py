@@ -6,17 +6,16 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
+from fuzzing import SETTINGS, check_reader, reader_fuzz_tests
 from tobitkf.io import ReadError, load
 from tobitkf.io.azure_kinect import read_azure_kinect
 from tobitkf.io.mediapipe import read_mediapipe
 from tobitkf.io.openpose import read_openpose
 from tobitkf.io.trc import read_trc
-from tobitkf.skeleton.sequence import SkeletonSequence
 
 READERS = {
     "openpose": (read_openpose, "_000000000000_keypoints.json"),
@@ -38,41 +37,9 @@ TOKENS = st.sampled_from(
     ]
 )  # fmt: skip
 SOUP = st.lists(TOKENS, max_size=80).map("".join)
-SETTINGS = settings(
-    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
 
 
-def _check(reader, path):
-    try:
-        result = reader(path)
-    except ReadError as exc:
-        assert path.name in str(exc)
-        return
-    assert isinstance(result, list)
-    for s in result:
-        assert isinstance(s, SkeletonSequence)
-        assert not np.isinf(s.positions).any()
-
-
-@pytest.mark.parametrize("name", sorted(READERS))
-@SETTINGS
-@given(data=st.binary(max_size=400))
-def test_arbitrary_bytes(tmp_path, name, data):
-    reader, ext = READERS[name]
-    p = tmp_path / f"f{ext}"
-    p.write_bytes(data)
-    _check(reader, p)
-
-
-@pytest.mark.parametrize("name", sorted(READERS))
-@SETTINGS
-@given(text=SOUP)
-def test_token_soup(tmp_path, name, text):
-    reader, ext = READERS[name]
-    p = tmp_path / f"f{ext}"
-    p.write_text(text, encoding="utf-8")
-    _check(reader, p)
+test_arbitrary_bytes, test_token_soup = reader_fuzz_tests(READERS, SOUP, full_path=False)
 
 
 # valid small documents, mutated as JSON values (type confusion, wrong lengths, huge numbers)
@@ -133,7 +100,7 @@ def test_mutated_documents(tmp_path, name, data):
     reader, ext = READERS[name]
     p = tmp_path / f"m{ext}"
     p.write_text(json.dumps(doc, allow_nan=True))
-    _check(reader, p)
+    check_reader(reader, p)
 
 
 @SETTINGS
@@ -183,4 +150,4 @@ def test_mutated_text(tmp_path, reader, text, sep, ext, data):
         lines[i][j] = data.draw(TOKENS)
     p = tmp_path / f"m{ext}"
     p.write_text("\n".join(sep.join(ln) for ln in lines))
-    _check(reader, p)
+    check_reader(reader, p)
