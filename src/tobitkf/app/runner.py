@@ -182,11 +182,18 @@ def run_planned(
     n_jobs: int = 1,
     client: Any = None,
     on_done: Callable[[FileSummary], None] | None = None,
+    warm_first: bool | None = None,
+    on_compile: Callable[[], Any] | None = None,
 ) -> list[FileSummary]:
     """Run planned jobs with the output folder's manifest; summaries in job order, then
     the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
     has ``extra["skipped"]`` true. ``client``: a :class:`distributed.Client` (the files
     run on its cluster) or None (the local pool of ``n_jobs`` processes).
+
+    ``warm_first`` (default: when the files run here, ``client`` None): compile the
+    method's kernels into numba's cache in this process before the files, so that
+    workers load them instead of each compiling them (:mod:`tobitkf.smoothing.warmup`);
+    ``on_compile`` is called if that compiles anything (e.g. to say why it waits).
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
@@ -203,6 +210,10 @@ def run_planned(
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
         for r in refused:
             manifest.record(make_entry(r, settings))
+        if (client is None if warm_first is None else warm_first) and None in expect:
+            from tobitkf.smoothing.warmup import warm
+
+            warm(method, on_compile=on_compile)
 
         def done(summary: FileSummary) -> FileSummary:
             if summary.extra.get("skipped"):

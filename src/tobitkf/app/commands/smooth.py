@@ -180,8 +180,6 @@ def smooth(
         )
     if not job_list and not refused:
         _fail("no input files found")
-    if job_list and (cluster is None or cluster == "local"):
-        _warm_kernels(method, as_json)
     with _progress(as_json, "{task.fields[frames]} frames", transient=False) as progress:
         task = progress.add_task(f"smoothing ({method})", total=len(job_list), frames=0)
         frames = [0]
@@ -206,6 +204,9 @@ def smooth(
                     n_jobs=jobs,
                     client=client,
                     on_done=done,
+                    # local workers share this machine's kernel cache
+                    warm_first=cluster is None or cluster == "local",
+                    on_compile=None if as_json else _compiling_notice(method),
                 )
             except ManifestBusy as exc:
                 _fail(str(exc))
@@ -268,19 +269,14 @@ def smooth(
         sys.exit(1)
 
 
-def _warm_kernels(method: str, quiet: bool) -> None:
-    """Compile ``method``'s kernels once here, before the files (parallel workers then
-    load them instead of each compiling them), and say so when it takes a while."""
-    from tobitkf.smoothing.warmup import warm
-
+def _compiling_notice(method: str):
     def notice():
-        if not quiet:
-            err_console.print(
-                f"compiling the kernels of {method} for this machine (first run only: "
-                "they are cached for later runs; `tobitkf warmup` does it ahead)"
-            )
+        err_console.print(
+            f"compiling the kernels of {method} for this machine (first run only: they are "
+            "cached for later runs; `tobitkf warmup` does it ahead)"
+        )
 
-    warm(method, on_compile=notice)
+    return notice
 
 
 @app.command()
