@@ -8,7 +8,27 @@ method's squared error and its RMSE before and after. A last column counts sampl
 look like a left/right swap (the raw joint is closer to the truth of its mirror joint
 than to its own by more than the threshold).
 
+``--truth-check`` adds what the truth itself gets wrong and what the accepted glitches
+look like:
+
+* *truth-inconsistent* samples: a joint at a frame where one of its bones in the truth
+  (to its parent or to a child, on the track's topology) is off the bone's median length
+  in that recording by more than the bone gate's tolerance (``bone_tol_abs +
+  bone_tol_rel * L``, the robust defaults); how many, on which joints, their share of the
+  method's squared error, and the pooled RMSE of raw / the method / ``robust_online``
+  without them;
+* per recording, the geometry of the raw track at the accepted glitches (glitch samples
+  the method did not reject): the smallest interior angle at the middle joint of an arm
+  (elbow) and the largest bend at its third (wrist; the angle between forearm and hand),
+  over the frames where a joint of that arm from the elbow down is an accepted glitch;
+  the largest rotation rate of a long limb segment (upper arm, forearm, thigh, shank) at
+  a frame where one of its ends is an accepted glitch; and how many accepted glitch
+  samples lie within ``--near`` of an accepted joint of another limb or of the trunk.
+  A limb is the subtree under a mirrored joint whose parent is not mirrored (shoulder,
+  hip); every other joint is trunk.
+
     python tools/error_breakdown.py TRACK... --truth-replace OLD NEW [--method robust]
+                                    [--truth-check]
 """
 
 from __future__ import annotations
@@ -20,6 +40,9 @@ import numpy as np
 
 import tobitkf as tk
 from tobitkf.evaluation.evaluate import evaluate_paths
+from tobitkf.smoothing.robust import ROBUST_DEFAULTS
+
+ONLINE = "robust_online"
 
 CLASSES = (
     ("glitch, accepted", False, True),
@@ -29,9 +52,112 @@ CLASSES = (
 )
 
 
-def breakdown(track: str, truth: str, method: str, threshold: float) -> dict:
+def truth_inconsistent(
+    truth: np.ndarray,
+    parents: tuple[int, ...] | list[int],
+    tol_abs: float = ROBUST_DEFAULTS["bone_tol_abs"],
+    tol_rel: float = ROBUST_DEFAULTS["bone_tol_rel"],
+) -> np.ndarray:
+    """``(T, J)`` bool: the joint has a bone (to its parent or a child) whose length in
+    ``truth`` ``(T, J, D)`` is off the bone's median length by more than ``tol_abs +
+    tol_rel * median`` (the bone gate's rule applied to the truth). Missing is not off."""
+    T, J = truth.shape[:2]
+    off = np.zeros((T, J), dtype=bool)
+    for j, p in enumerate(parents):
+        if p < 0:
+            continue
+        length = np.linalg.norm(truth[:, j] - truth[:, p], axis=-1)
+        if not np.isfinite(length).any():
+            continue
+        L = float(np.nanmedian(length))
+        with np.errstate(invalid="ignore"):
+            bad = np.abs(length - L) > tol_abs + tol_rel * L  # NaN compares False
+        off[:, j] |= bad
+        off[:, p] |= bad
+    return off
+
+
+def limbs(topology) -> np.ndarray:
+    """``(J,)`` limb id per joint: the subtree under a mirrored joint whose parent is not
+    mirrored (shoulder, hip) is a limb, numbered by that joint; the rest is trunk (-1)."""
+    parents = topology.parents
+    mirrored = {j for pair in topology.symmetry for j in pair}
+    out = np.full(len(parents), -1)
+    for j in range(len(parents)):
+        k = j
+        while k >= 0:
+            if k in mirrored and parents[k] not in mirrored:
+                out[j] = k
+                break
+            k = parents[k]
+    return out
+
+
+def _first_child(parents, j: int) -> int:
+    kids = [c for c, p in enumerate(parents) if p == j]
+    return min(kids) if kids else -1
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Angle between vectors ``(..., D)``, radians (NaN where either is missing)."""
+    cos = np.sum(u * v, axis=-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def glitch_geometry(raw: np.ndarray, accepted: np.ndarray, rejected: np.ndarray, topology,
+                    dt: float, near: float) -> dict:  # fmt: skip
+    """Geometry of the raw track ``(T, J, D)`` at the accepted glitches ``(T, J)`` (bool;
+    ``rejected`` ``(T, J)``: what the method rejected): see the module docstring (angles
+    in degrees, rates in rad/s; NaN when none applies)."""
+    par = topology.parents
+    limb = limbs(topology)
+    arms = set(topology.joint_groups()["arms"])
+    elbow, wrist, segrate = [], [], []
+    for root in sorted(set(limb[limb >= 0].tolist())):
+        c1 = _first_child(par, root)
+        c2 = _first_child(par, c1) if c1 >= 0 else -1
+        c3 = _first_child(par, c2) if c2 >= 0 else -1
+        if c2 < 0:
+            continue
+        for a, b in ((root, c1), (c1, c2)):  # long segments: upper arm / thigh, forearm / shank
+            seg = raw[:, b] - raw[:, a]
+            rate = _angle(seg[1:], seg[:-1]) / dt
+            kept = ~(rejected[1:, a] | rejected[1:, b] | rejected[:-1, a] | rejected[:-1, b])
+            hit = (accepted[1:, a] | accepted[1:, b]) & kept & np.isfinite(rate)
+            segrate.append(rate[hit])
+        if root not in arms or c3 < 0:
+            continue
+        hit = accepted[:, [c1, c2, c3]].any(axis=1) & ~rejected[:, [root, c1, c2, c3]].any(axis=1)
+        interior = _angle(raw[:, root] - raw[:, c1], raw[:, c2] - raw[:, c1])
+        bend = _angle(raw[:, c2] - raw[:, c1], raw[:, c3] - raw[:, c2])
+        elbow.append(interior[hit & np.isfinite(interior)])
+        wrist.append(bend[hit & np.isfinite(bend)])
+    close = 0
+    for t, j in zip(*np.nonzero(accepted)):
+        other = np.flatnonzero((limb != limb[j]) & ~rejected[t])
+        d = np.linalg.norm(raw[t, other] - raw[t, j], axis=-1)
+        close += int(np.any(d < near))
+    return {
+        "elbow_min": _ext(np.concatenate(elbow) if elbow else [], np.min, deg=True),
+        "wrist_max": _ext(np.concatenate(wrist) if wrist else [], np.max, deg=True),
+        "rate_max": _ext(np.concatenate(segrate) if segrate else [], np.max),
+        "near": close,
+        "n": int(accepted.sum()),
+    }
+
+
+def _ext(values, fn, deg: bool = False) -> float:
+    v = np.asarray(values, dtype=float)
+    if not v.size:
+        return float("nan")
+    return float(np.degrees(fn(v)) if deg else fn(v))
+
+
+def breakdown(track: str, truth: str, method: str, threshold: float,
+              truth_check: bool = False, near: float = 0.05) -> dict:  # fmt: skip
     outputs: dict = {}
-    gt, _ = evaluate_paths(track, truth, [method], outputs=outputs)
+    methods = [method, ONLINE] if truth_check and method != ONLINE else [method]
+    gt, _ = evaluate_paths(track, truth, methods, outputs=outputs)
     seq = tk.load(track)[0]
     est = outputs[method]
     t = gt.positions
@@ -49,7 +175,25 @@ def breakdown(track: str, truth: str, method: str, threshold: float) -> dict:
         for j, k in ((a, b), (b, a)):
             mirror = np.linalg.norm(seq.positions[:, j] - t[:, k], axis=-1)
             swaps += int(np.sum(ok[:, j] & (mirror + threshold < e_raw[:, j])))
-    return {"rows": rows, "swaps": swaps, "n": int(ok.sum())}
+    res = {"rows": rows, "swaps": swaps, "n": int(ok.sum())}
+    if truth_check:
+        e_on = np.linalg.norm(outputs[ONLINE].positions - t, axis=-1)
+        ok &= np.isfinite(e_on)
+        bad = truth_inconsistent(t, seq.topology.parents) & ok
+        keep = ok & ~bad
+        res["truth"] = {
+            "bad": bad,
+            "joints": seq.topology.joints,
+            "sse_bad": float((e_est[bad] ** 2).sum()),
+            "sse_all": float((e_est[ok] ** 2).sum()),
+            "all": (int(ok.sum()), *(float((e[ok] ** 2).sum()) for e in (e_raw, e_est, e_on))),
+            "kept": (int(keep.sum()), *(float((e[keep] ** 2).sum()) for e in (e_raw, e_est, e_on))),
+        }
+        accepted = ok & glitch & ~rejected.astype(bool)
+        res["geometry"] = glitch_geometry(
+            seq.positions, accepted, rejected.astype(bool), seq.topology, 1.0 / seq.fps, near
+        )
+    return res
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,6 +201,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("tracks", nargs="+")
     ap.add_argument("--method", default=tk.DEFAULT_METHOD)
     ap.add_argument("--threshold", type=float, default=0.10, help="glitch threshold, m")
+    ap.add_argument("--truth-check", action="store_true",
+                    help="also the truth's own bone-length failures and the accepted "
+                         "glitches' geometry (module docstring)")  # fmt: skip
+    ap.add_argument(
+        "--near",
+        type=float,
+        default=0.05,
+        help="--truth-check: distance to another limb's joint counted, m",
+    )
     ap.epilog = "--truth-replace OLD NEW (required): truth = track path with OLD replaced by NEW"
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--truth-replace" not in argv or len(argv) < argv.index("--truth-replace") + 3:
@@ -69,8 +222,11 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|---|")
     total = {name: [0, 0.0, 0.0] for name, _, _ in CLASSES}
     all_sse = 0.0
+    results = {}
     for track in args.tracks:
-        res = breakdown(track, track.replace(old, new), args.method, args.threshold)
+        res = breakdown(track, track.replace(old, new), args.method, args.threshold,
+                        args.truth_check, args.near)  # fmt: skip
+        results[track.rsplit("/", 1)[-1]] = res
         sse = sum(r[2] for r in res["rows"].values())
         all_sse += sse
         label = track.rsplit("/", 1)[-1]
@@ -85,11 +241,79 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(f"Glitch: raw sample more than {100 * args.threshold:.0f} cm from the truth; "
           "accepted / rejected: by the method's gates.")  # fmt: skip
+    if args.truth_check:
+        _print_truth_check(results, args.method, args.threshold, args.near)
     return 0
 
 
-def _rms(sse: float, n: int) -> str:
-    return f"{100 * np.sqrt(sse / n):.1f}" if n else "–"
+def _print_truth_check(results: dict, method: str, threshold: float, near: float) -> None:
+    tol = f"{100 * ROBUST_DEFAULTS['bone_tol_abs']:.0f} cm + {ROBUST_DEFAULTS['bone_tol_rel']:.0%}"
+    print()
+    print(f"Truth-inconsistent samples (a bone of the joint in the truth is off its median "
+          f"length by more than {tol} of it):")  # fmt: skip
+    print()
+    print(f"| recording | truth-inconsistent samples | joints (most first) | "
+          f"share of {method}'s squared error |")  # fmt: skip
+    print("|---|---|---|---|")
+    n_bad = sse_bad = sse_all = 0.0
+    pooled = {"all": np.zeros(4), "kept": np.zeros(4)}
+    for label, res in results.items():
+        tc = res["truth"]
+        bad = tc["bad"]
+        per = sorted(((int(c), -j) for j, c in enumerate(bad.sum(axis=0)) if c), reverse=True)
+        joints = ", ".join(_frames(tc["joints"][-j], bad[:, -j]) for _, j in per[:4]) or "–"
+        n_bad += int(bad.sum())
+        sse_bad += tc["sse_bad"]
+        sse_all += tc["sse_all"]
+        for k in pooled:
+            pooled[k] += tc[k]
+        print(f"| {label} | {int(bad.sum())} | {joints} | {tc['sse_bad'] / tc['sse_all']:.0%} |")
+    print(f"| all | {int(n_bad)} | | {sse_bad / sse_all:.0%} |")
+    print()
+    print("Pooled RMSE, cm, with and without the truth-inconsistent samples:")
+    print()
+    print(f"| samples | count | raw | {method} | {ONLINE} | {method} vs raw |")
+    print("|---|---|---|---|---|---|")
+    for name, key in (("all", "all"), ("without truth-inconsistent", "kept")):
+        n, raw, est, on = pooled[key]
+        n = int(n)
+        print(f"| {name} | {n} | {_rms(raw, n, 2)} | {_rms(est, n, 2)} | {_rms(on, n, 2)} | "
+              f"{np.sqrt(est / raw) - 1:+.0%} |")  # fmt: skip
+    print()
+    print(f"The raw track at the accepted glitches (raw more than {100 * threshold:.0f} cm "
+          f"from the truth, not rejected by {method}):")  # fmt: skip
+    print()
+    print("| recording | accepted glitch samples | elbow interior angle, min ° | "
+          "wrist bend, max ° | limb segment rotation rate, max rad/s | "
+          f"within {100 * near:.0f} cm of another limb's accepted joint |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    tot = [0, 0]
+    for label, res in results.items():
+        g = res["geometry"]
+        tot[0] += g["n"]
+        tot[1] += g["near"]
+        print(f"| {label} | {g['n']} | {_num(g['elbow_min'])} | {_num(g['wrist_max'])} | "
+              f"{_num(g['rate_max'])} | {g['near']} |")  # fmt: skip
+    print(f"| all | {tot[0]} | | | | {tot[1]} |")
+
+
+def _rms(sse: float, n: int, digits: int = 1) -> str:
+    return f"{100 * np.sqrt(sse / n):.{digits}f}" if n else "–"
+
+
+def _frames(name: str, flags: np.ndarray, most: int = 3) -> str:
+    """``"WristLeft 63 (frames 0–9, 117–169)"``: count and runs of flagged frames (0-based;
+    the longest ``most`` runs, in time order)."""
+    idx = np.flatnonzero(flags)
+    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
+    runs = [(int(r[0]), int(r[-1])) for r in np.split(idx, cuts)]
+    shown = sorted(sorted(runs, key=lambda r: r[0] - r[1])[:most])
+    text = ", ".join(f"{a}–{b}" if b > a else f"{a}" for a, b in shown)
+    return f"{name} {idx.size} (frames {text}{', …' if len(runs) > most else ''})"
+
+
+def _num(x: float) -> str:
+    return f"{x:.0f}" if np.isfinite(x) else "–"
 
 
 if __name__ == "__main__":

@@ -1,0 +1,57 @@
+"""tools/error_breakdown.py --truth-check: the truth's own bone-length failures are found
+by the bone gate's rule (docs/robust.md, "Where the remaining KERAAL error is")."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool():
+    if "error_breakdown" not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            "error_breakdown", ROOT / "tools" / "error_breakdown.py"
+        )
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["error_breakdown"] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules["error_breakdown"]
+
+
+def _chain(T: int = 30) -> np.ndarray:
+    """A truth of three joints in a line (root, 0.3 m bone, 0.25 m bone), drifting."""
+    t = np.zeros((T, 3, 3))
+    t[:, :, 0] = np.linspace(0, 1, T)[:, None]
+    t[:, 1, 1] = 0.3
+    t[:, 2, 1] = 0.55
+    return t
+
+
+def test_a_stretched_bone_flags_exactly_its_frames_and_both_ends():
+    eb = _tool()
+    truth = _chain()
+    # bone 1->2 (0.25 m, tolerance 0.03 + 0.15 * 0.25 = 0.0675 m)
+    truth[[5, 6, 7], 2, 1] += 0.20  # stretched: off
+    truth[[12, 13], 2, 1] += 0.06  # within the tolerance: not off
+    truth[20, 2] = np.nan  # missing: not off
+    off = eb.truth_inconsistent(truth, (-1, 0, 1), tol_abs=0.03, tol_rel=0.15)
+    expect = np.zeros((30, 3), dtype=bool)
+    expect[[5, 6, 7], 1] = expect[[5, 6, 7], 2] = True
+    np.testing.assert_array_equal(off, expect)
+
+
+def test_the_default_tolerance_is_the_robust_bone_gates():
+    eb = _tool()
+    from tobitkf.smoothing.robust import ROBUST_DEFAULTS
+
+    truth = _chain()
+    tol = ROBUST_DEFAULTS["bone_tol_abs"] + ROBUST_DEFAULTS["bone_tol_rel"] * 0.3
+    truth[3, 0, 1] -= tol + 0.005  # root moves away from joint 1: bone 0->1 just off
+    truth[9, 0, 1] -= tol - 0.005  # just within
+    off = eb.truth_inconsistent(truth, (-1, 0, 1))
+    assert sorted(zip(*np.nonzero(off))) == [(3, 0), (3, 1)]
