@@ -323,6 +323,7 @@ def _offline(
         with np.errstate(invalid="ignore"):
             scale = np.maximum(1.0, (radius / sd) ** 2)
         rvar = np.where(carried, r * scale, rvar)
+        del pseudo, radius, pb, rb, take, scale  # before the smoother allocates its own
     var = np.empty(missing.shape)
     rvar = np.ascontiguousarray(rvar)
     if fits is None:
