@@ -394,7 +394,9 @@ def _smooth_group(
     if ref.confidence is not None:
         confidence = np.stack([s.confidence for s in seqs], axis=1)
     # scale: metres per unit; None: pixels / unknown
-    scale, positions, ys, missing = method_view(positions, ref.units, states, confidence, min_conf)
+    scale, positions, ys, missing = method_view(
+        positions, ref.units, states, confidence, min_conf, owned=len(seqs) > 1
+    )
     positions, ys = _read_only(positions), _read_only(ys)  # a method must not write into them
     inp = SmoothInput(
         positions=positions,
@@ -416,29 +418,21 @@ def _smooth_group(
         result = SmoothOutput(positions.copy())
     else:
         result = run_method(spec, inp, params)
-    est = drop_third_axis(np.asarray(result.positions, dtype=float), n_dims)
+    returned = np.asarray(result.positions, dtype=float)
+    est = drop_third_axis(returned, n_dims)
     if scale is not None and scale != 1.0:
-        est = est / scale
-    clipped = (
-        np.zeros(missing.shape, dtype=bool)
-        if result.clipped is None
-        else np.asarray(result.clipped, dtype=bool)
-    )
-    extra = result.diagnostics or ({},) * len(seqs)
-    rejected = np.stack(
-        [np.broadcast_to(np.asarray(d.get("rejected", False), dtype=bool), missing.shape[::2])
-         for d in extra],
-        axis=1,
-    )  # fmt: skip
-    finite = all_last(np.isfinite(est))
-    sample = sample_states(missing, rejected, finite, spec.is_causal(params) and not offline)
+        if np.may_share_memory(est, returned):  # the method's array: not ours to change
+            est = est / scale
+        else:  # a copy made here (2-D): converted in place
+            est /= scale
     std = None
     if result.std is not None:
         std = np.asarray(result.std, dtype=float)
         if scale is not None and scale != 1.0:
             std = std / scale
-        if (~finite & ~np.isnan(std)).any():  # as a rule the method's NaN are there already
-            std = np.where(finite, std, np.nan)
+    clipped = None if result.clipped is None else np.asarray(result.clipped, dtype=bool)
+    extra = result.diagnostics or ({},) * len(seqs)
+    causal = spec.is_causal(params) and not offline
     T = max(ref.n_frames, 1)
     used = {
         **params,
@@ -453,11 +447,23 @@ def _smooth_group(
         used["untangle"] = True
     out = []
     for b, s in enumerate(seqs):
-        filled = (missing[:, b] | rejected[:, b]) & finite[:, b]
+        # body by body: (T, J) temporaries, not (T, B, J) ones
+        missing_b = missing[:, b]
+        rejected = np.broadcast_to(
+            np.asarray(extra[b].get("rejected", False), dtype=bool), missing_b.shape
+        )
+        finite = all_last(np.isfinite(est[:, b]))
+        sample = sample_states(missing_b, rejected, finite, causal)
+        std_b = None if std is None else std[:, b]
+        if std_b is not None and (~finite & ~np.isnan(std_b)).any():
+            std_b = np.where(finite, std_b, np.nan)  # as a rule the method's NaN are there
+        filled = (missing_b | rejected) & finite
         used_b = {**used, **(result.body_params[b] if result.body_params else {})}
         diagnostics = {
             **extra[b],
-            "clipped_fraction": clipped[:, b].sum(axis=0) / T,
+            "clipped_fraction": (
+                np.zeros(missing.shape[-1]) if clipped is None else clipped[:, b].sum(axis=0) / T
+            ),
             "filled_fraction": filled.sum(axis=0) / T,
             "method": spec.name,
             "params": used_b,
@@ -470,11 +476,9 @@ def _smooth_group(
             s.replace(
                 positions=est[:, b],
                 metadata=meta,
-                std=None if std is None else std[:, b],
-                sample_state=sample[:, b],
-                tracking_state=_output_states(
-                    None if states is None else states[:, b], sample[:, b]
-                ),
+                std=std_b,
+                sample_state=sample,
+                tracking_state=_output_states(None if states is None else states[:, b], sample),
             )
         )
     return out

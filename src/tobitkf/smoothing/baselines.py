@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tobitkf.smoothing.chunks import chunks
 from tobitkf.smoothing.params import (
     as_bool,
     at_least_int,
@@ -146,8 +147,6 @@ def savgol(
     -------
     ndarray, same shape as ``x``
     """
-    from scipy.signal import savgol_filter  # 1 s to import: only when used
-
     arr, shape = _as_series(x)
     window = _positive_int(window)
     if window % 2 == 0:
@@ -158,10 +157,26 @@ def savgol(
         raise ValueError(f"polyorder ({polyorder}) must be less than window ({window})")
     T = arr.shape[0]
     flat = arr.reshape(T, -1)
+    # the columns are independent: a large batch goes a chunk of columns at a time, so
+    # the working arrays (interpolated copies, scipy's output) stay small
+    parts = chunks(flat.shape[1], T * flat.itemsize)
+    if len(parts) == 1:
+        return _savgol_columns(flat, window, polyorder, max_gap).reshape(shape)
+    out = np.empty(flat.shape)
+    for c in parts:
+        out[:, c] = _savgol_columns(flat[:, c], window, polyorder, max_gap)
+    return out.reshape(shape)
+
+
+def _savgol_columns(
+    flat: NDArray[np.float64], window: int, polyorder: int, max_gap: int | None
+) -> NDArray[np.float64]:
+    """:func:`savgol` of the columns of ``flat`` (T, m), arguments checked."""
+    T = flat.shape[0]
     finite = np.isfinite(flat)
     if T > 2 and finite.all():  # no gap anywhere: one scipy call, no copies
         w = min(window, T if T % 2 == 1 else T - 1)
-        return savgol_filter(arr, w, min(polyorder, w - 1), axis=0, mode="interp").reshape(shape)
+        return _savgol_span(flat, w, min(polyorder, w - 1))
     out = np.full_like(flat, np.nan)
     idx = np.arange(T)
     # group columns by their finite span so that columns sharing it go through one call
@@ -177,7 +192,8 @@ def savgol(
         seg_finite = finite[first : last + 1, cols]
         gaps = np.flatnonzero(~seg_finite.all(axis=0))
         if gaps.size:
-            seg = seg.copy()
+            if isinstance(cols, slice):  # a view (fancy indexing copied already)
+                seg = seg.copy()
             seg_idx = idx[first : last + 1]
             for c in gaps:
                 ok = seg_finite[:, c]
@@ -185,11 +201,45 @@ def savgol(
         n = last - first + 1
         w = min(window, n if n % 2 == 1 else n - 1)
         order = min(polyorder, w - 1)
-        out[first : last + 1, cols] = savgol_filter(seg, w, order, axis=0, mode="interp")
+        out[first : last + 1, cols] = _savgol_span(seg, w, order)
     if max_gap is not None:
         long_gap = _long_gaps(finite, int(max_gap))
         out[long_gap] = np.nan
-    return out.reshape(shape)
+    return out
+
+
+def _savgol_span(seg: NDArray[np.float64], w: int, order: int) -> NDArray[np.float64]:
+    """``savgol_filter(seg, w, order, axis=0, mode="interp")`` of gap-free columns, the
+    edges fitted column by column: scipy fits the polynomial of the first and last ``w``
+    frames to all columns in one least-squares call, whose last bits depend on the other
+    columns of the call; here each edge value is the fit's value there, a fixed weighted
+    sum of the window (:func:`_edge_weights`) added up term by term, so a column's output
+    is the same whichever columns, and how many, are smoothed with it (chunks)."""
+    from scipy.signal import savgol_filter  # 1 s to import: only when used
+
+    # the interior as scipy's; the edges (where the modes differ) are replaced below
+    out = savgol_filter(seg, w, order, axis=0, mode="nearest")
+    half, n = w // 2, seg.shape[0]
+    if half:
+        hat = _edge_weights(w, order)
+        for rows, window, weights in (
+            (slice(0, half), seg[:w], hat[:half]),
+            (slice(n - half, n), seg[n - w :], hat[w - half :]),
+        ):
+            acc = weights[:, :1] * window[0]
+            for k in range(1, w):
+                acc += weights[:, k : k + 1] * window[k]
+            out[rows] = acc
+    return out
+
+
+def _edge_weights(w: int, order: int) -> NDArray[np.float64]:
+    """(w, w) least-squares fit of a polynomial of degree ``order`` to ``w`` equally spaced
+    samples, as weights: row i gives the fitted value at sample i. Legendre basis on
+    [-1, 1] and a QR factorisation: accurate to rounding for any window and order."""
+    u = np.linspace(-1.0, 1.0, w)
+    q = np.linalg.qr(np.polynomial.legendre.legvander(u, order))[0]
+    return q @ q.T
 
 
 def _long_gaps(finite: NDArray[np.bool_], max_gap: int) -> NDArray[np.bool_]:

@@ -69,15 +69,25 @@ def low_confidence(confidence: Array | None, threshold: float) -> NDArray[np.boo
 
 
 def method_view(
-    positions: Array, units: str | None, states: Any, confidence: Array | None, min_conf: float
+    positions: Array,
+    units: str | None,
+    states: Any,
+    confidence: Array | None,
+    min_conf: float,
+    *,
+    owned: bool = False,
 ) -> tuple[float | None, Array, Array, NDArray[np.bool_]]:
     """What a method sees of ``positions (T, ..., D)``: lengths in metres, three axes,
     samples below ``min_conf`` missing. Returns the metres per unit (None: pixels or
     unknown units, left as they are), the converted positions, the measurements (NaN where
-    missing, NOT_TRACKED or below ``min_conf``) and the missing mask."""
+    missing, NOT_TRACKED or below ``min_conf``) and the missing mask. ``owned``:
+    ``positions`` is the caller's own copy, converted in place (no second copy)."""
     scale = length_scale(units)
     if scale is not None and scale != 1.0:
-        positions = positions * scale
+        if owned:
+            positions *= scale
+        else:
+            positions = positions * scale
     positions = pad_third_axis(positions)
     ys, missing = measurements(positions, states)
     low = low_confidence(confidence, min_conf)

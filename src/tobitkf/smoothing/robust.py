@@ -92,6 +92,7 @@ from numpy.typing import NDArray
 
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology
+from tobitkf.smoothing.chunks import chunks
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
@@ -322,6 +323,7 @@ def _offline(
         with np.errstate(invalid="ignore"):
             scale = np.maximum(1.0, (radius / sd) ** 2)
         rvar = np.where(carried, r * scale, rvar)
+        del pseudo, radius, pb, rb, take, scale  # before the smoother allocates its own
     var = np.empty(missing.shape)
     rvar = np.ascontiguousarray(rvar)
     if fits is None:
@@ -387,7 +389,12 @@ def _robust_bodies(
     units: str | None = "m",
     n_dims: int = 3,
 ) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any]]:
-    """Gate and smooth every body at once: ys (T, B, J, 3) NaN where missing.
+    """Gate and smooth every body: ys (T, B, J, 3) NaN where missing.
+
+    The parameters taken from the recording (pixels, unknown units) pool all bodies and
+    are derived once, from the whole batch; everything else is per body and runs a chunk
+    of bodies at a time (:mod:`tobitkf.smoothing.chunks`) into outputs allocated once,
+    so the working set stays bounded and the numbers are those of one piece.
 
     Returns the estimates, their posterior standard deviations (T, B, J), one
     diagnostics dict per body and the resolved per-joint parameters.
@@ -400,32 +407,38 @@ def _robust_bodies(
         centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
     setup = _Setup(topo, params)
-    ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
-    # (B, J): the median bone lengths (reported), and what the offline bone gate compares
-    # with (2-D from the recording: the centre of the one-sided range)
-    L = bone_lengths(ys, topo.parents) if params["bones"] else None
-    L_gate = L if centre is None else centre
-    k = kernels()
-    missing = np.ascontiguousarray(missing, dtype=bool)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
-    rinf = _inferred_scale(states, missing, factor, confidence)
-    fits = None
-    if offline:
-        L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        inferred = np.zeros(missing.shape, dtype=bool)
-        if states is not None:
-            inferred = np.asarray(states) == TrackingState.INFERRED
-        est, rejected, var, fits = _offline(ys, missing, times, steps, rinf, setup, params,
-                                            L_fixed, inferred)  # fmt: skip
+
+    def part(b: slice) -> tuple[Array, NDArray[np.bool_], Array, Array | None, Any]:
+        return _robust_chunk(
+            ys[:, b], missing[:, b], None if states is None else states[:, b],
+            None if confidence is None else confidence[:, b],
+            None if centre is None else centre[b], times, steps, topo, setup, params, factor,
+            offline,
+        )  # fmt: skip
+
+    slices = chunks(B, T * J * 3 * 8)
+    if len(slices) == 1:
+        est, rejected, var, L, fits = part(slices[0])
     else:
-        state = k.new_state(B, J, int(params["lookback"]))
-        est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
-        var = np.empty((T, B, J))
-        k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
-                        *k.new_work(B, J), est, rejected, var)  # fmt: skip
-        guard = step_guard()
-        guard.guard_frames(ys, missing, est, var, *guard.new_state(B, J, ys.shape[-1]))
+        est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
+        rejected = np.empty((T, B, J), dtype=bool)
+        L = np.empty((B, J)) if params["bones"] else None
+        fits = None
+        for b in slices:
+            e, r, v, lengths, f = part(b)
+            est[:, b], rejected[:, b], var[:, b] = e, r, v
+            del e, r, v  # freed before the next chunk allocates its own
+            if L is not None:
+                L[b] = lengths
+            if f is not None:
+                if fits is None:
+                    fits = ({name: np.empty((B, J)) for name in f[0]}, [])
+                for name, a in f[0].items():
+                    fits[0][name][b] = a
+                fits[1].extend(f[1])
+    std = np.sqrt(var, out=var)
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -444,7 +457,52 @@ def _robust_bodies(
         body_params = tuple({name: a[b].tolist() for name, a in arrays.items()} for b in range(B))
         for b in range(B):
             diags[b]["noise_fit"] = reports[b]
-    return est, np.sqrt(var), diags, resolved, body_params
+    return est, std, diags, resolved, body_params
+
+
+def _robust_chunk(
+    ys: Array,
+    missing: NDArray[np.bool_],
+    states: Any,
+    confidence: Any,
+    centre: Array | None,
+    times: Array,
+    steps: Array,
+    topo: Topology,
+    setup: _Setup,
+    params: dict[str, Any],
+    factor: float,
+    offline: bool,
+) -> tuple[Array, NDArray[np.bool_], Array, Array | None, Any]:
+    """The per-body work of :func:`_robust_bodies` for some bodies, parameters resolved:
+    ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J), bone lengths (B, J) or None,
+    fits)``; ``centre`` (B, J): the 2-D bone gate's lengths from the recording, or None."""
+    T, B, J = missing.shape
+    ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
+    # (B, J): the median bone lengths (reported), and what the offline bone gate compares
+    # with (2-D from the recording: the centre of the one-sided range)
+    L = bone_lengths(ys, topo.parents) if params["bones"] else None
+    L_gate = L if centre is None else centre
+    k = kernels()
+    missing = np.ascontiguousarray(missing, dtype=bool)
+    rinf = _inferred_scale(states, missing, factor, confidence)
+    fits = None
+    if offline:
+        L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
+        inferred = np.zeros(missing.shape, dtype=bool)
+        if states is not None:
+            inferred = np.asarray(states) == TrackingState.INFERRED
+        est, rejected, var, fits = _offline(ys, missing, times, steps, rinf, setup, params,
+                                            L_fixed, inferred)  # fmt: skip
+    else:
+        state = k.new_state(B, J, int(params["lookback"]))
+        est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
+        var = np.empty((T, B, J))
+        k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
+                        *k.new_work(B, J), est, rejected, var)  # fmt: skip
+        guard = step_guard()
+        guard.guard_frames(ys, missing, est, var, *guard.new_state(B, J, ys.shape[-1]))
+    return est, rejected, var, L, fits
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
