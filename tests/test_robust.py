@@ -542,19 +542,27 @@ def test_online_bone_window_is_the_median_of_the_last_600_lengths():
 
     rng = np.random.default_rng(6)
     H = k.BONE_WINDOW
-    ring, srt, cnt = np.zeros((2, H)), np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
+    val, cnt = np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
+    idx = np.zeros((2, 2, H), dtype=np.int32)
     hist: list[float] = []
     for i in range(2500):
         if i in (700, 720):  # a re-lock forgets the lengths learnt so far
             hist, cnt[1] = [], 0
         v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
+        v = v + 0.2 if 1500 <= i < 1800 else v  # a drift: the median crosses whole heaps
         hist.append(v)
-        k._bone_push(ring, srt, cnt, 1, v)  # joint 1 of two
+        k._bone_push(val, idx, cnt, 1, v)  # joint 1 of two
         n = int(cnt[1, 0])
         assert n == min(len(hist), H)
-        assert k._window_median(srt, 1, n) == np.median(hist[-H:])
-        np.testing.assert_array_equal(srt[1, :n], np.sort(hist[-H:]))
-    assert not ring[0].any() and not srt[0].any() and not cnt[0].any()
+        assert k._window_median(val, 1, n) == np.median(hist[-H:])
+        # the two heaps hold exactly the window, the lower half below the upper one
+        lower, upper = val[1, : (n + 1) // 2], -val[1, H // 2 : H // 2 + n // 2]
+        np.testing.assert_array_equal(np.sort(np.r_[lower, upper]), np.sort(hist[-H:]))
+        assert n < 2 or lower.max() <= upper.min()
+        # each slot knows its heap position
+        slots = idx[1, 0, np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2]]
+        np.testing.assert_array_equal(idx[1, 1, slots], np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2])
+    assert not val[0].any() and not idx[0].any() and not cnt[0].any()
 
 
 def test_kernels_run_as_plain_python_with_jit_disabled():
