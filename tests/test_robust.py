@@ -560,9 +560,29 @@ def test_online_bone_window_is_the_median_of_the_last_600_lengths():
         np.testing.assert_array_equal(np.sort(np.r_[lower, upper]), np.sort(hist[-H:]))
         assert n < 2 or lower.max() <= upper.min()
         # each slot knows its heap position
-        slots = idx[1, 0, np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2]]
-        np.testing.assert_array_equal(idx[1, 1, slots], np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2])
+        where = np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2]
+        np.testing.assert_array_equal(idx[1, 1, idx[1, 0, where]], where)
     assert not val[0].any() and not idx[0].any() and not cnt[0].any()
+
+
+@pytest.mark.parametrize(
+    ("path", "n_rejected", "total"),
+    [
+        ("kimore/JointPositionExercise1.csv", 50, 23038.78866397567),
+        ("kimore/JointPositionExercise3.csv", 2944, 46495.27571292102),
+        ("kimore/JointPositionExercise5.csv", 1468, 22236.57176497204),
+        ("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt", 51, 14150.112195466576),
+        ("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt", 447, 13369.889783278963),
+        ("keraal/G3-Kinect-RTK-P1T1-Unknown-C-0.txt", 488, 13285.50439087471),
+    ],
+)
+def test_robust_online_on_real_recordings_is_unchanged(path, n_rejected, total):
+    # recorded with the sorted bone-length window (commit 702deee): a faster window, or
+    # any other rewrite of robust_online, must give the same decisions and numbers
+    seq = tk.load(data_file(path))[0]
+    out = tk.smooth(seq, method="robust_online")
+    assert int(out.metadata["diagnostics"]["rejected"].sum()) == n_rejected
+    np.testing.assert_allclose(np.nansum(out.positions), total, rtol=1e-12)
 
 
 def test_kernels_run_as_plain_python_with_jit_disabled():

@@ -406,7 +406,7 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
 
 def new_work(B: int, J: int) -> tuple:
     """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
-    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((2, B, J), dtype=np.bool_)
+    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
 
 
 @_jit
@@ -791,7 +791,7 @@ def online_frames(
     st: tuple,  # new_state(B, J, lookback), carried from call to call
     scratch: np.ndarray,  # work (2, J, 3)
     scratch1: np.ndarray,  # work (2, J)
-    acc: np.ndarray,  # work (2, B, J)
+    acc: np.ndarray,  # work (3, B, J)
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
     var_n: np.ndarray,  # out (n, B, J): filtered position variance (NaN before the start)
@@ -831,7 +831,9 @@ def online_frames(
             if min_run > 0:
                 confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
                 if has_prev:
-                    prev_final = sb[b, :, B_PREV_FINAL].copy()
+                    prev_final = acc[2, b]  # contiguous, no allocation: one chain_frame type
+                    for j in range(J):
+                        prev_final[j] = sb[b, j, B_PREV_FINAL]
                     chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
                                 pj, pf[P_MARGIN])  # fmt: skip
             else:
