@@ -128,6 +128,14 @@ def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ bones
 @_jit
+def _heap_put(val: np.ndarray, idx: np.ndarray, j: int, at: int, v: float, s: int) -> None:
+    """Entry ``v`` of ring slot ``s`` at heap position ``at`` of joint ``j``."""
+    val[j, at] = v
+    idx[j, 0, at] = s
+    idx[j, 1, s] = at
+
+
+@_jit
 def _sift(val: np.ndarray, idx: np.ndarray, j: int, base: int, size: int, i: int) -> None:
     """Restore the order of joint ``j``'s max-heap ``val[j, base:base + size]`` about
     position ``i``, moving its entry up or down; ``idx[j, 0]`` (the ring slot of each
@@ -139,10 +147,7 @@ def _sift(val: np.ndarray, idx: np.ndarray, j: int, base: int, size: int, i: int
         vp = val[j, base + p]
         if vp >= v:
             break
-        val[j, base + i] = vp
-        sp = idx[j, 0, base + p]
-        idx[j, 0, base + i] = sp
-        idx[j, 1, sp] = base + i
+        _heap_put(val, idx, j, base + i, vp, idx[j, 0, base + p])
         i = p
     while True:
         c = 2 * i + 1
@@ -154,22 +159,9 @@ def _sift(val: np.ndarray, idx: np.ndarray, j: int, base: int, size: int, i: int
             vc = val[j, base + c]
         if vc <= v:
             break
-        val[j, base + i] = vc
-        sc = idx[j, 0, base + c]
-        idx[j, 0, base + i] = sc
-        idx[j, 1, sc] = base + i
+        _heap_put(val, idx, j, base + i, vc, idx[j, 0, base + c])
         i = c
-    val[j, base + i] = v
-    idx[j, 0, base + i] = s
-    idx[j, 1, s] = base + i
-
-
-@_jit
-def _heap_put(val: np.ndarray, idx: np.ndarray, j: int, at: int, v: float, s: int) -> None:
-    """Entry ``v`` of ring slot ``s`` at heap position ``at`` of joint ``j``."""
-    val[j, at] = v
-    idx[j, 0, at] = s
-    idx[j, 1, s] = at
+    _heap_put(val, idx, j, base + i, v, s)
 
 
 @_jit
