@@ -25,7 +25,7 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -108,13 +108,13 @@ class _Body:
     last_seen: float
 
 
-def _group_frame(arr: Array, sts: list[Any] | None, rows: list[int]) -> tuple[Array, Any]:
+def _group_frame(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tuple[Array, Any]:
     """The frame of one group: slot ``s`` takes row ``rows[s]`` of the keyed frame's
     positions ``arr`` (and states ``sts``), NaN where it is -1 (a body not in the frame,
     predicted, or a dropped slot). States: None unless one of its bodies has some (the
     others TRACKED then, which is what None means)."""
     n = len(arr)
-    if rows == list(range(n)):
+    if isinstance(rows, range) or rows == list(range(n)):
         pos = arr  # the usual frame: every body of the group, in its order
     else:
         pos = np.full((len(rows), *arr.shape[1:]), np.nan)
@@ -209,6 +209,9 @@ class LiveSmoother:
         self._single = False
         self._last_timestamp: float | None = None
         self._bodies: dict[Any, _Body] | None = None  # streams keyed by body id
+        # the last frame's ids when they were every body tracked, all in one group in its
+        # slot order: the same ids again step that group as they are (no regrouping)
+        self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
         self.n_frames = 0
 
@@ -333,9 +336,31 @@ class LiveSmoother:
         bodies, arr, sts = self._check_bodies(frames, states)
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
+        self._clock += dt
+        same = self._same
+        if same is not None and same[0] == tuple(bodies):
+            out = self._step_same(same[1], same[2], bodies, arr, sts, dt)
+        else:
+            out = self._regroup(bodies, arr, sts, dt)
+        self._last_timestamp = stamp
+        self.n_frames += 1
+        return out
+
+    def _step_same(self, group: _Group, entries: list[_Body], bodies: list[Any], arr: Array,
+                   sts: list[Any] | None, dt: float) -> dict[Any, Array]:  # fmt: skip
+        """The usual frame: the bodies of the last one, every slot of its only group."""
+        res = self._step(group.stepper, *_group_frame(arr, sts, range(len(arr))), dt)
+        group.frames += 1
+        for entry in entries:
+            entry.last_seen = self._clock
+        return dict(zip(bodies, res, strict=True))
+
+    def _regroup(
+        self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float
+    ) -> dict[Any, Array]:
+        """Any frame: bodies dropped, new ones grouped, each group stepped."""
         if self._bodies is None:
             self._bodies = {}
-        self._clock += dt
         row = {b: i for i, b in enumerate(bodies)}  # each id's row of arr
         for body in [b for b in self._bodies if b not in row]:
             entry = self._bodies[body]
@@ -363,8 +388,11 @@ class LiveSmoother:
         out = {b: results[b] for b in bodies}
         if len(out) < len(self._bodies):
             out.update({b: results[b] for b in self._bodies if b not in row})
-        self._last_timestamp = stamp
-        self.n_frames += 1
+        self._same = None
+        if bodies and len(bodies) == len(self._bodies):
+            group = self._bodies[bodies[0]].group
+            if group.members == bodies:  # every body tracked, one group, in slot order
+                self._same = (tuple(bodies), group, [self._bodies[b] for b in bodies])
         return out
 
     def _check_bodies(
