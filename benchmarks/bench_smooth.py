@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_smooth.py                # all methods, both data sets
     .venv/bin/python benchmarks/bench_smooth.py -m robust -m robust_online --repeats 3
+    .venv/bin/python benchmarks/bench_smooth.py --live-only      # the live latency alone
 
 Data: (a) 12 synthetic Kinect V2 recordings x 1500 frames x 25 joints (the built-in
 motions with the Kinect-like corruption: jitter, spikes, sustained failures, inferred
@@ -73,7 +74,11 @@ def main() -> None:
     ap.add_argument("--live-frames", type=int, default=2000, help="frames for the live latency")
     ap.add_argument("--files", type=int, default=1000, help="small recordings for files/s")
     ap.add_argument("--markdown", action="store_true", help="end with the README's tables")
+    ap.add_argument("--live-only", action="store_true", help="only the live latency")
     args = ap.parse_args()
+    if args.live_only:
+        live_latency(args.live_frames)
+        return
     table: list[tuple[str, str, float, float]] = []
     names = args.method or sorted(tk.methods())
     sets: dict[str, list] = {

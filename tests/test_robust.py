@@ -542,19 +542,47 @@ def test_online_bone_window_is_the_median_of_the_last_600_lengths():
 
     rng = np.random.default_rng(6)
     H = k.BONE_WINDOW
-    ring, srt, cnt = np.zeros((2, H)), np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
+    val, cnt = np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
+    idx = np.zeros((2, 2, H), dtype=np.int32)
     hist: list[float] = []
     for i in range(2500):
         if i in (700, 720):  # a re-lock forgets the lengths learnt so far
             hist, cnt[1] = [], 0
         v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
+        v = v + 0.2 if 1500 <= i < 1800 else v  # a drift: the median crosses whole heaps
         hist.append(v)
-        k._bone_push(ring, srt, cnt, 1, v)  # joint 1 of two
+        k._bone_push(val, idx, cnt, 1, v)  # joint 1 of two
         n = int(cnt[1, 0])
         assert n == min(len(hist), H)
-        assert k._window_median(srt, 1, n) == np.median(hist[-H:])
-        np.testing.assert_array_equal(srt[1, :n], np.sort(hist[-H:]))
-    assert not ring[0].any() and not srt[0].any() and not cnt[0].any()
+        assert k._window_median(val, 1, n) == np.median(hist[-H:])
+        # the two heaps hold exactly the window, the lower half below the upper one
+        lower, upper = val[1, : (n + 1) // 2], -val[1, H // 2 : H // 2 + n // 2]
+        np.testing.assert_array_equal(np.sort(np.r_[lower, upper]), np.sort(hist[-H:]))
+        assert n < 2 or lower.max() <= upper.min()
+        # each slot knows its heap position
+        where = np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2]
+        np.testing.assert_array_equal(idx[1, 1, idx[1, 0, where]], where)
+    assert not val[0].any() and not idx[0].any() and not cnt[0].any()
+
+
+@pytest.mark.parametrize(
+    ("path", "n_rejected", "total"),
+    [
+        ("kimore/JointPositionExercise1.csv", 50, 23038.78866397567),
+        ("kimore/JointPositionExercise3.csv", 2944, 46495.27571292102),
+        ("kimore/JointPositionExercise5.csv", 1468, 22236.57176497204),
+        ("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt", 51, 14150.112195466576),
+        ("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt", 447, 13369.889783278963),
+        ("keraal/G3-Kinect-RTK-P1T1-Unknown-C-0.txt", 488, 13285.50439087471),
+    ],
+)
+def test_robust_online_on_real_recordings_is_unchanged(path, n_rejected, total):
+    # recorded with the sorted bone-length window (commit 702deee): a faster window, or
+    # any other rewrite of robust_online, must give the same decisions and numbers
+    seq = tk.load(data_file(path))[0]
+    out = tk.smooth(seq, method="robust_online")
+    assert int(out.metadata["diagnostics"]["rejected"].sum()) == n_rejected
+    np.testing.assert_allclose(np.nansum(out.positions), total, rtol=1e-12)
 
 
 def test_kernels_run_as_plain_python_with_jit_disabled():

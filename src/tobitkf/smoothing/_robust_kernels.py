@@ -128,57 +128,104 @@ def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ bones
 @_jit
-def _lower_bound(srt: np.ndarray, j: int, n: int, v: float) -> int:
-    """First index i < n with srt[j, i] >= v (n when none); srt[j, :n] sorted."""
-    lo, hi = 0, n
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if srt[j, mid] < v:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+def _heap_put(val: np.ndarray, idx: np.ndarray, j: int, at: int, v: float, s: int) -> None:
+    """Entry ``v`` of ring slot ``s`` at heap position ``at`` of joint ``j``."""
+    val[j, at] = v
+    idx[j, 0, at] = s
+    idx[j, 1, s] = at
 
 
 @_jit
-def _bone_push(ring: np.ndarray, srt: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
-    """Append ``v`` to joint ``j``'s window of bone lengths (the oldest leaves when full);
-    ``srt[j, :n]`` stays sorted, ``ring[j]`` keeps the arrival order, ``cnt[j] = (n, write
-    position)``. Full window: the oldest value's slot in ``srt`` becomes a hole that moves
-    to where ``v`` belongs (only the values between the two move)."""
-    H = ring.shape[1]
+def _sift(val: np.ndarray, idx: np.ndarray, j: int, base: int, size: int, i: int) -> None:
+    """Restore the order of joint ``j``'s max-heap ``val[j, base:base + size]`` about
+    position ``i``, moving its entry up or down; ``idx[j, 0]`` (the ring slot of each
+    entry) moves along and ``idx[j, 1]`` (the position of each slot) follows."""
+    v = val[j, base + i]
+    s = idx[j, 0, base + i]
+    while i > 0:
+        p = (i - 1) // 2
+        vp = val[j, base + p]
+        if vp >= v:
+            break
+        _heap_put(val, idx, j, base + i, vp, idx[j, 0, base + p])
+        i = p
+    while True:
+        c = 2 * i + 1
+        if c >= size:
+            break
+        vc = val[j, base + c]
+        if c + 1 < size and val[j, base + c + 1] > vc:
+            c += 1
+            vc = val[j, base + c]
+        if vc <= v:
+            break
+        _heap_put(val, idx, j, base + i, vc, idx[j, 0, base + c])
+        i = c
+    _heap_put(val, idx, j, base + i, v, s)
+
+
+@_jit
+def _bone_push(val: np.ndarray, idx: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+    """Append ``v`` to joint ``j``'s window of bone lengths (the oldest leaves when full).
+
+    The window is two max-heaps: ``val[j, :H/2]`` the lower ``(n + 1) // 2`` lengths,
+    ``val[j, H/2:]`` the upper ``n // 2`` ones negated, so the median is read off the two
+    tops and a push costs O(log n). ``cnt[j] = (n, write position)`` runs through the
+    ring slots in arrival order; ``idx[j, 0]`` is the slot of each heap entry and
+    ``idx[j, 1]`` the heap position of each slot. Full window: the new length takes
+    the slot (and heap position) of the oldest one, then at most the two tops swap."""
+    H = val.shape[1]
+    half = H // 2
     n = cnt[j, 0]
     pos = cnt[j, 1]
     cnt[j, 1] = (pos + 1) % H
+    nlo = (n + 1) // 2
+    nhi = n // 2
     if n == H:
-        old = ring[j, pos]
-        ring[j, pos] = v
-        k = _lower_bound(srt, j, n, old)  # an element equal to old: the hole
-        if v >= old:
-            while k + 1 < n and srt[j, k + 1] < v:
-                srt[j, k] = srt[j, k + 1]
-                k += 1
+        w = idx[j, 1, pos]
+        if w < half:
+            val[j, w] = v
+            _sift(val, idx, j, 0, nlo, w)
         else:
-            while k > 0 and srt[j, k - 1] > v:
-                srt[j, k] = srt[j, k - 1]
-                k -= 1
-        srt[j, k] = v
+            val[j, w] = -v
+            _sift(val, idx, j, half, nhi, w - half)
+        a, b = val[j, 0], -val[j, half]
+        if a > b:  # the tops swap sides: lower <= upper again
+            sa, sb = idx[j, 0, 0], idx[j, 0, half]
+            _heap_put(val, idx, j, 0, b, sb)
+            _heap_put(val, idx, j, half, -a, sa)
+            _sift(val, idx, j, 0, nlo, 0)
+            _sift(val, idx, j, half, nhi, 0)
         return
-    ring[j, pos] = v
-    k = n
-    while k > 0 and srt[j, k - 1] > v:
-        srt[j, k] = srt[j, k - 1]
-        k -= 1
-    srt[j, k] = v
+    # growing (pos == n): the lower heap takes one more for even n, the upper for odd n;
+    # a length that belongs to the other side goes there, and that side's top crosses
+    if n % 2 == 0:
+        u, s = v, pos
+        if nhi > 0 and v > -val[j, half]:
+            u, s = -val[j, half], idx[j, 0, half]
+            _heap_put(val, idx, j, half, -v, pos)
+            _sift(val, idx, j, half, nhi, 0)
+        _heap_put(val, idx, j, nlo, u, s)
+        _sift(val, idx, j, 0, nlo + 1, nlo)
+    else:
+        u, s = v, pos
+        if v < val[j, 0]:
+            u, s = val[j, 0], idx[j, 0, 0]
+            _heap_put(val, idx, j, 0, v, pos)
+            _sift(val, idx, j, 0, nlo, 0)
+        _heap_put(val, idx, j, half + nhi, -u, s)
+        _sift(val, idx, j, half, nhi + 1, nhi)
     cnt[j, 0] = n + 1
 
 
 @_jit
-def _window_median(srt: np.ndarray, j: int, n: int) -> float:
-    """Median of ``srt[j, :n]`` (sorted), as np.median takes it."""
+def _window_median(val: np.ndarray, j: int, n: int) -> float:
+    """Median of joint ``j``'s window of ``n`` lengths (:func:`_bone_push`), as np.median
+    takes it: the lower heap's top, or for even ``n`` the mean of the two tops."""
+    lo = val[j, 0]
     if n % 2 == 1:
-        return srt[j, n // 2]
-    return (srt[j, n // 2 - 1] + srt[j, n // 2]) / 2
+        return lo
+    return (lo + -val[j, val.shape[1] // 2]) / 2
 
 
 @_jit
@@ -262,8 +309,8 @@ def gate_frame(
     last: np.ndarray,  # state (J, 3): last accepted sample
     sf: np.ndarray,  # state (J, N_SF)
     sb: np.ndarray,  # state (J, N_SB)
-    h_ring: np.ndarray,  # state (J, BONE_WINDOW)
-    h_sorted: np.ndarray,  # state (J, BONE_WINDOW)
+    h_val: np.ndarray,  # state (J, BONE_WINDOW): bone-length heaps
+    h_idx: np.ndarray,  # state (J, 2, BONE_WINDOW)
     h_cnt: np.ndarray,  # state (J, 2)
     acc: np.ndarray,  # out (J,) accepted
 ) -> None:
@@ -275,7 +322,7 @@ def gate_frame(
     if online and use_bones and tidx % BONE_REFRESH == 0:
         for j in range(J):
             if h_cnt[j, 0] >= BONE_MIN_COUNT:
-                sf[j, S_L_CUR] = _window_median(h_sorted, j, h_cnt[j, 0])
+                sf[j, S_L_CUR] = _window_median(h_val, j, h_cnt[j, 0])
     for k in range(J):
         j = order[k]
         p = parents[j]
@@ -312,7 +359,7 @@ def gate_frame(
                 h_cnt[j, 1] = 0
                 sf[j, S_L_CUR] = math.nan
             if ok and not is_root and acc[p]:
-                _bone_push(h_ring, h_sorted, h_cnt, j, blen)
+                _bone_push(h_val, h_idx, h_cnt, j, blen)
     for j in range(J):
         a = acc[j]
         if a:
@@ -335,8 +382,8 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     off = np.full((B, J, 3), np.nan)
     sf = np.full((B, J, N_SF), np.nan)
     sb = np.zeros((B, J, N_SB), dtype=np.bool_)
-    h_ring = np.zeros((B, J, BONE_WINDOW))
-    h_sorted = np.zeros((B, J, BONE_WINDOW))
+    h_val = np.zeros((B, J, BONE_WINDOW))
+    h_idx = np.zeros((B, J, 2, BONE_WINDOW), dtype=np.int32)
     h_cnt = np.zeros((B, J, 2), dtype=np.int64)
     x = np.zeros((B, J, 3, 2))
     P = np.zeros((B, J, 2, 2))
@@ -345,13 +392,13 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
-    return (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+    return (last, yprev, off, sf, sb, h_val, h_idx, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
             clock)  # fmt: skip
 
 
 def new_work(B: int, J: int) -> tuple:
     """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
-    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((2, B, J), dtype=np.bool_)
+    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
 
 
 @_jit
@@ -371,7 +418,7 @@ def gate_run(
     """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    last, sf, sb, h_ring, h_sorted, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
+    last, sf, sb, h_val, h_idx, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
     for b in range(B):
         for t in range(T):
             has_prev = t > 0
@@ -379,7 +426,7 @@ def gate_run(
             prev = ys[t - 1 if has_prev else t, b]
             gate_frame(ys[t, b], prev, has_prev, times[t], dt_prev, t, parents, order, pj, pf,
                        L_fixed[b], use_bones, online, max_reject, last[b], sf[b], sb[b],
-                       h_ring[b], h_sorted[b], h_cnt[b], acc[t, b])  # fmt: skip
+                       h_val[b], h_idx[b], h_cnt[b], acc[t, b])  # fmt: skip
     return acc
 
 
@@ -736,7 +783,7 @@ def online_frames(
     st: tuple,  # new_state(B, J, lookback), carried from call to call
     scratch: np.ndarray,  # work (2, J, 3)
     scratch1: np.ndarray,  # work (2, J)
-    acc: np.ndarray,  # work (2, B, J)
+    acc: np.ndarray,  # work (3, B, J)
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
     var_n: np.ndarray,  # out (n, B, J): filtered position variance (NaN before the start)
@@ -744,7 +791,7 @@ def online_frames(
     """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
     batch runner passes a whole recording, the live stepper one frame per call."""
-    (last, yprev, off, sf, sb, h_ring, h_sorted, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+    (last, yprev, off, sf, sb, h_val, h_idx, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
      clock) = st  # fmt: skip
     B, J = ys.shape[1], ys.shape[2]
     for f in range(ys.shape[0]):
@@ -772,11 +819,13 @@ def online_frames(
             radius.fill(np.nan)
             gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                        no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
-                       h_ring[b], h_sorted[b], h_cnt[b], gate)  # fmt: skip
+                       h_val[b], h_idx[b], h_cnt[b], gate)  # fmt: skip
             if min_run > 0:
                 confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
                 if has_prev:
-                    prev_final = sb[b, :, B_PREV_FINAL].copy()
+                    prev_final = acc[2, b]  # contiguous, no allocation: one chain_frame type
+                    for j in range(J):
+                        prev_final[j] = sb[b, j, B_PREV_FINAL]
                     chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
                                 pj, pf[P_MARGIN])  # fmt: skip
             else:

@@ -25,7 +25,7 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -108,6 +108,27 @@ class _Body:
     last_seen: float
 
 
+def _group_frame(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tuple[Array, Any]:
+    """The frame of one group: slot ``s`` takes row ``rows[s]`` of the keyed frame's
+    positions ``arr`` (and states ``sts``), NaN where it is -1 (a body not in the frame,
+    predicted, or a dropped slot). States: None unless one of its bodies has some (the
+    others TRACKED then, which is what None means)."""
+    n = len(arr)
+    if isinstance(rows, range) or rows == list(range(n)):
+        pos = arr  # the usual frame: every body of the group, in its order
+    else:
+        pos = np.full((len(rows), *arr.shape[1:]), np.nan)
+        slots = [s for s, r in enumerate(rows) if r >= 0]
+        pos[slots] = arr[[rows[s] for s in slots]]
+    if sts is None or all(sts[r] is None for r in rows if r >= 0):
+        return pos, None
+    states = np.full(pos.shape[:2], TrackingState.TRACKED, np.int8)
+    for s, r in enumerate(rows):
+        if r >= 0 and sts[r] is not None:
+            states[s] = sts[r]
+    return pos, states
+
+
 class LiveSmoother:
     """Smooth a live skeleton stream frame by frame.
 
@@ -188,6 +209,9 @@ class LiveSmoother:
         self._single = False
         self._last_timestamp: float | None = None
         self._bodies: dict[Any, _Body] | None = None  # streams keyed by body id
+        # the last frame's ids when they were every body tracked, all in one group in its
+        # slot order: the same ids again step that group as they are (no regrouping)
+        self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
         self.n_frames = 0
 
@@ -309,36 +333,41 @@ class LiveSmoother:
     ) -> dict[Any, Array]:
         if self._stepper is not None:
             raise ValueError("this stream is not keyed by body id: pass an array of positions")
-        if states is not None and not isinstance(states, Mapping):
-            raise ValueError("tracking_state: expected a mapping {body_id: states} like positions")
-        checked = {}
-        for body, frame in frames.items():
-            st = None if states is None else states.get(body)
-            try:
-                pos, st = self._check_frame(frame, st, check_inf=False)
-            except ValueError as exc:
-                raise ValueError(f"body {body!r}: {exc}") from None
-            if pos.ndim != 2:
-                raise ValueError(f"body {body!r}: expected positions of shape (J, 3)")
-            checked[body] = (pos, st)
-        # infinite values: one check over all the bodies (a numpy call costs microseconds)
-        if checked and np.isinf(np.stack([p for p, _ in checked.values()])).any():
-            body = next(b for b, (p, _) in checked.items() if np.isinf(p).any())
-            raise ValueError(f"body {body!r}: {_INFINITE}")
-        unknown = [] if states is None else [b for b in states if b not in frames]
-        if unknown:
-            raise ValueError(f"tracking_state for bodies not in the frame: {unknown}")
+        bodies, arr, sts = self._check_bodies(frames, states)
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
+        self._clock += dt
+        same = self._same
+        if same is not None and same[0] == tuple(bodies):
+            out = self._step_same(same[1], same[2], bodies, arr, sts, dt)
+        else:
+            out = self._regroup(bodies, arr, sts, dt)
+        self._last_timestamp = stamp
+        self.n_frames += 1
+        return out
+
+    def _step_same(self, group: _Group, entries: list[_Body], bodies: list[Any], arr: Array,
+                   sts: list[Any] | None, dt: float) -> dict[Any, Array]:  # fmt: skip
+        """The usual frame: the bodies of the last one, every slot of its only group."""
+        res = self._step(group.stepper, *_group_frame(arr, sts, range(len(arr))), dt)
+        group.frames += 1
+        for entry in entries:
+            entry.last_seen = self._clock
+        return dict(zip(bodies, res, strict=True))
+
+    def _regroup(
+        self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float
+    ) -> dict[Any, Array]:
+        """Any frame: bodies dropped, new ones grouped, each group stepped."""
         if self._bodies is None:
             self._bodies = {}
-        self._clock += dt
-        for body in [b for b in self._bodies if b not in checked]:
+        row = {b: i for i, b in enumerate(bodies)}  # each id's row of arr
+        for body in [b for b in self._bodies if b not in row]:
             entry = self._bodies[body]
             if self._clock - entry.last_seen > self.max_missing:
                 del self._bodies[body]  # gone: dropped (its slot gets empty frames)
                 entry.group.members[entry.slot] = None
-        new = [b for b in checked if b not in self._bodies]
+        new = [b for b in bodies if b not in self._bodies]
         # new ids start new filters: one group for all of them when the method has a
         # stepper (bodies independent in it), else one each (a history re-run)
         for members in [new] if self.spec.live is not None else [[b] for b in new]:
@@ -346,32 +375,67 @@ class LiveSmoother:
                 group = _Group(self._new_stepper(), list(members))
                 for slot, body in enumerate(members):
                     self._bodies[body] = _Body(group, slot, self._clock)
-        results = {}
-        J = self.topology.n_joints
+        results: dict[Any, Array] = {}
         groups = {id(e.group): e.group for e in self._bodies.values()}.values()
         for group in groups:  # groups with at least one body tracked
-            pos = np.full((len(group.members), J, getattr(self, "_dims", 3)), np.nan)
-            states = None
-            for slot, body in enumerate(group.members):
-                if body in checked:
-                    pos[slot], st = checked[body]
-                    if st is not None:
-                        if states is None:  # the others TRACKED, which is what None means
-                            states = np.full(pos.shape[:2], TrackingState.TRACKED, np.int8)
-                        states[slot] = st
+            rows = [row.get(b, -1) for b in group.members]
             step = dt if group.frames else 1.0 / self.fps
-            res = self._step(group.stepper, pos, states, step)
+            res = self._step(group.stepper, *_group_frame(arr, sts, rows), step)
             group.frames += 1
-            for slot, body in enumerate(group.members):
-                if body is not None:
-                    results[body] = res[slot]
-        for body in checked:
+            results.update((b, r) for b, r in zip(group.members, res) if b is not None)
+        for body in bodies:
             self._bodies[body].last_seen = self._clock
-        out = {b: results[b] for b in checked}
-        out.update({b: results[b] for b in self._bodies if b not in checked})
-        self._last_timestamp = stamp
-        self.n_frames += 1
+        out = {b: results[b] for b in bodies}
+        if len(out) < len(self._bodies):
+            out.update({b: results[b] for b in self._bodies if b not in row})
+        self._same = None
+        if bodies and len(bodies) == len(self._bodies):
+            group = self._bodies[bodies[0]].group
+            if group.members == bodies:  # every body tracked, one group, in slot order
+                self._same = (tuple(bodies), group, [self._bodies[b] for b in bodies])
         return out
+
+    def _check_bodies(
+        self, frames: Mapping[Any, ArrayLike], states: Any
+    ) -> tuple[list[Any], Array, list[Any] | None]:
+        """A keyed frame, checked: its ids, their positions stacked ``(n, J, D)`` and
+        their tracking states (None, or an array or None per id)."""
+        if states is not None and not isinstance(states, Mapping):
+            raise ValueError("tracking_state: expected a mapping {body_id: states} like positions")
+        bodies = list(frames)
+        J = self.topology.n_joints
+        if states is None and bodies:
+            # the usual frame in one numpy call; anything else is checked body by body
+            # below, for the message naming the first faulty one
+            try:
+                arr = np.asarray([frames[b] for b in bodies], dtype=float)
+            except (TypeError, ValueError):
+                arr = np.empty(0)
+            D = arr.shape[-1]
+            if (arr.ndim == 3 and arr.shape[1] == J and D == getattr(self, "_dims", D)
+                    and D in (2, 3) and not np.isinf(arr).any()):  # fmt: skip
+                self._dims = D
+                return bodies, arr, None
+        checked = []
+        for body in bodies:
+            st = None if states is None else states.get(body)
+            try:
+                pos, st = self._check_frame(frames[body], st, check_inf=False)
+            except ValueError as exc:
+                raise ValueError(f"body {body!r}: {exc}") from None
+            if pos.ndim != 2:
+                raise ValueError(f"body {body!r}: expected positions of shape (J, 3)")
+            checked.append((pos, st))
+        # infinite values: one check over all the bodies (a numpy call costs microseconds)
+        if checked and np.isinf(arr := np.stack([p for p, _ in checked])).any():
+            body = next(b for b, (p, _) in zip(bodies, checked) if np.isinf(p).any())
+            raise ValueError(f"body {body!r}: {_INFINITE}")
+        unknown = [] if states is None else [b for b in states if b not in frames]
+        if unknown:
+            raise ValueError(f"tracking_state for bodies not in the frame: {unknown}")
+        if not checked:
+            arr = np.empty((0, J, getattr(self, "_dims", 3)))
+        return bodies, arr, None if states is None else [st for _, st in checked]
 
     def _check_frame(
         self, positions: ArrayLike, tracking_state: Any, check_inf: bool = True
