@@ -292,7 +292,7 @@ def warmup(names, jobs):
     """Compile the methods' kernels into numba's cache, ahead of the work.
 
     The first run of a compiled method on a machine (or after an upgrade) compiles its
-    kernels: seconds, about ten for the default method. Later processes load them from
+    kernels: seconds, most for the default method. Later processes load them from
     the cache. Run this once after installing, or on each node of a cluster whose cache
     is not shared (NUMBA_CACHE_DIR sets where the cache is).
     """
