@@ -12,7 +12,7 @@ alignment is needed: the truth is known in the track's frame and clock.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +21,35 @@ import numpy as np
 from tobitkf.core.jsonable import to_jsonable
 from tobitkf.evaluation.corruption import LABEL_NAMES, CorruptedTrack, CorruptionModel, corrupt
 from tobitkf.evaluation.evaluate import DEFAULT_METHODS, MethodLike, resolve_method
-from tobitkf.evaluation.metrics import joint_errors, rmse, smoothness, velocity_lag
+from tobitkf.evaluation.metrics import (
+    in_sd_ball,
+    joint_errors,
+    pool_shares,
+    rmse,
+    sample_share,
+    smoothness,
+    velocity_lag,
+)
 
-__all__ = ["BenchmarkRow", "BenchmarkTable", "benchmark_track", "run_benchmark", "seed_spread"]
+__all__ = [
+    "BenchmarkRow",
+    "BenchmarkTable",
+    "benchmark_track",
+    "run_benchmark",
+    "seed_ball",
+    "seed_spread",
+]
 
 
 @dataclass(frozen=True)
 class BenchmarkRow:
-    """One method's RMSE (m) overall and per label, its M (m²) and its hand lag (frames)."""
+    """One method's RMSE (m) overall and per label, its M (m²) and its hand lag (frames).
+
+    in_sd_ball, in_sd_ball_by_label : methods with a posterior sd: the share (0..1) of the
+        samples whose error lies in the 95 % ball of that sd
+        (:func:`~tobitkf.evaluation.metrics.in_sd_ball`), overall and per label; None and
+        empty without an sd.  ``sd_counts``: their numbers of samples (``"all"``, labels).
+    """
 
     method: str
     rmse: float
@@ -36,6 +57,9 @@ class BenchmarkRow:
     p95: float
     smoothness_M: float
     lag_frames: int | None
+    in_sd_ball: float | None = None
+    in_sd_ball_by_label: dict[str, float] = field(default_factory=dict)
+    sd_counts: dict[str, int] = field(default_factory=dict)
 
     def row(self) -> dict[str, Any]:
         """Flat dict in centimetres."""
@@ -46,6 +70,8 @@ class BenchmarkRow:
             "p95_cm": 100 * self.p95,
             "M": self.smoothness_M,
             "lag_frames": self.lag_frames,
+            "in_95_ball_pct": None if self.in_sd_ball is None else 100 * self.in_sd_ball,
+            **{f"{k}_in_95_ball_pct": 100 * v for k, v in self.in_sd_ball_by_label.items()},
         }
 
 
@@ -76,7 +102,7 @@ class BenchmarkTable:
 
     def to_text(self) -> str:
         labels = list(LABEL_NAMES.values())
-        head = ["method", "rmse", *labels, "p95", "M e-3", "lag"]
+        head = ["method", "rmse", *labels, "p95", "M e-3", "lag", "95% ball"]
         lines = ["  ".join(f"{h:>10}" for h in head)]
         for r in self.rows:
             cells = [r.rmse, *[r.rmse_by_label[k] for k in labels], r.p95]
@@ -85,11 +111,14 @@ class BenchmarkTable:
             ]
             txt.append(f"{r.smoothness_M * 1e3:10.3f}")
             txt.append(f"{'-' if r.lag_frames is None else r.lag_frames:>10}")
+            ball = r.in_sd_ball
+            txt.append(f"{'-' if ball is None else f'{100 * ball:.1f}':>10}")
             lines.append("  ".join(txt))
         lines.append(
             "(cm; samples per label: "
             + ", ".join(f"{k} {v}" for k, v in self.label_counts.items())
-            + f"; truth M = {self.truth_M * 1e3:.3f} e-3 m²)"
+            + f"; truth M = {self.truth_M * 1e3:.3f} e-3 m²; 95% ball: % of samples within"
+            " the 95 % ball of the method's sd)"
         )
         return "\n".join(lines)
 
@@ -123,6 +152,12 @@ def benchmark_track(
                 lag = velocity_lag(est, truth, hands, max_lag=10)[0]
             except ValueError:
                 lag = None
+        ball, ball_by, sd_counts = None, {}, {}
+        if getattr(out, "std", None) is not None:
+            hits = in_sd_ball(est, truth, out.std)
+            ball, sd_counts["all"] = sample_share(hits)
+            for code, name in LABEL_NAMES.items():
+                ball_by[name], sd_counts[name] = sample_share(hits, labels == code)
         rows.append(
             BenchmarkRow(
                 method=label,
@@ -131,6 +166,9 @@ def benchmark_track(
                 p95=float(np.percentile(fin, 95)) if fin.size else float("nan"),
                 smoothness_M=smoothness(est),
                 lag_frames=lag,
+                in_sd_ball=ball,
+                in_sd_ball_by_label=ball_by,
+                sd_counts=sd_counts,
             )
         )
     return BenchmarkTable(
@@ -218,5 +256,30 @@ def seed_spread(tables: Sequence[BenchmarkTable]) -> list[dict[str, Any]]:
             v = np.array([r.rmse if key == "rmse" else r.rmse_by_label[key] for r in rows])
             v = v[np.isfinite(v)]
             entry[key] = (float(v.mean()), float(v.std())) if v.size else (np.nan, np.nan)
+        out.append(entry)
+    return out
+
+
+def seed_ball(tables: Sequence[BenchmarkTable]) -> list[dict[str, Any]]:
+    """The share of samples in each method's 95 % sd ball, pooled over seeds (all the
+    seeds' hits over all their samples, so a seed weighs by its samples).
+
+    Returns
+    -------
+    list of dicts, one per method in the first table's order: ``method``,
+    ``in_95_ball_pct`` and ``<label>_in_95_ball_pct`` in percent (NaN where no seed had
+    samples of that label); None for a method without an sd.
+    """
+    out = []
+    for r0 in tables[0].rows:
+        rows = [t.row(r0.method) for t in tables]
+        entry: dict[str, Any] = {"method": r0.method}
+        for key in ("all", *LABEL_NAMES.values()):
+            share = pool_shares(
+                [r.in_sd_ball if key == "all" else r.in_sd_ball_by_label.get(key) for r in rows],
+                [r.sd_counts.get(key, 0) for r in rows],
+            )
+            col = "in_95_ball_pct" if key == "all" else f"{key}_in_95_ball_pct"
+            entry[col] = None if share is None else 100 * share
         out.append(entry)
     return out

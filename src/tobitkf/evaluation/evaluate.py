@@ -46,6 +46,7 @@ from tobitkf.evaluation.metrics import (
     classify_glitches,
     glitch_episodes,
     joint_errors,
+    pool_shares,
     smoothness,
     top_jumps,
 )
@@ -91,7 +92,10 @@ def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
     -------
     list of dicts, one per method (in the first table's order): ``method``, ``rmse_cm``,
     ``<group>_cm``, ``<class>_cm``, ``M`` (sample-weighted mean of the recordings' M),
-    ``max_cm``, ``frames_over``, ``n_samples``.
+    ``max_cm``, ``frames_over``, ``n_samples``, and ``in_95_ball_pct`` and
+    ``<class>_in_95_ball_pct``: the percentage of all the recordings' samples (with an sd)
+    inside the method's 95 % sd ball (:attr:`MethodScore.in_sd_ball`), None for a method
+    without an sd.
     """
     if not tables:
         raise ValueError("pool_scores: no tables")
@@ -126,6 +130,14 @@ def pool_scores(tables: Sequence[EvaluationTable]) -> list[dict[str, Any]]:
         row["max_cm"] = 100 * max((p.max for p in scored), default=float("nan"))
         row["frames_over"] = sum(p.frames_over for p in parts)
         row["n_samples"] = sum(p.counts.get("all", 0) for p in parts)
+        # share in the 95 % sd ball: pooled hits over pooled samples; None without an sd
+        for key in ("all", *GLITCH_CLASS_NAMES.values()):
+            share = pool_shares(
+                [p.in_sd_ball if key == "all" else p.in_sd_ball_by_class.get(key) for p in parts],
+                [p.counts.get("sd" if key == "all" else f"sd:{key}", 0) for p in parts],
+            )
+            col = "in_95_ball_pct" if key == "all" else f"{key}_in_95_ball_pct"
+            row[col] = None if share is None else 100 * share
         out.append(row)
     return out
 
@@ -193,6 +205,7 @@ class EvaluationTable:
             "sust.",
             "M e-3",
             "lag",
+            "95% ball",
         ]
         lines = ["  ".join(f"{c:>8}" for c in cols)]
         for s in self.scores:
@@ -212,11 +225,13 @@ class EvaluationTable:
                 s.rmse_by_class["sustained"] * 100,
                 s.smoothness_M * 1e3,
                 "-" if s.lag_frames is None else s.lag_frames,
+                "-" if s.in_sd_ball is None else 100 * s.in_sd_ball,
             ]
             lines.append("  ".join(_fmt(c) for c in cells))
         lines.append(
             f"{'truth':>8}  M = {self.truth_M * 1e3:.3f} e-3 m²; samples per raw class: "
             + ", ".join(f"{k} {v}" for k, v in self.class_counts.items())
+            + "; 95% ball: % of samples within the 95 % ball of the method's sd"
         )
         if any(s.angles for s in self.scores):
             names = sorted({n for s in self.scores for n in s.angles})
@@ -318,6 +333,7 @@ def evaluate_methods(
                 max_delay=max_delay,
                 truth_angles=truth_angles,
                 clipped_fraction=clipped,
+                std=getattr(out, "std", None),
             )
         )
     ok = np.isfinite(raw_err)

@@ -12,6 +12,8 @@ from typing import Any
 __all__ = ["benchmark_markdown", "evaluation_markdown"]
 
 _GROUPS = ("hands", "arms", "torso", "legs")
+#: the column of the share of samples inside the 95 % ball of the method's own sd
+BALL_HEADER = "in 95% ball"
 _CLASSES = (("fine", "fine"), ("short_glitch", "short"), ("sustained", "sustained"))
 
 
@@ -35,6 +37,30 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     ]
 
 
+def _ball_by_class(
+    rows: Sequence[dict[str, Any]], classes: Sequence[tuple[str, str]], what: str
+) -> list[str]:
+    """The share in the 95 % sd ball per class (``<class>_in_95_ball_pct``), for the
+    methods with an sd; nothing when no method has one."""
+    rows = [r for r in rows if r.get("in_95_ball_pct") is not None]
+    if not rows:
+        return []
+    return [
+        "",
+        f"Samples within the 95 % ball of the method's own standard deviation, % (95 when "
+        f"the sd is honest), by {what}:",
+        "",
+        *_table(
+            ["method", BALL_HEADER, *(n for _, n in classes)],
+            [
+                [r["method"], _num(r["in_95_ball_pct"], 1)]
+                + [_num(r.get(f"{c}_in_95_ball_pct"), 1) for c, _ in classes]
+                for r in rows
+            ],
+        ),
+    ]
+
+
 def evaluation_markdown(
     tables: Sequence[Any],
     labels: Sequence[str],
@@ -54,23 +80,17 @@ def evaluation_markdown(
     Returns
     -------
     The pooled table (RMSE in cm, change against raw, per joint group and per raw glitch
-    class, max, frames with a joint more than 10 cm off), then RMSE per recording, then
-    the warnings.
+    class, max, frames with a joint more than 10 cm off, % of samples in the 95 % ball of
+    the method's sd), the ball's share per raw class (methods with an sd), then RMSE per
+    recording, then the warnings.
     """
     if pooled is None:
-        t = tables[0]
-        pooled = []
-        for s in t.scores:
-            row = {"method": s.method, "rmse_cm": 100 * s.rmse, "max_cm": 100 * s.max,
-                   "frames_over": s.frames_over, "n_samples": s.counts.get("all", 0)}  # fmt: skip
-            for g in _GROUPS:
-                row[f"{g}_cm"] = 100 * s.rmse_groups.get(g, float("nan"))
-            for c, _ in _CLASSES:
-                row[f"{c}_cm"] = 100 * s.rmse_by_class.get(c, float("nan"))
-            pooled.append(row)
+        from tobitkf.evaluation.evaluate import pool_scores
+
+        pooled = pool_scores(tables[:1])
     raw = next((r["rmse_cm"] for r in pooled if r["method"] == "raw"), float("nan"))
     header = ["method", "RMSE", "vs raw", *_GROUPS, *(n for _, n in _CLASSES), "max",
-              "frames > 10 cm"]  # fmt: skip
+              "frames > 10 cm", BALL_HEADER]  # fmt: skip
     rows = [
         [
             r["method"],
@@ -80,6 +100,7 @@ def evaluation_markdown(
             *(_num(r.get(f"{c}_cm")) for c, _ in _CLASSES),
             _num(r.get("max_cm"), 1),
             str(r.get("frames_over", "–")),
+            _num(r.get("in_95_ball_pct"), 1),
         ]
         for r in pooled
     ]
@@ -87,6 +108,7 @@ def evaluation_markdown(
     what = f"{len(tables)} recording{'s' if len(tables) > 1 else ''}, {n:,} samples"
     out = [f"RMSE against motion capture, cm ({what}; pooled over recordings):", ""]
     out += _table(header, rows)
+    out += _ball_by_class(pooled, _CLASSES, "raw class")
     if len(tables) > 1:
         methods = [s.method for s in tables[0].scores]
         out += ["", "RMSE per recording, cm:", ""]
@@ -103,10 +125,23 @@ def evaluation_markdown(
     return "\n".join(out) + "\n"
 
 
-def benchmark_markdown(spread: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
+def benchmark_markdown(
+    spread: Sequence[dict[str, Any]],
+    seeds: Sequence[int],
+    ball: Sequence[dict[str, Any]] | None = None,
+) -> str:
     """Markdown of :func:`~tobitkf.evaluation.benchmark.seed_spread`: RMSE in cm, mean ±
-    standard deviation over the seeds, overall and by glitch label."""
-    return spread_markdown(spread, seeds, total="rmse", unit="cm", scale=100.0)
+    standard deviation over the seeds, overall and by glitch label; then, given ``ball``
+    (:func:`~tobitkf.evaluation.benchmark.seed_ball`), the share of samples in each
+    method's 95 % sd ball, pooled over the seeds, overall and by label."""
+    out = spread_markdown(spread, seeds, total="rmse", unit="cm", scale=100.0)
+    if ball:
+        from tobitkf.evaluation.corruption import LABEL_NAMES
+
+        labels = [(name, name) for name in LABEL_NAMES.values()]
+        lines = _ball_by_class(ball, labels, "label (pooled over the seeds)")
+        out += "\n".join(lines) + "\n" if lines else ""
+    return out
 
 
 def spread_markdown(

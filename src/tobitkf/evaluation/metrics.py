@@ -27,8 +27,11 @@ __all__ = [
     "SUSTAINED_GLITCH",
     "classify_glitches",
     "glitch_episodes",
+    "in_sd_ball",
     "joint_errors",
+    "pool_shares",
     "rmse",
+    "sample_share",
     "smoothness",
     "smoothness_per_component",
     "top_jumps",
@@ -60,6 +63,72 @@ def rmse(errors: ArrayLike, mask: ArrayLike | None = None) -> float:
     if mask is not None:
         ok &= np.asarray(mask, dtype=bool)
     return float(np.sqrt(np.mean(err[ok] ** 2))) if ok.any() else float("nan")
+
+
+def in_sd_ball(
+    estimate: ArrayLike, truth: ArrayLike, std: ArrayLike, level: float = 0.95
+) -> NDArray[np.float64]:
+    """Whether each sample's error lies in the ``level`` ball of its own uncertainty.
+
+    A method that reports a per-axis posterior standard deviation ``sd`` claims that its
+    error ``e`` (D coordinates) is Gaussian with covariance ``sd² I``; then ``|e|² / sd²`` is
+    chi-square with D degrees of freedom, and ``|e|² <= chi2.ppf(level, D) * sd²`` holds with
+    probability ``level``.  The share of samples for which it holds (the mean of this
+    array) is the method's coverage: ``level`` when the sd is honest, less when it is too
+    small (over-confident), more when it is too large.
+
+    Parameters
+    ----------
+    estimate, truth : (T, J, D) positions (D = 3, or 2 for image keypoints).
+    std : (T, J) per-axis standard deviation, same units.
+    level : probability of the ball (default 0.95: chi2.ppf(0.95, 3) = 7.81).
+
+    Returns
+    -------
+    (T, J) float: 1.0 inside, 0.0 outside, NaN where the estimate, the truth or the sd is
+    missing (or the sd is not finite).
+    """
+    from scipy.stats import chi2
+
+    e = np.asarray(estimate, dtype=float)
+    t = np.asarray(truth, dtype=float)
+    sd = np.asarray(std, dtype=float)
+    if e.shape != t.shape or e.ndim != 3 or sd.shape != e.shape[:2]:
+        raise ValueError(
+            f"estimate {e.shape}, truth {t.shape} must be (T, J, D) and std {sd.shape} (T, J)"
+        )
+    sq = np.sum((e - t) ** 2, axis=-1)
+    bound = chi2.ppf(level, e.shape[-1]) * sd**2
+    out = (sq <= bound).astype(float)
+    out[~(np.isfinite(sq) & np.isfinite(bound))] = np.nan
+    return out
+
+
+def sample_share(values: ArrayLike, mask: ArrayLike | None = None) -> tuple[float, int]:
+    """Mean of the finite ``values`` (optionally only where ``mask``) and their number;
+    ``(nan, 0)`` if none (e.g. the share of :func:`in_sd_ball` hits, with the number to
+    weight it by when pooling)."""
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    if mask is not None:
+        ok &= np.asarray(mask, dtype=bool)
+    n = int(ok.sum())
+    return (float(v[ok].mean()) if n else float("nan")), n
+
+
+def pool_shares(shares: Sequence[float | None], counts: Sequence[int]) -> float | None:
+    """Shares of several parts (e.g. recordings) pooled by their numbers of samples:
+    ``Σ n_i s_i / Σ n_i`` over the parts with samples, i.e. the share over all their
+    samples; None when every share is None (no part has the quantity), NaN when no
+    part has a sample."""
+    if all(s is None for s in shares):
+        return None
+    num = den = 0.0
+    for s, n in zip(shares, counts, strict=True):
+        if n and s is not None and np.isfinite(s):
+            num += n * s
+            den += n
+    return num / den if den else float("nan")
 
 
 def glitch_episodes(flags: ArrayLike) -> list[tuple[int, int, int]]:

@@ -21,8 +21,10 @@ from tobitkf.evaluation.angles import (
 )
 from tobitkf.evaluation.metrics import (
     GLITCH_CLASS_NAMES,
+    in_sd_ball,
     joint_errors,
     rmse,
+    sample_share,
     smoothness,
     velocity_lag,
 )
@@ -133,6 +135,11 @@ class MethodScore:
         several recordings with :func:`pool_scores`).
     clipped_fraction : Tobit methods: mean over paired joints of the fraction of frames whose
         measurement the filter's limits clipped (``metadata["diagnostics"]``); else None.
+    in_sd_ball : methods with a posterior sd (``SkeletonSequence.std``): the share (0..1) of
+        the scored samples with an sd whose error lies in the 95 % ball of that sd
+        (:func:`~tobitkf.evaluation.metrics.in_sd_ball`; 0.95 when the sd is honest);
+        None for methods without one. ``in_sd_ball_by_class``: the same per raw class.
+        Their sample numbers are ``counts["sd"]`` and ``counts["sd:<class>"]``.
     """
 
     method: str
@@ -149,6 +156,8 @@ class MethodScore:
     angles: dict[str, AngleScore]
     counts: dict[str, int] = field(default_factory=dict)
     clipped_fraction: float | None = None
+    in_sd_ball: float | None = None
+    in_sd_ball_by_class: dict[str, float] = field(default_factory=dict)
 
     def row(self) -> dict[str, Any]:
         """Flat dict for a table (centimetres, degrees)."""
@@ -163,6 +172,7 @@ class MethodScore:
             "M": self.smoothness_M,
             "lag_frames": self.lag_frames,
             "clipped_fraction": self.clipped_fraction,
+            "in_95_ball_pct": None if self.in_sd_ball is None else 100 * self.in_sd_ball,
         }
         for name, a in self.angles.items():
             r[f"{name}_best_deg"] = a.rmse_best
@@ -190,12 +200,14 @@ def score_estimate(
     max_delay: int = 10,
     truth_angles: Mapping[str, NDArray] | None = None,
     clipped_fraction: float | None = None,
+    std: Any = None,
 ) -> MethodScore:
     """Score one (T, J, 3) estimate against ``truth`` (see :class:`MethodScore`).
 
     ``raw_classes`` is (T, J) from :func:`~tobitkf.evaluation.metrics.classify_glitches`;
     samples labelled with no class code (e.g. -1 where the raw track is missing) count in
-    the overall and group RMSEs but in no per-class RMSE.
+    the overall and group RMSEs but in no per-class RMSE.  ``std`` is the estimate's (T, J)
+    posterior sd (same units), or None for a method without one.
     """
     est = np.asarray(estimate, dtype=float)
     tp = truth.positions
@@ -216,6 +228,14 @@ def score_estimate(
     by_class = {name: rmse(err, raw_classes == code) for code, name in GLITCH_CLASS_NAMES.items()}
     for code, name in GLITCH_CLASS_NAMES.items():
         counts[name] = int((ok & (raw_classes == code)).sum())
+    ball = None
+    ball_by_class: dict[str, float] = {}
+    if std is not None:
+        hits = in_sd_ball(est, tp, std)
+        hits[:, ~truth.paired] = np.nan
+        ball, counts["sd"] = sample_share(hits)
+        for code, name in GLITCH_CLASS_NAMES.items():
+            ball_by_class[name], counts[f"sd:{name}"] = sample_share(hits, raw_classes == code)
     paired_idx = np.flatnonzero(truth.paired)
     M = smoothness(est, paired_idx)
     lag = lagr = lagc = None
@@ -248,4 +268,6 @@ def score_estimate(
         angles=angles,
         counts=counts,
         clipped_fraction=clipped_fraction,
+        in_sd_ball=ball,
+        in_sd_ball_by_class=ball_by_class,
     )

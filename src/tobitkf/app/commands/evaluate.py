@@ -175,9 +175,10 @@ def evaluate(
     if pooled is not None:
         results["pooled"] = pooled
         if not quiet:
-            cols = [c for c in pooled[0] if c != "method"]
+            # the ball's per-class shares are in --json and --markdown (too wide here)
+            cols = [c for c in pooled[0] if c != "method" and not c.endswith("_in_95_ball_pct")]
             scale = {"M": 1e3}  # M is in m²; shown in 1e-3 m²
-            names = {"M": "M e-3"}
+            names = {"M": "M e-3", "in_95_ball_pct": "in 95% ball"}
             _print_table(
                 f"pooled over {len(tables)} recordings (cm)",
                 ["method", *[names.get(c, c.removesuffix("_cm")) for c in cols]],
@@ -292,7 +293,7 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
     if kind == "pose2d":
         _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown)
         return
-    from tobitkf.evaluation.benchmark import run_benchmark, seed_spread
+    from tobitkf.evaluation.benchmark import run_benchmark, seed_ball, seed_spread
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -311,17 +312,22 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
     if as_markdown:
         from tobitkf.evaluation.markdown import benchmark_markdown
 
-        click.echo(benchmark_markdown(spread, list(range(seed, seed + seeds))), nl=False)
+        seed_list = list(range(seed, seed + seeds))
+        click.echo(benchmark_markdown(spread, seed_list, seed_ball(tables)), nl=False)
         return
     if seeds == 1:
         console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
         return
     keys = [k for k in spread[0] if k != "method"]
     rows = [
-        [r["method"], *[f"{100 * r[k][0]:.2f} ± {100 * r[k][1]:.2f}" for k in keys]] for r in spread
+        [r["method"], *[f"{100 * r[k][0]:.2f} ± {100 * r[k][1]:.2f}" for k in keys], b]
+        for r, b in zip(spread, (b["in_95_ball_pct"] for b in seed_ball(tables)), strict=True)
     ]
     _print_table(
-        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}", ["method", *keys], rows
+        f"RMSE (cm), mean ± sd over seeds {seed}..{seed + seeds - 1}; in 95% ball: % of "
+        "samples within the 95 % ball of the method's sd (pooled)",
+        ["method", *keys, "in 95% ball"],
+        rows,
     )
 
 
