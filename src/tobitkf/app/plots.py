@@ -112,6 +112,7 @@ def plot_joint_traces(
     shade: Sequence[tuple[int, int]] = (),
     unit: str = "m",
     shade_label: str = "glitch",
+    bands: Mapping[str, np.ndarray] | None = None,
 ):
     """Per-axis coordinate traces of one joint (like Fig. 1, 2, 4, 6 of the 2020 paper).
 
@@ -123,6 +124,9 @@ def plot_joint_traces(
     shade : frame ranges ``(start, stop)`` to shade (glitch episodes)
     unit : axis label unit
     shade_label : the shading's entry in the legend
+    bands : mapping name -> (T,) per-axis posterior sd of that series: a light band of
+        ±2 sd in the series' colour around its curve on every axis, behind the lines,
+        with the legend entry ``"<name> ± 2 sd"``
 
     Returns
     -------
@@ -139,6 +143,13 @@ def plot_joint_traces(
             lo = times[min(start, len(times) - 1)]
             hi = times[min(max(stop - 1, start), len(times) - 1)]
             ax.axvspan(lo - half, hi + half, color="tab:red", alpha=0.12, lw=0)
+        for name, sd in (bands or {}).items():
+            if name not in series:
+                continue
+            v = np.asarray(series[name], dtype=float)[:, k]
+            half_width = 2.0 * np.asarray(sd, dtype=float)[: len(v)]
+            ax.fill_between(times[: len(v)], v - half_width, v + half_width, color=colours[name],
+                            alpha=0.18, lw=0, zorder=0.5, label=f"{name} ± 2 sd")  # fmt: skip
         for name, values in series.items():
             v = np.asarray(values, dtype=float)
             style = {"lw": 1.6 if name == "truth" else 1.1}
@@ -150,6 +161,14 @@ def plot_joint_traces(
     axes[-1].set_xlabel("time [s]")
     # one legend above the plots (never over a curve), the shading included
     handles, labels = axes[0].get_legend_handles_labels()
+    for name in bands or {}:  # a band's entry right after its curve's
+        band, curve = f"{name} ± 2 sd", name
+        if band in labels and curve in labels:
+            i = labels.index(band)
+            entry = handles.pop(i), labels.pop(i)
+            at = labels.index(curve) + 1
+            handles.insert(at, entry[0])
+            labels.insert(at, entry[1])
     if shade:
         from matplotlib.patches import Patch
 

@@ -21,6 +21,10 @@ GLITCH_THRESHOLD_M = 0.10
 #: published offline smoother, and ours (the tables always list every method)
 FOCUS_METHODS = ("atkf", "kf+rts", "robust", "robust_online")
 
+#: the method whose ±2 sd band the traces draw (the default smoother, when it is traced
+#: and its output has a posterior sd)
+BAND_METHOD = "robust"
+
 
 @dataclass(frozen=True)
 class TableSpec:
@@ -143,20 +147,32 @@ def make_figures(
             series[name] = np.asarray(inp.methods[name].positions, float)[:, j]
         if inp.truth is not None and np.isfinite(inp.truth[:, j]).any():
             series["truth"] = inp.truth[:, j]
+        std = getattr(inp.methods.get(BAND_METHOD), "std", None) if BAND_METHOD in series else None
+        bands = {BAND_METHOD: np.asarray(std, float)[:, j]} if std is not None else {}
         fig = plots.plot_joint_traces(
             times,
             series,
             title=f"{joint_names[j]}",
             shade=plots.episodes(mask[:, j]),
             shade_label=shade_label,
+            bands=bands,
         )
         name = f"traces_{joint_names[j]}.png"
         figures[name] = plots.figure_to_png(fig)
+        band_text = (
+            f" Light band in {BAND_METHOD}'s colour ({BAND_METHOD} ± 2 sd): the {BAND_METHOD} "
+            "curve plus and minus twice its own posterior standard deviation on each axis, "
+            "where it says the true position lies (about 95 % of the time on one axis, if "
+            "the sd is honest)."
+            if bands
+            else ""
+        )
         captions[name] = (
             f"{joint_names[j]}: x, y and z over time, raw track (grey dots) against "
-            f"{', '.join(n for n in series if n != 'raw')}. Shaded: frames where the raw "
-            f"track is more than {100 * GLITCH_THRESHOLD_M:.0f} cm from {against}. "
-            f"{joint_names[j]} is one of the {n_joints} joints with the most such frames."
+            f"{', '.join(n for n in series if n != 'raw')}.{band_text} Shaded red: frames "
+            f"where the raw track is more than {100 * GLITCH_THRESHOLD_M:.0f} cm from "
+            f"{against}. {joint_names[j]} is one of the {n_joints} joints with the most such "
+            "frames."
         )
 
     # skeletons before, during and after the worst glitch
@@ -282,6 +298,7 @@ _HEADERS = {
     "short_glitch_cm": "short glitch",
     "sustained_cm": "sustained",
     "lag_frames": "hand lag (frames)",
+    "in_95_ball_pct": "in 95% ball (%)",
 }
 
 
@@ -372,7 +389,9 @@ def track_report(
                 "Accuracy against ground truth (cm, lag in frames)",
                 [_display_row(r, outputs.get(r["method"])) for r in table.rows()],
                 note="fine / short_glitch / sustained: samples where the RAW track is within "
-                "10 cm of the truth, off for at most 4 frames, or off for longer.",
+                "10 cm of the truth, off for at most 4 frames, or off for longer. "
+                "in 95% ball: % of samples whose 3-D error lies within the 95 % ball of the "
+                "method's own posterior sd (95 if the sd is honest; – : no sd).",
             )
         ]
         angle_rows = [
