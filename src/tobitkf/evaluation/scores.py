@@ -171,8 +171,8 @@ class MethodScore:
             **{f"{k}_cm": 100 * v for k, v in self.rmse_by_class.items()},
             "M": self.smoothness_M,
             "lag_frames": self.lag_frames,
-            "clipped_fraction": self.clipped_fraction,
             "in_95_ball_pct": None if self.in_sd_ball is None else 100 * self.in_sd_ball,
+            "clipped_fraction": self.clipped_fraction,
         }
         for name, a in self.angles.items():
             r[f"{name}_best_deg"] = a.rmse_best
