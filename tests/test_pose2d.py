@@ -137,3 +137,19 @@ def test_cli_pose2d_benchmark():
     assert "| robust |" in res.output and "pixels" in res.output
     res = CliRunner().invoke(app, ["benchmark", "--kind", "pose2d", "--source", "x.bvh"])
     assert res.exit_code != 0 and "generator" in res.output
+
+
+def test_metric_methods_report_their_sd_in_pixels():
+    # the benchmark runs metric methods (tuned in metres) on metre-scaled keypoints and
+    # converts back: the standard deviation goes back to pixels with the positions
+    from tobitkf.evaluation.pose2d import _method
+
+    seqs = [s for _, s in _people()]
+    m = 0.002  # metres per pixel
+    _, fn = _method("atkf", m)
+    out = fn(seqs)
+    ref = tk.smooth([s.replace(positions=s.positions * m, units="m") for s in seqs], "atkf")
+    for o, r in zip(out, ref, strict=True):
+        assert o.units == "px"
+        np.testing.assert_allclose(o.positions, r.positions / m, rtol=1e-12)
+        np.testing.assert_allclose(o.std, r.std / m, rtol=1e-12)

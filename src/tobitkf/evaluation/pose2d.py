@@ -237,7 +237,14 @@ def _method(spec: Any, metres_per_px: float) -> tuple[str, Callable[[Any], Any]]
             seqs = untangle_sequences(list(seqs))[0]  # as tobitkf.smooth does for pixels
             scaled = [s.replace(positions=s.positions * metres_per_px, units="m") for s in seqs]
             out = _fn(scaled)
-            return [o.replace(positions=o.positions / metres_per_px, units="px") for o in out]
+            return [
+                o.replace(
+                    positions=o.positions / metres_per_px,
+                    std=None if o.std is None else o.std / metres_per_px,
+                    units="px",
+                )
+                for o in out
+            ]
 
         return label, in_metres
     return label, fn
