@@ -200,19 +200,6 @@ def _band_add(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: flo
 
 
 @_jit
-def _band_drop(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
-    """Take one copy of ``v`` out of joint ``j``'s band."""
-    m = cnt[j, W_BAND]
-    i = _band_at(val, j, m, v)
-    mult[j, i] -= 1
-    if mult[j, i] == 0:
-        for s in range(i, m - 1):
-            val[j, BONE_WINDOW + s] = val[j, BONE_WINDOW + s + 1]
-            mult[j, s] = mult[j, s + 1]
-        cnt[j, W_BAND] = m - 1
-
-
-@_jit
 def _window_reset(val: np.ndarray, cnt: np.ndarray, j: int) -> None:
     """Empty joint ``j``'s window (its first lengths all go into the band)."""
     for k in range(N_W):
@@ -244,8 +231,15 @@ def _bone_push(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: fl
             cnt[j, W_BELOW] -= 1
         elif old > hi:
             cnt[j, W_ABOVE] -= 1
-        else:
-            _band_drop(val, mult, cnt, j, old)
+        else:  # one copy of it out of the band
+            m = cnt[j, W_BAND]
+            i = _band_at(val, j, m, old)
+            mult[j, i] -= 1
+            if mult[j, i] == 0:
+                for s in range(i, m - 1):
+                    val[j, BONE_WINDOW + s] = val[j, BONE_WINDOW + s + 1]
+                    mult[j, s] = mult[j, s + 1]
+                cnt[j, W_BAND] = m - 1
     else:
         cnt[j, W_N] = n + 1
     val[j, pos] = v
@@ -256,16 +250,6 @@ def _bone_push(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: fl
         cnt[j, W_ABOVE] += 1
     else:
         _band_add(val, mult, cnt, j, v)
-
-
-@_jit
-def _band_rank(val: np.ndarray, mult: np.ndarray, j: int, r: int) -> float:
-    """Joint ``j``'s band length of rank ``r`` (0: its smallest), counting copies."""
-    i = 0
-    while r >= mult[j, i]:
-        r -= mult[j, i]
-        i += 1
-    return val[j, BONE_WINDOW + i]
 
 
 @_jit
@@ -292,10 +276,15 @@ def _window_median(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int) -
                 cnt[j, W_ABOVE] += 1
             else:
                 _band_put(val, mult, cnt, j, v)
-    a = _band_rank(val, mult, j, k - cnt[j, W_BELOW])
+    r = k - cnt[j, W_BELOW]  # the band's value of rank r, counting copies
+    i = 0
+    while r >= mult[j, i]:
+        r -= mult[j, i]
+        i += 1
+    a = val[j, BONE_WINDOW + i]
     if upper == k:
         return a
-    return (a + _band_rank(val, mult, j, upper - cnt[j, W_BELOW])) / 2
+    return (a + (a if r + 1 < mult[j, i] else val[j, BONE_WINDOW + i + 1])) / 2
 
 
 @_jit
