@@ -540,29 +540,37 @@ def test_online_bone_window_is_the_median_of_the_last_600_lengths():
     # the bounded window the online bone gate keeps, against np.median(history[-600:])
     from tobitkf.smoothing import _robust_kernels as k
 
-    rng = np.random.default_rng(6)
-    H = k.BONE_WINDOW
-    val, cnt = np.zeros((2, H)), np.zeros((2, 2), dtype=np.int64)
-    idx = np.zeros((2, 2, H), dtype=np.int32)
-    hist: list[float] = []
-    for i in range(2500):
-        if i in (700, 720):  # a re-lock forgets the lengths learnt so far
-            hist, cnt[1] = [], 0
-        v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
-        v = v + 0.2 if 1500 <= i < 1800 else v  # a drift: the median crosses whole heaps
-        hist.append(v)
-        k._bone_push(val, idx, cnt, 1, v)  # joint 1 of two
-        n = int(cnt[1, 0])
-        assert n == min(len(hist), H)
-        assert k._window_median(val, 1, n) == np.median(hist[-H:])
-        # the two heaps hold exactly the window, the lower half below the upper one
-        lower, upper = val[1, : (n + 1) // 2], -val[1, H // 2 : H // 2 + n // 2]
-        np.testing.assert_array_equal(np.sort(np.r_[lower, upper]), np.sort(hist[-H:]))
-        assert n < 2 or lower.max() <= upper.min()
-        # each slot knows its heap position
-        where = np.r_[: (n + 1) // 2, H // 2 : H // 2 + n // 2]
-        np.testing.assert_array_equal(idx[1, 1, idx[1, 0, where]], where)
-    assert not val[0].any() and not idx[0].any() and not cnt[0].any()
+    H, W = k.BONE_WINDOW, k.BONE_BAND
+    for seed, every in ((6, 1), (7, 3)):
+        rng = np.random.default_rng(seed)
+        st = k.new_state(1, 2, 0)
+        val, mult, cnt = st[5][0], st[6][0], st[7][0]
+        hist: list[float] = []
+        for i in range(3000):
+            if i in (700, 720):  # a re-lock forgets the lengths learnt so far
+                hist = []
+                k._window_reset(val, cnt, 1)
+            v = float(rng.choice([0.3, 0.31, 0.5]) if i % 7 == 0 else rng.normal(0.3, 0.02))
+            v = v + 0.2 if 1500 <= i < 1800 else v  # a drift: the median leaves the band
+            v = 0.4 if 2200 <= i < 2500 else v  # one length many times
+            hist.append(v)
+            k._bone_push(val, mult, cnt, 1, v)  # joint 1 of two
+            n = int(cnt[1, k.W_N])
+            assert n == min(len(hist), H)
+            if i % every:
+                continue
+            assert k._window_median(val, mult, cnt, 1) == np.median(hist[-H:])
+            # the band holds exactly the window's lengths between its bounds, the counts
+            # the others
+            w = np.array(hist[-H:])
+            lo, hi = val[1, k.W_LO], val[1, k.W_HI]
+            assert cnt[1, k.W_BELOW] == (w < lo).sum() and cnt[1, k.W_ABOVE] == (w > hi).sum()
+            m = cnt[1, k.W_BAND]
+            values, copies = np.unique(w[(w >= lo) & (w <= hi)], return_counts=True)
+            np.testing.assert_array_equal(val[1, H : H + m], values)
+            np.testing.assert_array_equal(mult[1, :m], copies)
+            assert m <= W
+        assert not val[0, : k.W_LO].any() and not mult[0].any() and not cnt[0].any()
 
 
 @pytest.mark.parametrize(

@@ -34,6 +34,19 @@ BONE_WINDOW = 600
 BONE_MIN_COUNT = 15
 #: the online bone length is refreshed every this many frames
 BONE_REFRESH = 5
+#: distinct lengths the window keeps sorted about its median (:func:`_bone_push`)
+BONE_BAND = 32
+# the window of one joint: val[:BONE_WINDOW] the ring, then the band, then its bounds
+W_LO = BONE_WINDOW + BONE_BAND
+W_HI = W_LO + 1
+N_WV = W_HI + 1
+# its counts (cnt[k]): lengths, next ring slot, band values, lengths below / above it
+W_N = 0
+W_POS = 1
+W_BAND = 2
+W_BELOW = 3
+W_ABOVE = 4
+N_W = 5
 
 # float state per body and joint (sf[..., k])
 S_LAST_T = 0  # time of the last accepted sample (gate)
@@ -128,113 +141,158 @@ def ou_table(steps: np.ndarray, tau: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ bones
 @_jit
-def _heap_put(val: np.ndarray, idx: np.ndarray, j: int, at: int, v: float, s: int) -> None:
-    """Entry ``v`` of ring slot ``s`` at heap position ``at`` of joint ``j``."""
-    val[j, at] = v
-    idx[j, 0, at] = s
-    idx[j, 1, s] = at
+def _band_at(val: np.ndarray, j: int, m: int, v: float) -> int:
+    """Index of the first of joint ``j``'s ``m`` sorted band values not below ``v``
+    (``m``: none)."""
+    lo, hi = 0, m
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if val[j, BONE_WINDOW + mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @_jit
-def _sift(val: np.ndarray, idx: np.ndarray, j: int, base: int, size: int, i: int) -> None:
-    """Restore the order of joint ``j``'s max-heap ``val[j, base:base + size]`` about
-    position ``i``, moving its entry up or down; ``idx[j, 0]`` (the ring slot of each
-    entry) moves along and ``idx[j, 1]`` (the position of each slot) follows."""
-    v = val[j, base + i]
-    s = idx[j, 0, base + i]
-    while i > 0:
-        p = (i - 1) // 2
-        vp = val[j, base + p]
-        if vp >= v:
-            break
-        _heap_put(val, idx, j, base + i, vp, idx[j, 0, base + p])
-        i = p
-    while True:
-        c = 2 * i + 1
-        if c >= size:
-            break
-        vc = val[j, base + c]
-        if c + 1 < size and val[j, base + c + 1] > vc:
-            c += 1
-            vc = val[j, base + c]
-        if vc <= v:
-            break
-        _heap_put(val, idx, j, base + i, vc, idx[j, 0, base + c])
-        i = c
-    _heap_put(val, idx, j, base + i, v, s)
+def _band_put(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+    """One more copy of ``v`` (within the bounds) in joint ``j``'s band, which has room."""
+    m = cnt[j, W_BAND]
+    i = _band_at(val, j, m, v)
+    if i < m and val[j, BONE_WINDOW + i] == v:
+        mult[j, i] += 1
+        return
+    for s in range(m, i, -1):
+        val[j, BONE_WINDOW + s] = val[j, BONE_WINDOW + s - 1]
+        mult[j, s] = mult[j, s - 1]
+    val[j, BONE_WINDOW + i] = v
+    mult[j, i] = 1
+    cnt[j, W_BAND] = m + 1
 
 
 @_jit
-def _bone_push(val: np.ndarray, idx: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+def _band_add(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
+    """Put ``v`` (within the bounds) in joint ``j``'s band; a full band first hands its
+    distinct value farthest from the median (with its copies) to the count of its side,
+    and ``v`` may then fall outside."""
+    m = cnt[j, W_BAND]
+    if m == BONE_BAND:
+        i = _band_at(val, j, m, v)
+        if not (i < m and val[j, BONE_WINDOW + i] == v):
+            inside = cnt[j, W_N] - 1 - cnt[j, W_BELOW] - cnt[j, W_ABOVE]  # v not counted
+            if 2 * ((cnt[j, W_N] - 1) // 2 - cnt[j, W_BELOW]) < inside:  # median: lower half
+                cnt[j, W_ABOVE] += mult[j, m - 1]
+                val[j, W_HI] = val[j, BONE_WINDOW + m - 2]
+            else:
+                cnt[j, W_BELOW] += mult[j, 0]
+                for s in range(m - 1):
+                    val[j, BONE_WINDOW + s] = val[j, BONE_WINDOW + s + 1]
+                    mult[j, s] = mult[j, s + 1]
+                val[j, W_LO] = val[j, BONE_WINDOW]
+            cnt[j, W_BAND] = m - 1
+            if v < val[j, W_LO]:
+                cnt[j, W_BELOW] += 1
+                return
+            if v > val[j, W_HI]:
+                cnt[j, W_ABOVE] += 1
+                return
+    _band_put(val, mult, cnt, j, v)
+
+
+@_jit
+def _window_reset(val: np.ndarray, cnt: np.ndarray, j: int) -> None:
+    """Empty joint ``j``'s window (its first lengths all go into the band)."""
+    for k in range(N_W):
+        cnt[j, k] = 0
+    val[j, W_LO] = -math.inf
+    val[j, W_HI] = math.inf
+
+
+@_jit
+def _bone_push(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int, v: float) -> None:
     """Append ``v`` to joint ``j``'s window of bone lengths (the oldest leaves when full).
 
-    The window is two max-heaps: ``val[j, :H/2]`` the lower ``(n + 1) // 2`` lengths,
-    ``val[j, H/2:]`` the upper ``n // 2`` ones negated, so the median is read off the two
-    tops and a push costs O(log n). ``cnt[j] = (n, write position)`` runs through the
-    ring slots in arrival order; ``idx[j, 0]`` is the slot of each heap entry and
-    ``idx[j, 1]`` the heap position of each slot. Full window: the new length takes
-    the slot (and heap position) of the oldest one, then at most the two tops swap."""
-    H = val.shape[1]
-    half = H // 2
-    n = cnt[j, 0]
-    pos = cnt[j, 1]
-    cnt[j, 1] = (pos + 1) % H
-    nlo = (n + 1) // 2
-    nhi = n // 2
-    if n == H:
-        w = idx[j, 1, pos]
-        if w < half:
-            val[j, w] = v
-            _sift(val, idx, j, 0, nlo, w)
-        else:
-            val[j, w] = -v
-            _sift(val, idx, j, half, nhi, w - half)
-        a, b = val[j, 0], -val[j, half]
-        if a > b:  # the tops swap sides: lower <= upper again
-            sa, sb = idx[j, 0, 0], idx[j, 0, half]
-            _heap_put(val, idx, j, 0, b, sb)
-            _heap_put(val, idx, j, half, -a, sa)
-            _sift(val, idx, j, 0, nlo, 0)
-            _sift(val, idx, j, half, nhi, 0)
-        return
-    # growing (pos == n): the lower heap takes one more for even n, the upper for odd n;
-    # a length that belongs to the other side goes there, and that side's top crosses
-    if n % 2 == 0:
-        u, s = v, pos
-        if nhi > 0 and v > -val[j, half]:
-            u, s = -val[j, half], idx[j, 0, half]
-            _heap_put(val, idx, j, half, -v, pos)
-            _sift(val, idx, j, half, nhi, 0)
-        _heap_put(val, idx, j, nlo, u, s)
-        _sift(val, idx, j, 0, nlo + 1, nlo)
+    ``val[j, :BONE_WINDOW]`` is the ring of lengths in arrival order (``cnt[j, W_N]`` of
+    them, the next one written at ``cnt[j, W_POS]``). The median is read off the *band*:
+    the distinct lengths between the bounds ``val[j, W_LO]`` and ``val[j, W_HI]``, sorted
+    in ``val[j, BONE_WINDOW:]`` (``cnt[j, W_BAND]`` of them, their multiplicities in
+    ``mult[j]``); the lengths below and above it are only counted (``cnt[j, W_BELOW]``,
+    ``cnt[j, W_ABOVE]``). Most lengths fall outside the band, so a push is mostly two
+    counts (:func:`gate_frame` does those itself: a call with array arguments costs
+    atomic reference counts, more than the push); :func:`_window_median` rebuilds the
+    band about the median from the ring when the median has left it."""
+    n = cnt[j, W_N]
+    pos = cnt[j, W_POS]
+    lo = val[j, W_LO]
+    hi = val[j, W_HI]
+    if n == BONE_WINDOW:
+        old = val[j, pos]
+        if old < lo:
+            cnt[j, W_BELOW] -= 1
+        elif old > hi:
+            cnt[j, W_ABOVE] -= 1
+        else:  # one copy of it out of the band
+            m = cnt[j, W_BAND]
+            i = _band_at(val, j, m, old)
+            mult[j, i] -= 1
+            if mult[j, i] == 0:
+                for s in range(i, m - 1):
+                    val[j, BONE_WINDOW + s] = val[j, BONE_WINDOW + s + 1]
+                    mult[j, s] = mult[j, s + 1]
+                cnt[j, W_BAND] = m - 1
     else:
-        u, s = v, pos
-        if v < val[j, 0]:
-            u, s = val[j, 0], idx[j, 0, 0]
-            _heap_put(val, idx, j, 0, v, pos)
-            _sift(val, idx, j, 0, nlo, 0)
-        _heap_put(val, idx, j, half + nhi, -u, s)
-        _sift(val, idx, j, half, nhi + 1, nhi)
-    cnt[j, 0] = n + 1
+        cnt[j, W_N] = n + 1
+    val[j, pos] = v
+    cnt[j, W_POS] = pos + 1 if pos + 1 < BONE_WINDOW else 0
+    if v < lo:
+        cnt[j, W_BELOW] += 1
+    elif v > hi:
+        cnt[j, W_ABOVE] += 1
+    else:
+        _band_add(val, mult, cnt, j, v)
 
 
 @_jit
-def _window_median(val: np.ndarray, j: int, n: int) -> float:
-    """Median of joint ``j``'s window of ``n`` lengths (:func:`_bone_push`), as np.median
-    takes it: the lower heap's top, or for even ``n`` the mean of the two tops."""
-    lo = val[j, 0]
-    if n % 2 == 1:
-        return lo
-    return (lo + -val[j, val.shape[1] // 2]) / 2
-
-
-@_jit
-def _median(a: np.ndarray, n: int) -> float:
-    """Median of ``a[:n]`` as np.median takes it (the mean of the two middle values for
-    even n); reorders ``a[:n]``. Quickselect with a three-way partition (many equal
-    values, as in hierarchy-converted skeletons, cost nothing)."""
+def _window_median(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int) -> float:
+    """Median of joint ``j``'s window of lengths (:func:`_bone_push`) as np.median takes
+    it (the mean of the two middle lengths for an even count). When a middle rank is not
+    in the band, the band is first rebuilt from the ring: the lengths from
+    ``BONE_BAND // 2 - 2`` ranks below the middle ones to as many above."""
+    n = cnt[j, W_N]
     k = (n - 1) // 2
-    lo, hi = 0, n - 1
+    upper = n // 2  # the upper middle rank (k for an odd count)
+    if k < cnt[j, W_BELOW] or upper >= n - cnt[j, W_ABOVE]:
+        buf = val[j, :n].copy()
+        lo_r = max(k - BONE_BAND // 2 + 2, 0)
+        hi_r = min(upper + BONE_BAND // 2 - 2, n - 1)
+        lo = val[j, W_LO] = _select(buf, 0, n - 1, lo_r)
+        hi = val[j, W_HI] = _select(buf, lo_r, n - 1, hi_r)
+        cnt[j, W_BAND] = cnt[j, W_BELOW] = cnt[j, W_ABOVE] = 0
+        for s in range(n):
+            v = val[j, s]
+            if v < lo:
+                cnt[j, W_BELOW] += 1
+            elif v > hi:
+                cnt[j, W_ABOVE] += 1
+            else:
+                _band_put(val, mult, cnt, j, v)
+    r = k - cnt[j, W_BELOW]  # the band's value of rank r, counting copies
+    i = 0
+    while r >= mult[j, i]:
+        r -= mult[j, i]
+        i += 1
+    a = val[j, BONE_WINDOW + i]
+    if upper == k:
+        return a
+    return (a + (a if r + 1 < mult[j, i] else val[j, BONE_WINDOW + i + 1])) / 2
+
+
+@_jit
+def _select(a: np.ndarray, lo: int, hi: int, k: int) -> float:
+    """The ``k``-th smallest of ``a[lo:hi + 1]`` (``lo <= k <= hi``), left at ``a[k]`` with
+    nothing larger before it and nothing smaller after it (within ``lo..hi``).
+    Quickselect with a three-way partition (many equal values, as in
+    hierarchy-converted skeletons, cost nothing)."""
     while lo < hi:
         mid = (lo + hi) // 2
         p0, p1, p2 = a[lo], a[mid], a[hi]
@@ -256,13 +314,22 @@ def _median(a: np.ndarray, n: int) -> float:
             lo = gt + 1
         else:
             break
+    return a[k]
+
+
+@_jit
+def _median(a: np.ndarray, n: int) -> float:
+    """Median of ``a[:n]`` as np.median takes it (the mean of the two middle values for
+    even n); reorders ``a[:n]``."""
+    k = (n - 1) // 2
+    mid = _select(a, 0, n - 1, k)
     # a[k] is the k-th smallest, everything after it is not smaller
     if n % 2 == 1:
-        return a[k]
+        return mid
     upper = a[k + 1]
     for i in range(k + 2, n):
         upper = min(upper, a[i])
-    return (a[k] + upper) / 2
+    return (mid + upper) / 2
 
 
 @_jit
@@ -309,9 +376,9 @@ def gate_frame(
     last: np.ndarray,  # state (J, 3): last accepted sample
     sf: np.ndarray,  # state (J, N_SF)
     sb: np.ndarray,  # state (J, N_SB)
-    h_val: np.ndarray,  # state (J, BONE_WINDOW): bone-length heaps
-    h_idx: np.ndarray,  # state (J, 2, BONE_WINDOW)
-    h_cnt: np.ndarray,  # state (J, 2)
+    h_val: np.ndarray,  # state (J, N_WV): bone-length windows (_bone_push)
+    h_mult: np.ndarray,  # state (J, BONE_BAND)
+    h_cnt: np.ndarray,  # state (J, N_W)
     acc: np.ndarray,  # out (J,) accepted
 ) -> None:
     """Speed gate, bone gate, chain rule and re-acquisition for one frame (rules 1-4)."""
@@ -321,8 +388,8 @@ def gate_frame(
     tol_rel = pf[P_TOL_REL]
     if online and use_bones and tidx % BONE_REFRESH == 0:
         for j in range(J):
-            if h_cnt[j, 0] >= BONE_MIN_COUNT:
-                sf[j, S_L_CUR] = _window_median(h_val, j, h_cnt[j, 0])
+            if h_cnt[j, W_N] >= BONE_MIN_COUNT:
+                sf[j, S_L_CUR] = _window_median(h_val, h_mult, h_cnt, j)
     for k in range(J):
         j = order[k]
         p = parents[j]
@@ -355,11 +422,25 @@ def gate_frame(
         if online and use_bones:
             # a re-lock means the learnt bone length was wrong: learn it again
             if relock and not (gate_ok and bone_ok and parent_acc):
-                h_cnt[j, 0] = 0
-                h_cnt[j, 1] = 0
+                _window_reset(h_val, h_cnt, j)
                 sf[j, S_L_CUR] = math.nan
             if ok and not is_root and acc[p]:
-                _bone_push(h_val, h_idx, h_cnt, j, blen)
+                # the usual push, done here: the new length and the leaving one outside
+                # the band (_bone_push), only counted
+                n, pos = h_cnt[j, W_N], h_cnt[j, W_POS]
+                lo, hi = h_val[j, W_LO], h_val[j, W_HI]
+                old = h_val[j, pos]
+                full = n == BONE_WINDOW
+                if (blen < lo or blen > hi) and not (full and lo <= old <= hi):
+                    if full:
+                        h_cnt[j, W_BELOW if old < lo else W_ABOVE] -= 1
+                    else:
+                        h_cnt[j, W_N] = n + 1
+                    h_val[j, pos] = blen
+                    h_cnt[j, W_POS] = pos + 1 if pos + 1 < BONE_WINDOW else 0
+                    h_cnt[j, W_BELOW if blen < lo else W_ABOVE] += 1
+                else:
+                    _bone_push(h_val, h_mult, h_cnt, j, blen)
     for j in range(J):
         a = acc[j]
         if a:
@@ -382,9 +463,10 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     off = np.full((B, J, 3), np.nan)
     sf = np.full((B, J, N_SF), np.nan)
     sb = np.zeros((B, J, N_SB), dtype=np.bool_)
-    h_val = np.zeros((B, J, BONE_WINDOW))
-    h_idx = np.zeros((B, J, 2, BONE_WINDOW), dtype=np.int32)
-    h_cnt = np.zeros((B, J, 2), dtype=np.int64)
+    h_val = np.zeros((B, J, N_WV))
+    h_val[..., W_LO], h_val[..., W_HI] = -np.inf, np.inf  # empty windows (_window_reset)
+    h_mult = np.zeros((B, J, BONE_BAND), dtype=np.int64)
+    h_cnt = np.zeros((B, J, N_W), dtype=np.int64)
     x = np.zeros((B, J, 3, 2))
     P = np.zeros((B, J, 2, 2))
     xs_h = np.zeros((K, B, J, 3, 2))
@@ -392,7 +474,7 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
-    return (last, yprev, off, sf, sb, h_val, h_idx, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+    return (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
             clock)  # fmt: skip
 
 
@@ -418,7 +500,7 @@ def gate_run(
     """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    last, sf, sb, h_val, h_idx, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
+    last, sf, sb, h_val, h_mult, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
     for b in range(B):
         for t in range(T):
             has_prev = t > 0
@@ -426,7 +508,7 @@ def gate_run(
             prev = ys[t - 1 if has_prev else t, b]
             gate_frame(ys[t, b], prev, has_prev, times[t], dt_prev, t, parents, order, pj, pf,
                        L_fixed[b], use_bones, online, max_reject, last[b], sf[b], sb[b],
-                       h_val[b], h_idx[b], h_cnt[b], acc[t, b])  # fmt: skip
+                       h_val[b], h_mult[b], h_cnt[b], acc[t, b])  # fmt: skip
     return acc
 
 
@@ -791,7 +873,7 @@ def online_frames(
     """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
     batch runner passes a whole recording, the live stepper one frame per call."""
-    (last, yprev, off, sf, sb, h_val, h_idx, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
+    (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
      clock) = st  # fmt: skip
     B, J = ys.shape[1], ys.shape[2]
     for f in range(ys.shape[0]):
@@ -819,7 +901,7 @@ def online_frames(
             radius.fill(np.nan)
             gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                        no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
-                       h_val[b], h_idx[b], h_cnt[b], gate)  # fmt: skip
+                       h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
             if min_run > 0:
                 confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
                 if has_prev:
