@@ -420,19 +420,25 @@ def test_moving_average_wide_batch_matches_brute_force():
 
 
 @pytest.mark.parametrize(("window", "centered"), [(1, True), (5, True), (4, False), (7, False)])
-def test_moving_average_frame_loop_equals_the_vectorised_form(window, centered):
-    # wide batches run frame by frame over a ring of cumulated rows: bit for bit the
-    # vectorised form (which narrow batches use), also with windows longer than T
-    from tobitkf.smoothing import baselines
+def test_moving_average_columns_are_independent_and_chunks_change_nothing(
+    window, centered, monkeypatch
+):
+    # each column's output is bit for bit the same whichever columns are smoothed with
+    # it, in one piece or a chunk of columns at a time, also with windows longer than T
+    from tobitkf.smoothing import chunks
 
     rng = np.random.default_rng(9)
     for T in (1, 3, 30):
         x = rng.normal(size=(T, 120, 3))
         x[rng.random(x.shape[:-1]) < 0.2] = np.nan
-        wide = moving_average(x, window=window, centered=centered)
+        whole = moving_average(x, window=window, centered=centered)
         narrow = np.stack(
             [moving_average(x[:, j], window=window, centered=centered) for j in range(120)],
             axis=1,
         )
-        assert x[0].size >= baselines._WIDE > x[:, 0][0].size
-        np.testing.assert_array_equal(wide, narrow)
+        np.testing.assert_array_equal(whole, narrow)
+        with monkeypatch.context() as m:
+            m.setattr(chunks, "CHUNK_BYTES", 8 * T * 7)  # 7 columns a chunk
+            np.testing.assert_array_equal(
+                moving_average(x, window=window, centered=centered), whole
+            )

@@ -61,7 +61,9 @@ print(json.dumps(seen))
 
 @pytest.mark.slow
 @pytest.mark.realdata
-@pytest.mark.parametrize("method", ["robust", "robust_online", "atkf", "tkfc", "kinect"])
+@pytest.mark.parametrize(
+    "method", ["robust", "robust_online", "atkf", "tkfc", "kinect", "one_euro"]
+)
 def test_warming_on_the_tiny_recording_covers_real_files(method, tmp_path):
     # in an empty cache: after warm(), real recordings (other lengths, tracking states
     # or none, other formats, live frames) need no further compilation

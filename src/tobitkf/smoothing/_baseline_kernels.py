@@ -1,10 +1,13 @@
-"""Compiled kernel of the Kinect SDK joint filter (numba, ``cache=True``).
+"""Compiled kernels of the Kinect SDK joint filter and the 1€ filter (numba, ``cache=True``).
 
-Imported lazily by :func:`tobitkf.smoothing.baselines.kinect_double_exponential`, so that
-importing tobitkf does not import numba. The kernel is the same arithmetic as the
-documented numpy form of that function, joint by joint, in the same order of operations
-(the norm over the last axis summed in axis order, as numpy does), so the outputs are
-the same numbers; tests/test_baselines.py checks it against an independent loop.
+Imported lazily by :func:`tobitkf.smoothing.baselines.kinect_double_exponential` and
+:func:`~tobitkf.smoothing.baselines.one_euro`, so that importing tobitkf does not import
+numba. Each kernel takes its filter state as arguments and updates it in place: the
+batch functions pass fresh state for a whole recording, the live steppers the state
+they carry from frame to frame, so a stream gives exactly the batch numbers. The
+arithmetic is the documented form of those functions, component by component, in the
+same order of operations (the Kinect norm over the last axis summed in axis order, as
+numpy does); tests/test_baselines.py checks both against independent loops.
 """
 
 from __future__ import annotations
@@ -18,6 +21,58 @@ _NOT_TRACKED = 0
 _INFERRED = 1
 
 
+def kinect_state(M: int, D: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fresh state of :func:`kinect_run` for ``M`` joints of ``D`` axes."""
+    return np.zeros((M, D)), np.zeros((M, D)), np.zeros((M, D)), np.zeros(M, dtype=np.int64)
+
+
+def one_euro_state(M: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fresh state of :func:`one_euro_run` for ``M`` components: estimate (NaN until the
+    first finite sample), derivative estimate, time of the last update, started."""
+    return np.full(M, np.nan), np.zeros(M), np.full(M, np.nan), np.zeros(M, dtype=np.bool_)
+
+
+@njit(cache=True, nogil=True)
+def one_euro_run(
+    x: np.ndarray,
+    t: np.ndarray,
+    mincutoff: float,
+    beta: float,
+    dcutoff: float,
+    xhat: np.ndarray,
+    dxhat: np.ndarray,
+    t_prev: np.ndarray,
+    started: np.ndarray,
+) -> np.ndarray:
+    """``x (T, M)`` at times ``t (T,)`` -> filtered ``(T, M)``, the state ``(M,)`` each
+    (:func:`one_euro_state`) updated in place. A missing (non-finite) sample holds: the
+    output repeats the estimate and the state is left as it is."""
+    T, M = x.shape
+    out = np.empty((T, M))
+    tau_d = 1.0 / (2.0 * np.pi * dcutoff)
+    for k in range(T):
+        tk = t[k]
+        for m in range(M):
+            xk = x[k, m]
+            if math.isfinite(xk):
+                if not started[m]:  # first finite sample: x̂ = x, dx̂ = 0
+                    xhat[m] = xk
+                    t_prev[m] = tk
+                    started[m] = True
+                else:
+                    te = tk - t_prev[m]
+                    dx = (xk - xhat[m]) / te
+                    a_d = 1.0 / (1.0 + tau_d / te)
+                    d = a_d * dx + (1.0 - a_d) * dxhat[m]
+                    fc = mincutoff + beta * abs(d)
+                    a = 1.0 / (1.0 + (1.0 / (2.0 * np.pi * fc)) / te)
+                    xhat[m] = a * xk + (1.0 - a) * xhat[m]
+                    dxhat[m] = d
+                    t_prev[m] = tk
+            out[k, m] = xhat[m]
+    return out
+
+
 @njit(cache=True, nogil=True)
 def kinect_run(
     arr: np.ndarray,
@@ -27,14 +82,18 @@ def kinect_run(
     pred: float,
     jitter0: float,
     maxdev0: float,
+    f_prev: np.ndarray,
+    b_prev: np.ndarray,
+    r_prev: np.ndarray,
+    count: np.ndarray,
 ) -> np.ndarray:
-    """``arr (T, M, D)``, ``state (T, M)`` int8 -> filtered ``(T, M, D)``."""
+    """``arr (T, M, D)``, ``state (T, M)`` int8 -> filtered ``(T, M, D)``.
+
+    Filter state, updated in place (:func:`kinect_state` makes a fresh one): the
+    previous filtered position ``f_prev``, trend ``b_prev`` and raw position ``r_prev``
+    ``(M, D)``, and the valid frames since each joint's (re)start ``count (M,)``."""
     T, M, D = arr.shape
-    out = np.empty_like(arr)
-    f_prev = np.zeros((M, D))
-    b_prev = np.zeros((M, D))
-    r_prev = np.zeros((M, D))
-    count = np.zeros(M, dtype=np.int64)
+    out = np.empty((T, M, D))
     rr = np.empty(D)
     f = np.empty(D)
     b = np.empty(D)

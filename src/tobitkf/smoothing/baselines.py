@@ -33,6 +33,7 @@ from tobitkf.smoothing.params import (
     unit_float,
 )
 from tobitkf.smoothing.registry import SmoothInput, register_method
+from tobitkf.smoothing.timebase import readonly
 
 __all__ = [
     "KINECT_PRESETS",
@@ -61,6 +62,7 @@ KINECT_PRESETS: dict[str, dict[str, float]] = {
         "max_deviation_radius": 0.05,
     },
 }
+_KINECT_PARAMS = ("smoothing", "correction", "prediction", "jitter_radius", "max_deviation_radius")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -287,85 +289,85 @@ def moving_average(x: ArrayLike, window: int = 5, centered: bool = True) -> NDAr
     if centered and window % 2 == 0:
         raise ValueError(f"a centred moving average needs an odd window, got {window}")
     T = arr.shape[0]
-    k = np.arange(T)
-    # window of frame k: cumulated rows lo[k] .. hi[k]; lo[k] = max(k - back, 0)
-    back = window // 2 if centered else window - 1
-    hi = np.clip(k + window // 2 + 1, 0, T) if centered else k + 1
-    if arr[0].size >= _WIDE:
-        return _moving_average_frames(arr, hi, back).reshape(shape)
-    finite = np.isfinite(arr)
-    # sums and counts, each formed in place from its cumulated array (peak memory: two
-    # arrays of the input's size besides it; the same operations as total = c[hi] - c[lo])
-    total = _window_diff(_cumsum0(np.where(finite, arr, 0.0)), hi, back)
-    count = _window_diff(_cumsum0(finite.astype(float)), hi, back)
+    back = window // 2 if centered else window - 1  # frames before k in its window
+    flat = arr.reshape(T, -1)
+    # the columns are independent: a large batch goes a chunk of columns at a time, so
+    # the working arrays stay small
+    parts = chunks(flat.shape[1], T * flat.itemsize)
+    if len(parts) == 1:
+        return _window_means(flat, window, back).reshape(shape)
+    out = np.empty(flat.shape)
+    for c in parts:
+        out[:, c] = _window_means(flat[:, c], window, back)
+    return out.reshape(shape)
+
+
+def _window_means(x: NDArray[np.float64], window: int, back: int) -> NDArray[np.float64]:
+    """:func:`moving_average` of the columns of ``x (T, m)``: frame k's window is frames
+    ``k - back .. k - back + window - 1`` (those inside the series).
+
+    Each window's finite samples are added up from its oldest frame to its newest,
+    starting from 0 (a missing sample adds 0), then divided by their count: the
+    arithmetic of the live stepper (:class:`MovingAverageStepper`), which adds its ring
+    of the last frames in the same order, so a stream gives exactly these numbers. (A
+    difference of cumulated sums would make each output depend, in its last bits, on
+    the whole history before its window.)"""
+    T = x.shape[0]
+    finite = np.isfinite(x)
+    vals = np.where(finite, x, 0.0)
+    total = np.zeros(x.shape)
+    count = np.zeros(x.shape)
+    for offset in range(-back, window - back):  # oldest first: frame k + offset
+        lo, hi = max(0, -offset), min(T, T - offset)  # the frames k it reaches
+        if lo < hi:
+            total[lo:hi] += vals[lo + offset : hi + offset]
+            count[lo:hi] += finite[lo + offset : hi + offset]
+    return _means(total, count)
+
+
+def _means(total: NDArray[np.float64], count: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``total / count`` in place, NaN where the count is 0."""
     empty = count <= 0
     np.maximum(count, 1.0, out=count)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        np.divide(total, count, out=total)
+    np.divide(total, count, out=total)
     total[empty] = np.nan
-    return total.reshape(shape)
+    return total
 
 
-def _moving_average_frames(
-    arr: NDArray[np.float64], hi: NDArray[np.intp], back: int
-) -> NDArray[np.float64]:
-    """:func:`moving_average` frame by frame for wide batches: the same cumulated sums,
-    differences and quotient, with only the cumulated rows a window spans kept (a ring),
-    so the memory is the output's."""
-    T = arr.shape[0]
-    lo_all = np.maximum(np.arange(T) - back, 0)
-    width = min(int(np.max(hi - lo_all)) + 2, T + 1)  # rows one window spans, + 1
-    ring_v = np.empty((width, *arr.shape[1:]))
-    ring_c = np.empty((width, *arr.shape[1:]))
-    ring_v[0] = 0.0
-    ring_c[0] = 0.0
-    out = np.empty(arr.shape)
-    done = 0  # cumulated rows 0 .. done are formed
-    for k in range(T):
-        while done < hi[k]:
-            prev, row = done % width, (done + 1) % width
-            finite = np.isfinite(arr[done])
-            np.add(ring_v[prev], np.where(finite, arr[done], 0.0), out=ring_v[row])
-            np.add(ring_c[prev], finite, out=ring_c[row], casting="unsafe")
-            done += 1
-        h, lo = hi[k] % width, max(k - back, 0) % width
-        total = ring_v[h] - ring_v[lo]
-        count = ring_c[h] - ring_c[lo]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out[k] = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
-    return out
+class MovingAverageStepper:
+    """Live form of the trailing ``moving_average`` (``centered=False``): a ring of the
+    last ``window`` frames (finite samples, and which were finite), added up oldest
+    first as :func:`_window_means` does. Work per frame: ``window`` additions."""
 
+    def __init__(self, topology: Any, up_axis: int, inferred_noise_factor: float, *,
+                 window: int, centered: bool) -> None:  # fmt: skip
+        if centered:
+            raise ValueError("a centred moving average looks ahead: it cannot run live")
+        self.window = int(window)
+        self._vals: NDArray[np.float64] | None = None
+        self._finite: NDArray[np.bool_] | None = None
+        self._n = 0  # frames seen
 
-def _window_diff(csum: NDArray[np.float64], hi: NDArray[np.intp], back: int) -> NDArray[np.float64]:
-    """``csum[hi] - csum[lo]`` with ``lo[k] = max(k - back, 0)``, subtracted in place."""
-    T = hi.shape[0]
-    out = csum[hi]
-    if back < T:
-        out[back:] -= csum[: T - back]
-    out[: min(back, T)] -= csum[0]
-    return out
-
-
-#: batch width (values per frame) from which frame-by-frame loops beat numpy's
-#: reductions over the leading axis
-_WIDE = 256
-
-
-def _cumsum0(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``concatenate([0, cumsum(a, axis=0)])``."""
-    out = np.empty((a.shape[0] + 1, *a.shape[1:]))
-    out[0] = 0.0
-    np.cumsum(a, axis=0, out=out[1:])
-    return out
+    def step(self, ys: Any, missing: Any, states: Any, dt: float) -> NDArray[np.float64]:
+        """Smooth one frame: ys (B, J, 3) NaN where missing; returns (B, J, 3)."""
+        if self._vals is None:
+            self._vals = np.empty((self.window, *ys.shape))
+            self._finite = np.empty((self.window, *ys.shape), dtype=bool)
+        vals, finite, w = self._vals, self._finite, self.window
+        slot = self._n % w
+        np.isfinite(ys, out=finite[slot])
+        vals[slot] = np.where(finite[slot], ys, 0.0)
+        self._n += 1
+        n = min(self._n, w)
+        total = np.zeros(ys.shape)
+        count = np.zeros(ys.shape)
+        for i in range(self._n - n, self._n):  # oldest first
+            total += vals[i % w]
+            count += finite[i % w]
+        return _means(total, count)
 
 
 # --------------------------------------------------------------------------- 1€ filter
-
-
-def _one_euro_alpha(cutoff: NDArray[np.float64], te: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Smoothing factor ``alpha = 1 / (1 + tau / Te)``, ``tau = 1 / (2 pi fc)`` (Casiez 2012)."""
-    tau = 1.0 / (2.0 * np.pi * cutoff)
-    return 1.0 / (1.0 + tau / te)
 
 
 def one_euro(
@@ -422,33 +424,25 @@ def one_euro(
         raise ValueError(f"beta must be >= 0, got {beta!r}")
     T = arr.shape[0]
     t = _time_steps(T, fps, timestamps)
-    out = np.full_like(arr, np.nan)
-    xhat = np.full(arr.shape[1:], np.nan)
-    dxhat = np.zeros(arr.shape[1:])
-    t_prev = np.full(arr.shape[1:], np.nan)
-    started = np.zeros(arr.shape[1:], dtype=bool)
-    for k in range(T):
-        xk = arr[k]
-        ok = np.isfinite(xk)
-        first = ok & ~started
-        upd = ok & started
-        # first finite sample: x̂ = x, dx̂ = 0
-        xhat = np.where(first, xk, xhat)
-        t_prev = np.where(first, t[k], t_prev)
-        if upd.any():
-            te = np.where(upd, t[k] - t_prev, 1.0)
-            dx = np.where(upd, (xk - xhat) / te, 0.0)
-            a_d = _one_euro_alpha(np.asarray(dcutoff, dtype=float), te)
-            new_dxhat = a_d * dx + (1.0 - a_d) * dxhat
-            fc = mincutoff + beta * np.abs(new_dxhat)
-            a = _one_euro_alpha(fc, te)
-            new_xhat = a * np.where(upd, xk, 0.0) + (1.0 - a) * np.where(upd, xhat, 0.0)
-            xhat = np.where(upd, new_xhat, xhat)
-            dxhat = np.where(upd, new_dxhat, dxhat)
-            t_prev = np.where(upd, t[k], t_prev)
-        started |= ok
-        out[k] = xhat
-    return out.reshape(shape)
+    params = (float(mincutoff), float(beta), float(dcutoff))
+    return _one_euro_call(arr.reshape(T, -1), t, params, None).reshape(shape)
+
+
+def _one_euro_call(
+    x: NDArray[np.float64], t: NDArray[np.float64], params: tuple[float, float, float],
+    state: tuple[NDArray[Any], ...] | None,
+) -> NDArray[np.float64]:  # fmt: skip
+    """``one_euro_run`` (compiled, component by component) of ``x (T, M)`` from ``state``
+    (None: a fresh one), its inputs as one type (read-only, C-ordered) in the batch and
+    in the live stepper alike, so that numba compiles one version."""
+    # numba, imported here: not at import tobitkf
+    from tobitkf.smoothing._baseline_kernels import one_euro_run, one_euro_state
+
+    if state is None:
+        state = one_euro_state(x.shape[1])
+    xs = readonly(np.ascontiguousarray(x, dtype=float))
+    ts = readonly(np.ascontiguousarray(t, dtype=float))
+    return one_euro_run(xs, ts, *params, *state)
 
 
 # --------------------------------------------------------------------------- Kinect SDK filter
@@ -507,23 +501,9 @@ def kinect_double_exponential(
     -------
     ndarray, same shape as ``x``
     """
-    if preset not in KINECT_PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; valid presets: {sorted(KINECT_PRESETS)}")
-    p = dict(KINECT_PRESETS[preset])
-    for name, value in (
-        ("smoothing", smoothing),
-        ("correction", correction),
-        ("prediction", prediction),
-        ("jitter_radius", jitter_radius),
-        ("max_deviation_radius", max_deviation_radius),
-    ):
-        if value is not None:
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
-            p[name] = float(value)
-    for name in ("smoothing", "correction"):
-        if p[name] > 1:
-            raise ValueError(f"{name} must be in [0, 1], got {p[name]!r}")
+    consts = _kinect_constants(
+        preset, smoothing, correction, prediction, jitter_radius, max_deviation_radius
+    )
     arr = np.asarray(x, dtype=float)
     if arr.ndim < 2:
         raise ValueError(f"x must have shape (T, *batch, 3), got {arr.shape}")
@@ -538,19 +518,104 @@ def kinect_double_exponential(
                 f"tracking_state must have shape {(T, *batch)} to match x {arr.shape}, "
                 f"got {state.shape}"
             )
-    s, c, pred = p["smoothing"], p["correction"], p["prediction"]
-    jitter0 = max(1e-4, p["jitter_radius"])
-    maxdev0 = p["max_deviation_radius"]
     if not arr.size:  # nothing to filter
         return arr.copy()
-    # compiled, joint by joint (numba, imported here: not at import tobitkf)
-    from tobitkf.smoothing._baseline_kernels import kinect_run
-
     D = arr.shape[-1]
-    flat = np.ascontiguousarray(arr.reshape(T, -1, D))
-    st = np.ascontiguousarray(np.asarray(state).reshape(T, -1), dtype=np.int8)
-    out = kinect_run(flat, st, float(s), float(c), float(pred), float(jitter0), float(maxdev0))
+    out = _kinect_call(arr.reshape(T, -1, D), state.reshape(T, -1), consts, None)
     return out.reshape(arr.shape)
+
+
+def _kinect_constants(preset: str, *values: float | None) -> tuple[float, ...]:
+    """``(s, c, P, J, M)`` of :func:`kinect_double_exponential`: the preset's values
+    overridden by ``values`` (smoothing, correction, prediction, jitter radius, maximum
+    deviation radius; None keeps the preset's), checked; J at least 0.1 mm."""
+    if preset not in KINECT_PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; valid presets: {sorted(KINECT_PRESETS)}")
+    p = dict(KINECT_PRESETS[preset])
+    for name, value in zip(_KINECT_PARAMS, values, strict=True):
+        if value is not None:
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+            p[name] = float(value)
+    for name in ("smoothing", "correction"):
+        if p[name] > 1:
+            raise ValueError(f"{name} must be in [0, 1], got {p[name]!r}")
+    jitter0 = max(1e-4, p["jitter_radius"])
+    return (p["smoothing"], p["correction"], p["prediction"], jitter0, p["max_deviation_radius"])
+
+
+def _kinect_call(
+    x: NDArray[np.float64], states: NDArray[Any], consts: tuple[float, ...],
+    state: tuple[NDArray[Any], ...] | None,
+) -> NDArray[np.float64]:  # fmt: skip
+    """``kinect_run`` (compiled, joint by joint) of ``x (T, M, D)`` with tracking states
+    ``(T, M)`` from filter ``state`` (None: a fresh one), its inputs as one type
+    (read-only, C-ordered) in the batch and in the live stepper alike."""
+    # numba, imported here: not at import tobitkf
+    from tobitkf.smoothing._baseline_kernels import kinect_run, kinect_state
+
+    if state is None:
+        state = kinect_state(*x.shape[1:])
+    xs = readonly(np.ascontiguousarray(x, dtype=float))
+    st = readonly(np.ascontiguousarray(states, dtype=np.int8))
+    return kinect_run(xs, st, *(float(v) for v in consts), *state)
+
+
+# --------------------------------------------------------------------------- live steppers
+
+
+class OneEuroStepper:
+    """Live form of :func:`one_euro`: the compiled filter run on one frame from the state
+    (estimate, derivative estimate, time of the last update, started) of the last one.
+
+    The frame times are the cumulated steps, summed as the batch runner's
+    ``np.cumsum(steps)`` does, so a stream gives exactly the batch numbers.
+    """
+
+    def __init__(self, topology: Any, up_axis: int, inferred_noise_factor: float, *,
+                 mincutoff: float, beta: float, dcutoff: float) -> None:  # fmt: skip
+        self.params = (float(mincutoff), float(beta), float(dcutoff))
+        self._state: tuple[NDArray[Any], ...] | None = None
+        self._time = 0.0
+
+    def step(self, ys: Any, missing: Any, states: Any, dt: float) -> NDArray[np.float64]:
+        """Smooth one frame: ys (B, J, 3) NaN where missing; returns (B, J, 3)."""
+        if self._state is None:
+            from tobitkf.smoothing._baseline_kernels import one_euro_state
+
+            self._state = one_euro_state(ys.size)
+        self._time = self._time + float(dt)
+        out = _one_euro_call(ys.reshape(1, -1), np.array([self._time]), self.params, self._state)
+        return out.reshape(ys.shape)
+
+
+class KinectStepper:
+    """Live form of ``kinect``: the compiled SDK filter run on one frame from the state
+    (previous filtered, trend and raw positions, frames since the restart) of the last
+    one. It reads the positions as given (``uses_positions``): a NOT_TRACKED joint
+    passes its raw position through, as in the batch."""
+
+    uses_positions = True
+
+    def __init__(self, topology: Any, up_axis: int, inferred_noise_factor: float,
+                 **params: Any) -> None:  # fmt: skip
+        self.consts = _kinect_constants(params["preset"], *(params[n] for n in _KINECT_PARAMS))
+        self._state: tuple[NDArray[Any], ...] | None = None
+
+    def step(self, ys: Any, missing: Any, states: Any, dt: float,
+             positions: Any = None) -> NDArray[np.float64]:  # fmt: skip
+        """Smooth one frame of ``positions`` (B, J, 3) (default ``ys``) with their tracking
+        ``states`` (B, J) or None (all tracked); returns (B, J, 3)."""
+        pos = ys if positions is None else positions
+        B, J, D = pos.shape
+        if self._state is None:
+            from tobitkf.smoothing._baseline_kernels import kinect_state
+
+            self._state = kinect_state(B * J, D)
+        st = np.full((1, B * J), 2, np.int8) if states is None else states.reshape(1, B * J)
+        return _kinect_call(pos.reshape(1, B * J, D), st, self.consts, self._state).reshape(
+            pos.shape
+        )
 
 
 # --------------------------------------------------------------------------- registration
@@ -620,6 +685,7 @@ register_method(
     validators={"mincutoff": positive_float, "beta": nonneg_float, "dcutoff": positive_float},
     description="1-euro filter (Casiez et al. 2012)",
     causal=True,
+    live=OneEuroStepper,
 )
 register_method(
     "kinect",
@@ -642,6 +708,7 @@ register_method(
     },
     description="Kinect SDK double-exponential joint filter",
     causal=True,
+    live=KinectStepper,
 )
 register_method(
     "moving_average",
@@ -651,4 +718,5 @@ register_method(
     description="moving average (centred, or trailing: centered=False)",
     check=_check_moving_average,
     causal=lambda params: not params["centered"],
+    live=MovingAverageStepper,
 )

@@ -1,11 +1,13 @@
 """Live smoothing: one skeleton frame at a time, the same numbers as :func:`smooth`.
 
 :class:`LiveSmoother` runs any *causal* registered method on a stream. A method that
-registered a per-frame stepper (the Kalman-type ones: constant work per frame) runs
-through it; any other causal method runs by re-running its batch form on the frames
-seen so far and returning the last frame, which is exact by causality but costs time
-proportional to the stream's length. Fed the frames of a recording one by one, it
-returns what ``smooth(recording, method)`` returns (tested), without looking ahead.
+registered a per-frame stepper (every built-in causal one: the Kalman-type methods,
+``robust_online``, the 1€ and Kinect filters, the trailing moving average; constant
+work per frame) runs through it; any other causal method runs by re-running its batch
+form on the frames seen so far and returning the last frame, which is exact by
+causality but costs time proportional to the stream's length. Fed the frames of a
+recording one by one, it returns what ``smooth(recording, method)`` returns (tested),
+without looking ahead.
 
 Bodies may come and go: give a frame as a mapping ``{body_id: (J, 3) positions}``. A new
 id starts a new filter; an id missing from a frame is predicted (its prediction is
@@ -62,6 +64,8 @@ def live_methods() -> list[str]:
 class _HistoryStepper:
     """A causal method without a stepper: re-run it on the history, keep the last frame."""
 
+    uses_positions = True
+
     def __init__(self, spec: MethodSpec, topology: Topology, up_axis: int, factor: float,
                  params: dict[str, Any]) -> None:  # fmt: skip
         self.spec, self.topology, self.up_axis, self.factor = spec, topology, up_axis, factor
@@ -75,11 +79,16 @@ class _HistoryStepper:
         self._frames.append((pos.copy(), ys.copy(), missing.copy(), states, dt))
         pos, y, miss, st, steps = zip(*self._frames, strict=True)
         step_arr = np.asarray(steps, dtype=float)
+        if all(s is None for s in st):
+            states_arr = None
+        else:  # states in some frames only (bodies keyed by id): None means all TRACKED
+            tracked = np.full(missing.shape, TrackingState.TRACKED, np.int8)
+            states_arr = np.stack([tracked if s is None else s for s in st])
         inp = SmoothInput(
             positions=np.stack(pos),
             ys=np.stack(y),
             missing=np.stack(miss),
-            tracking_state=None if st[0] is None else np.stack(st),
+            tracking_state=states_arr,
             steps=step_arr,
             times=np.concatenate([[0.0], np.cumsum(step_arr[1:])]),
             is_reference=bool(np.allclose(step_arr, REFERENCE_DT, rtol=1e-9, atol=0.0)),
@@ -321,7 +330,7 @@ class LiveSmoother:
         dims = batch_pos.shape[-1]
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
-        if isinstance(stepper, _HistoryStepper):
+        if getattr(stepper, "uses_positions", False):  # the positions as given, too
             out = stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
         else:
             out = stepper.step(ys, missing, batch_states, dt)

@@ -127,7 +127,11 @@ class SmoothOutput:
 
 
 class LiveStepper(Protocol):
-    """One live stream of a method: ``step`` is called once per frame, in order."""
+    """One live stream of a method: ``step`` is called once per frame, in order.
+
+    A stepper that reads the positions as given (not only ``ys``, where NOT_TRACKED
+    samples are NaN) sets a class attribute ``uses_positions = True``: ``step`` then
+    also receives ``positions=`` (B, J, 3)."""
 
     def step(
         self,
