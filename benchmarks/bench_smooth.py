@@ -8,7 +8,9 @@ Data: (a) 12 synthetic Kinect V2 recordings x 1500 frames x 25 joints (the built
 motions with the Kinect-like corruption: jitter, spikes, sustained failures, inferred
 drift), smoothed in one ``tk.smooth`` call (a list of sequences: the bodies go to the
 method together); (b) the three KIMORE recordings in ../shared/data/kimore (when present),
-one call each. For each method it prints joint-frames per second and the ratio to the
+one call each; (c) for the default offline and causal methods only, 200 recordings x
+3000 frames x 25 joints in one call (``--big``). For each method it prints joint-frames
+per second and the ratio to the
 package's Kalman core, ``tk.kalman_filter`` (3-D random walk per joint, A = H = I, on the
 same positions, all joints of all recordings as one batch), measured in the same run.
 The first call of each method is not timed (it loads, or compiles, the robust kernels).
@@ -75,6 +77,10 @@ def main() -> None:
     ap.add_argument("--files", type=int, default=1000, help="small recordings for files/s")
     ap.add_argument("--markdown", action="store_true", help="end with the README's tables")
     ap.add_argument("--live-only", action="store_true", help="only the live latency")
+    ap.add_argument(
+        "--big", type=int, default=200,
+        help="recordings of the large batch (x 3000 frames) for the default pair (0: none)",
+    )  # fmt: skip
     args = ap.parse_args()
     if args.live_only:
         live_latency(args.live_frames)
@@ -111,10 +117,35 @@ def main() -> None:
         for name, sec, rate in rows:
             print(f"{name:>14} {sec:9.3f} {rate:15,.0f} {rate / base:8.3f}")
             table.append((label, name, rate, rate / base))
+    if args.big > 0:
+        table += big_batch(args.big, args.repeats, names)
     live = live_latency(args.live_frames)
     files = files_per_second(args.files) if args.files > 0 else {}
     if args.markdown:
         print_markdown(table, live, files, args.files)
+
+
+def big_batch(n: int, repeats: int, names: list[str]) -> list[tuple[str, str, float, float]]:
+    """The default offline and causal methods on ``n`` recordings x 3000 frames x 25
+    joints in one ``tk.smooth`` call (the 12 synthetic recordings repeated), against the
+    core on the same positions as one (3000, n x 25, 3) batch. Timed once (a call takes
+    seconds); the core's best rate of the runs before and after each is the reference."""
+    from tobitkf.smoothing.api import DEFAULT_LIVE_METHOD, DEFAULT_METHOD
+
+    base = synthetic_recordings(12, 3000)
+    seqs = [base[i % 12] for i in range(n)]
+    batch = np.concatenate([s.positions for s in seqs], axis=1)
+    jf = batch.shape[0] * batch.shape[1]
+    label = f"{n} x 3000 x 25 synthetic"
+    rows = []
+    core = core_rate([batch], repeats)
+    for name in (m for m in (DEFAULT_METHOD, DEFAULT_LIVE_METHOD) if m in names):
+        tk.smooth(seqs[:2], method=name)  # kernels loaded
+        sec = best_of(lambda name=name: tk.smooth(seqs, method=name), 1)
+        core = max(core, core_rate([batch], repeats))
+        rows.append((label, name, jf / sec, jf / sec / core))
+        print(f"{label}: {name} {jf / sec:,.0f} joint-frames/s, {jf / sec / core:.3f} of the core")
+    return rows
 
 
 def _latencies(live: tk.LiveSmoother, frames: list, states: list | None) -> np.ndarray:
