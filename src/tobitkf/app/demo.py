@@ -28,6 +28,8 @@ def _header(column: str) -> str:
         return "M (1e-3 m²)"
     if column == "lag_frames":
         return "lag (frames)"
+    if column.endswith("in_95_ball_pct"):  # the sd's coverage (docs/evaluation.md)
+        return column.removesuffix("in_95_ball_pct").replace("_", " ") + "in 95% ball (%)"
     return column.removesuffix("_cm").replace("_", " ")
 
 
