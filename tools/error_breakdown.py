@@ -39,7 +39,9 @@ import sys
 import numpy as np
 
 import tobitkf as tk
+from tobitkf.evaluation.angles import joint_angle
 from tobitkf.evaluation.evaluate import evaluate_paths
+from tobitkf.evaluation.metrics import glitch_episodes
 from tobitkf.smoothing.robust import ROBUST_DEFAULTS
 
 ONLINE = "robust_online"
@@ -98,12 +100,6 @@ def _first_child(parents, j: int) -> int:
     return min(kids) if kids else -1
 
 
-def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Angle between vectors ``(..., D)``, radians (NaN where either is missing)."""
-    cos = np.sum(u * v, axis=-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
-    return np.arccos(np.clip(cos, -1.0, 1.0))
-
-
 def glitch_geometry(raw: np.ndarray, accepted: np.ndarray, rejected: np.ndarray, topology,
                     dt: float, near: float) -> dict:  # fmt: skip
     """Geometry of the raw track ``(T, J, D)`` at the accepted glitches ``(T, J)`` (bool;
@@ -121,15 +117,15 @@ def glitch_geometry(raw: np.ndarray, accepted: np.ndarray, rejected: np.ndarray,
             continue
         for a, b in ((root, c1), (c1, c2)):  # long segments: upper arm / thigh, forearm / shank
             seg = raw[:, b] - raw[:, a]
-            rate = _angle(seg[1:], seg[:-1]) / dt
+            rate = np.radians(joint_angle(seg[1:], 0.0, seg[:-1])) / dt  # between frames
             kept = ~(rejected[1:, a] | rejected[1:, b] | rejected[:-1, a] | rejected[:-1, b])
             hit = (accepted[1:, a] | accepted[1:, b]) & kept & np.isfinite(rate)
             segrate.append(rate[hit])
         if root not in arms or c3 < 0:
             continue
         hit = accepted[:, [c1, c2, c3]].any(axis=1) & ~rejected[:, [root, c1, c2, c3]].any(axis=1)
-        interior = _angle(raw[:, root] - raw[:, c1], raw[:, c2] - raw[:, c1])
-        bend = _angle(raw[:, c2] - raw[:, c1], raw[:, c3] - raw[:, c2])
+        interior = joint_angle(raw[:, root], raw[:, c1], raw[:, c2])
+        bend = 180.0 - joint_angle(raw[:, c1], raw[:, c2], raw[:, c3])  # 0: hand straight
         elbow.append(interior[hit & np.isfinite(interior)])
         wrist.append(bend[hit & np.isfinite(bend)])
     close = 0
@@ -138,19 +134,17 @@ def glitch_geometry(raw: np.ndarray, accepted: np.ndarray, rejected: np.ndarray,
         d = np.linalg.norm(raw[t, other] - raw[t, j], axis=-1)
         close += int(np.any(d < near))
     return {
-        "elbow_min": _ext(np.concatenate(elbow) if elbow else [], np.min, deg=True),
-        "wrist_max": _ext(np.concatenate(wrist) if wrist else [], np.max, deg=True),
+        "elbow_min": _ext(np.concatenate(elbow) if elbow else [], np.min),
+        "wrist_max": _ext(np.concatenate(wrist) if wrist else [], np.max),
         "rate_max": _ext(np.concatenate(segrate) if segrate else [], np.max),
         "near": close,
         "n": int(accepted.sum()),
     }
 
 
-def _ext(values, fn, deg: bool = False) -> float:
+def _ext(values, fn) -> float:
     v = np.asarray(values, dtype=float)
-    if not v.size:
-        return float("nan")
-    return float(np.degrees(fn(v)) if deg else fn(v))
+    return float(fn(v)) if v.size else float("nan")
 
 
 def breakdown(track: str, truth: str, method: str, threshold: float,
@@ -304,12 +298,10 @@ def _rms(sse: float, n: int, digits: int = 1) -> str:
 def _frames(name: str, flags: np.ndarray, most: int = 3) -> str:
     """``"WristLeft 63 (frames 0–9, 117–169)"``: count and runs of flagged frames (0-based;
     the longest ``most`` runs, in time order)."""
-    idx = np.flatnonzero(flags)
-    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
-    runs = [(int(r[0]), int(r[-1])) for r in np.split(idx, cuts)]
+    runs = [(a, b - 1) for _, a, b in glitch_episodes(flags[:, None])]
     shown = sorted(sorted(runs, key=lambda r: r[0] - r[1])[:most])
     text = ", ".join(f"{a}–{b}" if b > a else f"{a}" for a, b in shown)
-    return f"{name} {idx.size} (frames {text}{', …' if len(runs) > most else ''})"
+    return f"{name} {int(flags.sum())} (frames {text}{', …' if len(runs) > most else ''})"
 
 
 def _num(x: float) -> str:
