@@ -114,12 +114,9 @@ def warm(method: str, on_compile: Callable[[], Any] | None = None) -> float:
     ``on_compile`` is called once, when the first kernel starts compiling (e.g. to tell
     the person waiting why).
     """
+    from numba.core import event
+
     get_method(method)  # an unknown name fails here, with the list of methods
-    try:
-        from numba.core import event
-    except ImportError:  # pragma: no cover - numba is a dependency; a method may not use it
-        _run_tiny(method)
-        return 0.0
     watch = _Watch(on_compile)
     with event.install_listener("numba:compile", watch.listener()):
         _run_tiny(method)
@@ -145,11 +142,15 @@ def warmup(
     for name in names:
         get_method(name)
     done: dict[str, float] = {}
+
+    def record(name: str, seconds: float) -> None:
+        done[name] = seconds
+        if on_done is not None:
+            on_done(name, seconds)
+
     if jobs <= 1 or len(names) <= 1:
         for name in names:
-            done[name] = warm(name)
-            if on_done is not None:
-                on_done(name, done[name])
+            record(name, warm(name))
         return done
     # user methods registered in this process would be unknown to a fresh one
     builtin = [n for n in names if get_method(n).run.__module__.startswith("tobitkf.")]
@@ -160,13 +161,8 @@ def warmup(
     with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
         futures = [pool.submit(_warm_in_child, n) for n in builtin]
         for fut in as_completed(futures):
-            name, seconds = fut.result()
-            done[name] = seconds
-            if on_done is not None:
-                on_done(name, seconds)
+            record(*fut.result())
     for name in names:
-        if name not in done:
-            done[name] = warm(name)
-            if on_done is not None:
-                on_done(name, done[name])
+        if name not in done:  # registered in this process only: warmed here
+            record(name, warm(name))
     return {n: done[n] for n in names}
