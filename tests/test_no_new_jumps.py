@@ -83,7 +83,7 @@ def test_the_causal_guard_spreads_a_snap_back_over_frames():
     est = ys.copy()
     est[3:, 0, 0, 0] = 1.2
     var = np.full((T, 1, 1), 1e-4)
-    g.guard_frames(ys, missing, est, var, *g.new_state(1, 1, D))
+    g.guard_frames(ys, missing, est, var, 0, *g.new_state(1, 1, D))
     # catches up 0.1 m per frame: 0.3, 0.4, ... (exact arithmetic)
     np.testing.assert_allclose(est[:, 0, 0, 0], [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
     # the shift from the filter's estimate is added to the variance, per axis

@@ -186,12 +186,15 @@ def test_smoother_without_coloured_error_is_the_two_state_smoother():
     for b in range(B):  # smooth_run with the first sample's: the same there
         for j in range(J):
             rvar[np.flatnonzero(np.isfinite(yk[:, b, j, 0]))[0], b, j] = 1e-4
-    v2, v3 = np.empty((T, B, J)), np.empty((T, B, J))
-    two = rk.ou_smooth_run(yk, rvar, steps, pj, TAU, v2)
+    v2, two = np.empty((T, B, J)), np.empty((T, B, J, 3))
+    rk.ou_smooth_run(yk, rvar, steps, pj, TAU, two, v2, 0)
     q = np.ascontiguousarray(np.broadcast_to(qj, (T, B, J)))
-    three = nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), v3)
-    np.testing.assert_allclose(three, two, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(v3, v2, rtol=1e-9, atol=1e-15)
+    # written as a chunk (bodies 1..B) of larger outputs: the other bodies stay untouched
+    v3, three = np.full((T, B + 2, J), -7.0), np.full((T, B + 2, J, 3), -7.0)
+    nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1)
+    assert (three[:, [0, B + 1]] == -7.0).all() and (v3[:, [0, B + 1]] == -7.0).all()
+    np.testing.assert_allclose(three[:, 1 : B + 1], two, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v3[:, 1 : B + 1], v2, rtol=1e-9, atol=1e-15)
 
 
 def test_smoother_equals_a_brute_force_rts_smoother():
@@ -204,9 +207,9 @@ def test_smoother_equals_a_brute_force_rts_smoother():
     rvar = np.where(rng.random((T, 1, 1)) < 0.3, 9e-4, 1e-4)
     q = np.where(rng.random((T, 1, 1)) < 0.3, 13.0, 2.0)  # the floor in gaps: per step
     sc2, tau_c = 2e-4, 0.07
-    var = np.empty((T, 1, 1))
-    est = nk.smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c),
-                        var)  # fmt: skip
+    var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
+    nk.smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c), est,
+                  var, 0)  # fmt: skip
     for i in range(3):
         want, wvar = _brute_smooth(y[:, 0, 0, i], rvar[:, 0, 0], steps, q[:, 0, 0], sc2, TAU,
                                    tau_c)  # fmt: skip

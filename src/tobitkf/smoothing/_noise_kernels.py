@@ -148,6 +148,12 @@ def loglik(
     return -0.5 * (n * math.log(2 * math.pi) + sl + se), n
 
 
+#: columns (joints of all bodies) a block of :func:`smooth_run` runs together: time is
+#: the outer loop inside a block, so each frame reads a contiguous row of the block
+#: instead of one joint's samples at a stride of the whole batch
+SMOOTH_BLOCK = 16
+
+
 @_jit
 def smooth_run(
     yk: np.ndarray,  # (T, B, J, 3) samples, NaN = none
@@ -157,47 +163,72 @@ def smooth_run(
     sc2: np.ndarray,  # (B, J) coloured-error variance
     tau: float,
     tau_c: np.ndarray,  # (B, J) coloured-error correlation time
-    var: np.ndarray,  # out (T, B, J): smoothed variance of x
-) -> np.ndarray:
+    est: np.ndarray,  # out (T, B0, J, 3): the estimate of x
+    var: np.ndarray,  # out (T, B0, J): its smoothed variance
+    b0: int,  # body b is written at b0 + b (a chunk of the bodies of est and var)
+) -> None:
     """Kalman filter + RTS smoother of the three-state model per joint: the estimate of
-    ``x``, ``(T, B, J, 3)`` (NaN for a joint without samples). As
+    ``x`` and its variance (NaN for a joint without samples). As
     :func:`~tobitkf.smoothing._robust_kernels.ou_smooth_run`, the filter starts at frame
     0 from the joint's first sample (velocity 0, the prior of :func:`filter_sums` with
     the ``q`` of that sample's frame) and is then updated with every sample, the first
-    one included: with ``sc2 = 0`` it is exactly that two-state smoother."""
+    one included: with ``sc2 = 0`` it is exactly that two-state smoother.
+
+    The joints run in blocks of :data:`SMOOTH_BLOCK`, time outside, the block's joints
+    inside (each joint's arithmetic is that of its own recursion: the blocks change
+    the memory order, not the numbers). The RTS pass recomputes each prediction from
+    the stored filtered moments with the forward pass's expressions (same values)
+    instead of storing it."""
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
-    est = np.full((T, B, J, 3), np.nan)
-    X = np.empty((T, 3, 3))  # filtered (x, v, c) per axis
-    Xp = np.empty((T, 3, 3))  # predicted
-    Pf = np.empty((T, 6))  # filtered p00, p01, p02, p11, p12, p22
-    Pp = np.empty((T, 6))  # predicted
+    N = B * J
+    W = min(SMOOTH_BLOCK, N)
+    X = np.empty((T, W, 9))  # filtered (x, v, c) of each axis
+    Pf = np.empty((T, W, 6))  # filtered p00, p01, p02, p11, p12, p22
+    S = np.empty((W, 6))  # smoothed covariance of the frame after
+    first = np.empty(W, dtype=np.int64)
+    cb = np.empty(W, dtype=np.int64)  # each column's body, joint, tau_c index and sc2
+    cj = np.empty(W, dtype=np.int64)
+    cu = np.empty(W, dtype=np.int64)
+    cs = np.empty(W)
     ou = ou_table(steps, tau)
-    phis = np.empty(T)
-    last_tc = math.nan
-    for b in range(B):
-        for j in range(J):
-            sj, tc = sc2[b, j], tau_c[b, j]
-            if tc != last_tc:
+    # exp(-dt / tau_c) per frame for each distinct tau_c (a few per body: one per region)
+    tcs = np.unique(tau_c.ravel())
+    phis = np.empty((T, tcs.shape[0]))
+    for u in range(tcs.shape[0]):
+        for t in range(T):
+            phis[t, u] = math.exp(-steps[t] / tcs[u])
+    ui = np.searchsorted(tcs, tau_c.ravel())
+    for n0 in range(0, N, W):
+        w_n = min(W, N - n0)
+        for w in range(w_n):
+            b, j = (n0 + w) // J, (n0 + w) % J
+            cb[w], cj[w], cu[w], cs[w] = b, j, ui[n0 + w], sc2[b, j]
+            first[w] = -1
+        for t in range(T):  # each column's first sample
+            for w in range(w_n):
+                if first[w] < 0 and math.isfinite(yk[t, cb[w], cj[w], 0]):
+                    first[w] = t
+        for w in range(w_n):
+            if first[w] < 0:  # no sample: no estimate
                 for t in range(T):
-                    phis[t] = math.exp(-steps[t] / tc)
-                last_tc = tc
-            for t in range(T):
-                var[t, b, j] = math.nan
-            first = -1
-            for t in range(T):
-                if math.isfinite(yk[t, b, j, 0]):
-                    first = t
-                    break
-            if first < 0:
-                continue
-            p00 = p01 = p02 = p11 = p12 = p22 = 0.0
-            for t in range(T):
-                if t > 0:
-                    a, rr, phi, qq = ou[t, 0], ou[t, 1], phis[t], q[t, b, j]
+                    var[t, b0 + cb[w], cj[w]] = math.nan
                     for i in range(3):
-                        X[t, i, 0] = X[t - 1, i, 0] + a * X[t - 1, i, 1]
-                        X[t, i, 1] = rr * X[t - 1, i, 1]
-                        X[t, i, 2] = phi * X[t - 1, i, 2]
+                        est[t, b0 + cb[w], cj[w], i] = math.nan
+        for t in range(T):
+            a, rr = ou[t, 0], ou[t, 1]
+            for w in range(w_n):
+                fw = first[w]
+                if fw < 0:
+                    continue
+                b, j, sj = cb[w], cj[w], cs[w]
+                if t > 0:
+                    phi, qq = phis[t, cu[w]], q[t, b, j]
+                    for i in range(3):
+                        X[t, w, 3 * i] = X[t - 1, w, 3 * i] + a * X[t - 1, w, 3 * i + 1]
+                        X[t, w, 3 * i + 1] = rr * X[t - 1, w, 3 * i + 1]
+                        X[t, w, 3 * i + 2] = phi * X[t - 1, w, 3 * i + 2]
+                    p00, p01, p02 = Pf[t - 1, w, 0], Pf[t - 1, w, 1], Pf[t - 1, w, 2]
+                    p11, p12, p22 = Pf[t - 1, w, 3], Pf[t - 1, w, 4], Pf[t - 1, w, 5]
                     n00 = p00 + 2 * a * p01 + a * a * p11 + qq * ou[t, 2]
                     n01 = rr * (p01 + a * p11) + qq * ou[t, 3]
                     n11 = rr * rr * p11 + qq * ou[t, 4]
@@ -206,55 +237,61 @@ def smooth_run(
                     n22 = phi * phi * p22 + sj * (1.0 - phi * phi)
                     p00, p01, p11, p02, p12, p22 = n00, n01, n11, n02, n12, n22
                 else:  # frame 0 starts at the first sample, as ou_smooth_run
-                    v0 = q[first, b, j] * tau / 2 if math.isfinite(tau) else 1.0
-                    rf = rvar[first, b, j]
+                    v0 = q[fw, b, j] * tau / 2 if math.isfinite(tau) else 1.0
+                    rf = rvar[fw, b, j]
                     p00, p01, p02, p11, p12, p22 = rf + sj, 0.0, -sj, v0, 0.0, sj
                     for i in range(3):
-                        X[t, i, 0] = yk[first, b, j, i]
-                        X[t, i, 1] = 0.0
-                        X[t, i, 2] = 0.0
-                for i in range(3):
-                    for k in range(3):
-                        Xp[t, i, k] = X[t, i, k]
-                Pp[t, 0], Pp[t, 1], Pp[t, 2] = p00, p01, p02
-                Pp[t, 3], Pp[t, 4], Pp[t, 5] = p11, p12, p22
+                        X[t, w, 3 * i] = yk[fw, b, j, i]
+                        X[t, w, 3 * i + 1] = 0.0
+                        X[t, w, 3 * i + 2] = 0.0
                 if math.isfinite(yk[t, b, j, 0]):
                     h0 = p00 + p02
                     h1 = p01 + p12
                     h2 = p02 + p22
-                    S = h0 + h2 + rvar[t, b, j]
-                    k0, k1, k2 = h0 / S, h1 / S, h2 / S
+                    Sv = h0 + h2 + rvar[t, b, j]
+                    iS = 1.0 / Sv
+                    k0, k1, k2 = h0 * iS, h1 * iS, h2 * iS
                     for i in range(3):
-                        e = yk[t, b, j, i] - X[t, i, 0] - X[t, i, 2]
-                        X[t, i, 0] += k0 * e
-                        X[t, i, 1] += k1 * e
-                        X[t, i, 2] += k2 * e
+                        e = yk[t, b, j, i] - X[t, w, 3 * i] - X[t, w, 3 * i + 2]
+                        X[t, w, 3 * i] += k0 * e
+                        X[t, w, 3 * i + 1] += k1 * e
+                        X[t, w, 3 * i + 2] += k2 * e
                     p00, p01, p02 = p00 - k0 * h0, p01 - k0 * h1, p02 - k0 * h2
                     p11, p12, p22 = p11 - k1 * h1, p12 - k1 * h2, p22 - k2 * h2
-                Pf[t, 0], Pf[t, 1], Pf[t, 2] = p00, p01, p02
-                Pf[t, 3], Pf[t, 4], Pf[t, 5] = p11, p12, p22
-            # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
-            # S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ; (s..) the smoothed covariance
-            s00, s01, s02, s11, s12, s22 = p00, p01, p02, p11, p12, p22
+                Pf[t, w, 0], Pf[t, w, 1], Pf[t, w, 2] = p00, p01, p02
+                Pf[t, w, 3], Pf[t, w, 4], Pf[t, w, 5] = p11, p12, p22
+        # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
+        # S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ; X becomes the smoothed state
+        for w in range(w_n):
+            if first[w] < 0:
+                continue
+            b, j = cb[w], cj[w]
+            for k in range(6):
+                S[w, k] = Pf[T - 1, w, k]
             for i in range(3):
-                est[T - 1, b, j, i] = X[T - 1, i, 0]
-            var[T - 1, b, j] = s00
-            for t in range(T - 2, -1, -1):
-                a, rr, phi = ou[t + 1, 0], ou[t + 1, 1], phis[t + 1]
-                f00, f01, f02, f11, f12, f22 = Pf[t, 0], Pf[t, 1], Pf[t, 2], Pf[t, 3], \
-                    Pf[t, 4], Pf[t, 5]  # fmt: skip
+                est[T - 1, b0 + b, j, i] = X[T - 1, w, 3 * i]
+            var[T - 1, b0 + b, j] = S[w, 0]
+        for t in range(T - 2, -1, -1):
+            a, rr = ou[t + 1, 0], ou[t + 1, 1]
+            for w in range(w_n):
+                if first[w] < 0:
+                    continue
+                b, j, sj = cb[w], cj[w], cs[w]
+                phi, qq = phis[t + 1, cu[w]], q[t + 1, b, j]
+                f00, f01, f02 = Pf[t, w, 0], Pf[t, w, 1], Pf[t, w, 2]
+                f11, f12, f22 = Pf[t, w, 3], Pf[t, w, 4], Pf[t, w, 5]
+                # the prediction of frame t + 1, as the forward pass computed it
+                n00 = f00 + 2 * a * f01 + a * a * f11 + qq * ou[t + 1, 2]
+                n01 = rr * (f01 + a * f11) + qq * ou[t + 1, 3]
+                n11 = rr * rr * f11 + qq * ou[t + 1, 4]
+                n02 = phi * (f02 + a * f12)
+                n12 = phi * rr * f12
+                n22 = phi * phi * f22 + sj * (1.0 - phi * phi)
                 # M = P_t Aᵀ (rows i, columns k)
                 m00, m01, m02 = f00 + a * f01, rr * f01, phi * f02
                 m10, m11, m12 = f01 + a * f11, rr * f11, phi * f12
                 m20, m21, m22 = f02 + a * f12, rr * f12, phi * f22
-                i00, i01, i02, i11, i12, i22 = _inv3s(
-                    Pp[t + 1, 0],
-                    Pp[t + 1, 1],
-                    Pp[t + 1, 2],
-                    Pp[t + 1, 3],
-                    Pp[t + 1, 4],
-                    Pp[t + 1, 5],
-                )
+                i00, i01, i02, i11, i12, i22 = _inv3s(n00, n01, n02, n11, n12, n22)
                 g00 = m00 * i00 + m01 * i01 + m02 * i02
                 g01 = m00 * i01 + m01 * i11 + m02 * i12
                 g02 = m00 * i02 + m01 * i12 + m02 * i22
@@ -264,8 +301,8 @@ def smooth_run(
                 g20 = m20 * i00 + m21 * i01 + m22 * i02
                 g21 = m20 * i01 + m21 * i11 + m22 * i12
                 g22 = m20 * i02 + m21 * i12 + m22 * i22
-                d00, d01, d02 = s00 - Pp[t + 1, 0], s01 - Pp[t + 1, 1], s02 - Pp[t + 1, 2]
-                d11, d12, d22 = s11 - Pp[t + 1, 3], s12 - Pp[t + 1, 4], s22 - Pp[t + 1, 5]
+                d00, d01, d02 = S[w, 0] - n00, S[w, 1] - n01, S[w, 2] - n02
+                d11, d12, d22 = S[w, 3] - n11, S[w, 4] - n12, S[w, 5] - n22
                 # E = G D
                 e00 = g00 * d00 + g01 * d01 + g02 * d02
                 e01 = g00 * d01 + g01 * d11 + g02 * d12
@@ -276,22 +313,22 @@ def smooth_run(
                 e20 = g20 * d00 + g21 * d01 + g22 * d02
                 e21 = g20 * d01 + g21 * d11 + g22 * d12
                 e22 = g20 * d02 + g21 * d12 + g22 * d22
-                s00 = f00 + e00 * g00 + e01 * g01 + e02 * g02
-                s01 = f01 + e00 * g10 + e01 * g11 + e02 * g12
-                s02 = f02 + e00 * g20 + e01 * g21 + e02 * g22
-                s11 = f11 + e10 * g10 + e11 * g11 + e12 * g12
-                s12 = f12 + e10 * g20 + e11 * g21 + e12 * g22
-                s22 = f22 + e20 * g20 + e21 * g21 + e22 * g22
-                var[t, b, j] = s00
+                S[w, 0] = f00 + e00 * g00 + e01 * g01 + e02 * g02
+                S[w, 1] = f01 + e00 * g10 + e01 * g11 + e02 * g12
+                S[w, 2] = f02 + e00 * g20 + e01 * g21 + e02 * g22
+                S[w, 3] = f11 + e10 * g10 + e11 * g11 + e12 * g12
+                S[w, 4] = f12 + e10 * g20 + e11 * g21 + e12 * g22
+                S[w, 5] = f22 + e20 * g20 + e21 * g21 + e22 * g22
+                var[t, b0 + b, j] = S[w, 0]
                 for i in range(3):
-                    u0 = X[t + 1, i, 0] - Xp[t + 1, i, 0]
-                    u1 = X[t + 1, i, 1] - Xp[t + 1, i, 1]
-                    u2 = X[t + 1, i, 2] - Xp[t + 1, i, 2]
-                    X[t, i, 0] += g00 * u0 + g01 * u1 + g02 * u2
-                    X[t, i, 1] += g10 * u0 + g11 * u1 + g12 * u2
-                    X[t, i, 2] += g20 * u0 + g21 * u1 + g22 * u2
-                    est[t, b, j, i] = X[t, i, 0]
-    return est
+                    x0, x1, x2 = X[t, w, 3 * i], X[t, w, 3 * i + 1], X[t, w, 3 * i + 2]
+                    u0 = X[t + 1, w, 3 * i] - (x0 + a * x1)
+                    u1 = X[t + 1, w, 3 * i + 1] - rr * x1
+                    u2 = X[t + 1, w, 3 * i + 2] - phi * x2
+                    X[t, w, 3 * i] = x0 + (g00 * u0 + g01 * u1 + g02 * u2)
+                    X[t, w, 3 * i + 1] = x1 + (g10 * u0 + g11 * u1 + g12 * u2)
+                    X[t, w, 3 * i + 2] = x2 + (g20 * u0 + g21 * u1 + g22 * u2)
+                    est[t, b0 + b, j, i] = X[t, w, 3 * i]
 
 
 @_jit
@@ -306,8 +343,9 @@ def _inv3s(a: float, b: float, c: float, d: float, e: float, f: float) -> tuple:
     det = a * c00 + b * c01 + c * c02
     scale = a * a + d * d + f * f
     if abs(det) > 1e-14 * scale * math.sqrt(scale):
-        return (c00 / det, c01 / det, c02 / det, (a * f - c * c) / det, (b * c - a * e) / det,
-                (a * d - b * b) / det)  # fmt: skip
+        idet = 1.0 / det
+        return (c00 * idet, c01 * idet, c02 * idet, (a * f - c * c) * idet,
+                (b * c - a * e) * idet, (a * d - b * b) * idet)  # fmt: skip
     dd = a * d - b * b
     if f <= 0.0 and dd != 0.0:
         return d / dd, -b / dd, 0.0, a / dd, 0.0, 0.0

@@ -335,24 +335,27 @@ def _median(a: np.ndarray, n: int) -> float:
 @_jit
 def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """Median over frames of each joint's distance to its parent, ``(B, J)`` (NaN for
-    roots and for bones never seen: frames with a non-finite end are left out)."""
+    roots and for bones never seen: frames with a non-finite end are left out). Frames
+    are the outer loop (one contiguous read each), the lengths gathered per bone."""
     T, B, J = pos.shape[0], pos.shape[1], pos.shape[2]
     out = np.full((B, J), np.nan)
-    buf = np.empty(T)
-    for b in range(B):
-        for j in range(J):
-            p = parents[j]
-            if p < 0:
-                continue
-            n = 0
-            for t in range(T):
+    buf = np.empty((B, J, T))
+    cnt = np.zeros((B, J), dtype=np.int64)
+    for t in range(T):
+        for b in range(B):
+            for j in range(J):
+                p = parents[j]
+                if p < 0:
+                    continue
                 d = _dist(pos[t, b, j, 0], pos[t, b, j, 1], pos[t, b, j, 2],
                           pos[t, b, p, 0], pos[t, b, p, 1], pos[t, b, p, 2])  # fmt: skip
                 if math.isfinite(d):
-                    buf[n] = d
-                    n += 1
-            if n > 0:
-                out[b, j] = _median(buf, n)
+                    buf[b, j, cnt[b, j]] = d
+                    cnt[b, j] += 1
+    for b in range(B):
+        for j in range(J):
+            if cnt[b, j] > 0:
+                out[b, j] = _median(buf[b, j], cnt[b, j])
     return out
 
 
@@ -484,32 +487,75 @@ def new_work(B: int, J: int) -> tuple:
 
 
 @_jit
-def gate_run(
+def gate_both(
     ys: np.ndarray,
     times: np.ndarray,
+    times_back: np.ndarray,  # -times[::-1]: the backward pass's clock
     parents: np.ndarray,
     order: np.ndarray,
     pj: np.ndarray,
     pf: np.ndarray,
     L_fixed: np.ndarray,  # (B, J)
     use_bones: bool,
-    online: bool,
     max_reject: float,
+    two_pass: bool,
     st: tuple,  # new_state(B, J, 0)
+    st_back: tuple,  # another, for the backward pass
 ) -> np.ndarray:
-    """Causal accept / reject decision (gate rules 1-4) for every sample, ``(T, B, J)``."""
+    """The offline gate: forwards in time and (``two_pass``) backwards, a sample accepted
+    when both passes accept it, ``(T, B, J)``. The backward pass is the forward one on
+    the time-reversed recording (clock ``times_back``), read in place."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    last, sf, sb, h_val, h_mult, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
-    for b in range(B):
-        for t in range(T):
-            has_prev = t > 0
-            dt_prev = times[t] - times[t - 1] if has_prev else math.inf
-            prev = ys[t - 1 if has_prev else t, b]
-            gate_frame(ys[t, b], prev, has_prev, times[t], dt_prev, t, parents, order, pj, pf,
-                       L_fixed[b], use_bones, online, max_reject, last[b], sf[b], sb[b],
-                       h_val[b], h_mult[b], h_cnt[b], acc[t, b])  # fmt: skip
+    gate_pass(ys, times, parents, order, pj, pf, L_fixed, use_bones, False, max_reject, st,
+              False, acc)  # fmt: skip
+    if two_pass:
+        gate_pass(ys, times_back, parents, order, pj, pf, L_fixed, use_bones, False,
+                  max_reject, st_back, True, acc)  # fmt: skip
     return acc
+
+
+@_jit
+def gate_pass(
+    ys: np.ndarray,
+    times: np.ndarray,  # the pass's clock: frame i of the pass is at times[i]
+    parents: np.ndarray,
+    order: np.ndarray,
+    pj: np.ndarray,
+    pf: np.ndarray,
+    L_fixed: np.ndarray,
+    use_bones: bool,
+    online: bool,
+    max_reject: float,
+    st: tuple,
+    reverse: bool,  # frame i of the pass is frame T - 1 - i, and acc is ANDed
+    acc: np.ndarray,  # out (T, B, J)
+) -> None:
+    """Causal accept / reject decision (gate rules 1-4) for every sample into ``acc``:
+    :func:`gate_frame` over time, frames outside and bodies inside (a frame of every
+    body is one contiguous read)."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    last, sf, sb, h_val, h_mult, h_cnt = st[0], st[3], st[4], st[5], st[6], st[7]
+    out = np.empty((B, J), dtype=np.bool_)
+    for i in range(T):
+        t = T - 1 - i if reverse else i
+        has_prev = i > 0
+        dt_prev = times[i] - times[i - 1] if has_prev else math.inf
+        tp = t
+        if has_prev:
+            tp = t + 1 if reverse else t - 1
+        for b in range(B):
+            gate_frame(ys[t, b], ys[tp, b], has_prev, times[i], dt_prev, i, parents, order,
+                       pj, pf, L_fixed[b], use_bones, online, max_reject, last[b], sf[b],
+                       sb[b], h_val[b], h_mult[b], h_cnt[b], out[b])  # fmt: skip
+        if reverse:
+            for b in range(B):
+                for j in range(J):
+                    acc[t, b, j] = acc[t, b, j] and out[b, j]
+        else:
+            for b in range(B):
+                for j in range(J):
+                    acc[t, b, j] = out[b, j]
 
 
 # ------------------------------------------------------------------------------ offline rules
@@ -698,19 +744,61 @@ def carry_frame(
 def carry_run(
     ys: np.ndarray, acc: np.ndarray, parents: np.ndarray, order: np.ndarray, reverse: bool
 ) -> tuple:
-    """:func:`carry_frame` over time (backwards in time with ``reverse``)."""
+    """:func:`carry_frame` over time (backwards in time with ``reverse``): the
+    pseudo-measurements ``(T, B, J, 3)`` and their radii ``(T, B, J)``, NaN where none."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     pseudo = np.full((T, B, J, 3), np.nan)
     radius = np.full((T, B, J), np.nan)
-    off = np.full((J, 3), np.nan)
+    off = np.full((B, J, 3), np.nan)
     anchor = np.empty((J, 3))
-    for b in range(B):
-        off.fill(np.nan)
-        for i in range(T):
-            t = T - 1 - i if reverse else i
-            carry_frame(ys[t, b], acc[t, b], parents, order, off, anchor, pseudo[t, b],
+    for i in range(T):
+        t = T - 1 - i if reverse else i
+        for b in range(B):
+            carry_frame(ys[t, b], acc[t, b], parents, order, off[b], anchor, pseudo[t, b],
                         radius[t, b])  # fmt: skip
     return pseudo, radius
+
+
+@_jit
+def carry_both(
+    ys: np.ndarray,  # (T, B, J, 3)
+    acc: np.ndarray,  # (T, B, J)
+    parents: np.ndarray,
+    order: np.ndarray,
+    sd: np.ndarray,  # (B, J) measurement standard deviation
+    yk: np.ndarray,  # (T, B, J, 3) the smoother's samples: pseudo-measurements written in
+    rvar: np.ndarray,  # (T, B, J) their variances: the carried ones' written in
+) -> None:
+    """Offline carrying: forwards in time, and backwards for the samples with no earlier
+    good offset. A carried sample's variance is ``sd² max(1, (radius / sd)²)``: its
+    standard deviation is the bone's length, the joint may have rotated about its
+    parent (at least the measurement's own)."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    radius = np.full((T, B, J), np.nan)
+    off = np.full((B, J, 3), np.nan)
+    anchor = np.empty((J, 3))
+    pseudo = np.empty((J, 3))
+    rad = np.empty(J)
+    for back in (False, True):
+        off.fill(np.nan)
+        for i in range(T):
+            t = T - 1 - i if back else i
+            for b in range(B):
+                carry_frame(ys[t, b], acc[t, b], parents, order, off[b], anchor, pseudo, rad)
+                for j in range(J):
+                    if math.isfinite(rad[j]) and not (back and math.isfinite(radius[t, b, j])):
+                        radius[t, b, j] = rad[j]
+                        yk[t, b, j, 0] = pseudo[j, 0]
+                        yk[t, b, j, 1] = pseudo[j, 1]
+                        yk[t, b, j, 2] = pseudo[j, 2]
+    for t in range(T):
+        for b in range(B):
+            for j in range(J):
+                if math.isfinite(radius[t, b, j]):
+                    s = sd[b, j]
+                    v = radius[t, b, j] / s
+                    v = v * v
+                    rvar[t, b, j] = (s * s) * (1.0 if v <= 1.0 else v)
 
 
 # ------------------------------------------------------------------------------ OU filter
@@ -772,18 +860,19 @@ def ou_smooth_run(
     steps: np.ndarray,
     pj: np.ndarray,
     tau: float,
-    var: np.ndarray,  # out (T, B, J): smoothed position variance (shared by the axes)
-) -> np.ndarray:
-    """OU-velocity Kalman filter and RTS smoother per axis, ``(T, B, J, 3)``.
+    est: np.ndarray,  # out (T, B0, J, 3): the estimates
+    var: np.ndarray,  # out (T, B0, J): smoothed position variance (shared by the axes)
+    b0: int,  # body b is written at b0 + b (a chunk of the bodies of est and var)
+) -> None:
+    """OU-velocity Kalman filter and RTS smoother per axis into ``est``.
 
     Started at frame 0 from the joint's first sample (velocity 0, P = diag(r, v0)); the
     covariances are shared by the three axes (same variances, same missing samples).
     The smoothed position variance of each sample goes into ``var``.
     """
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
-    est = np.empty((T, B, J, 3))
     if T == 0:
-        return est
+        return
     coef = ou_table(steps, tau)
     xf = np.empty((T, 3, 2))
     xp = np.empty((T, 3, 2))
@@ -824,9 +913,9 @@ def ou_smooth_run(
             # RTS, x becoming the smoothed state: x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
             # S the smoothed covariance: S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ
             for i in range(3):
-                est[T - 1, b, j, i] = x[i, 0]
+                est[T - 1, b0 + b, j, i] = x[i, 0]
             s00, s01, s10, s11 = Pf[T - 1, 0], Pf[T - 1, 1], Pf[T - 1, 2], Pf[T - 1, 3]
-            var[T - 1, b, j] = s00
+            var[T - 1, b0 + b, j] = s00
             for t in range(T - 2, -1, -1):
                 g00, g01, g10, g11 = _rts_gain(Pf, Pp, coef, t)
                 d00, d01 = s00 - Pp[t + 1, 0], s01 - Pp[t + 1, 1]
@@ -838,15 +927,14 @@ def ou_smooth_run(
                 s01 = Pf[t, 1] + m00 * g01 + m01 * g11
                 s10 = Pf[t, 2] + m10 * g00 + m11 * g10
                 s11 = Pf[t, 3] + m10 * g01 + m11 * g11
-                var[t, b, j] = s00
+                var[t, b0 + b, j] = s00
                 for i in range(3):
                     d0 = x[i, 0] - xp[t + 1, i, 0]
                     d1 = x[i, 1] - xp[t + 1, i, 1]
                     # G = Gtᵀ: G[0, :] = (g00, g10), G[1, :] = (g01, g11)
                     x[i, 0] = xf[t, i, 0] + (g00 * d0 + g10 * d1)
                     x[i, 1] = xf[t, i, 1] + (g01 * d0 + g11 * d1)
-                    est[t, b, j, i] = x[i, 0]
-    return est
+                    est[t, b0 + b, j, i] = x[i, 0]
 
 
 # ------------------------------------------------------------------------------ online
@@ -869,6 +957,7 @@ def online_frames(
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
     var_n: np.ndarray,  # out (n, B, J): filtered position variance (NaN before the start)
+    b0: int,  # the outputs' body b0 + b is body b (a chunk of the outputs' bodies)
 ) -> None:
     """``robust_online``, frame by frame: gate, confirmation, chain, carrying, causal OU
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
@@ -918,7 +1007,7 @@ def online_frames(
             # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
             for j in range(J):
                 a = final[j]
-                rejected[b, j] = not (a or missing[b, j])
+                rejected[b0 + b, j] = not (a or missing[b, j])
                 carried = carry and not a and math.isfinite(radius[j])
                 started = sb[b, j, B_STARTED]
                 q = pj[j, J_Q]
@@ -977,10 +1066,10 @@ def online_frames(
                 sb[b, j, B_PREV_OK] = a
                 sb[b, j, B_PREV_FINAL] = a
                 started = sb[b, j, B_STARTED]
-                var[b, j] = p00 if started else np.nan
+                var[b0 + b, j] = p00 if started else np.nan
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
-                    out[b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
+                    out[b0 + b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
             _copy2(yprev[b], y[b])
         clock[0] = tidx + 1
         clock[1] = tt

@@ -41,16 +41,19 @@ def guard_frames(
     missing: np.ndarray,
     est: np.ndarray,
     var: np.ndarray,
+    b0: int,
     prev_y: np.ndarray,
     largest: np.ndarray,
     prev_out: np.ndarray,
     d: np.ndarray,
 ) -> None:
     """Limit, in place, the steps of ``est`` (and widen ``var``, the variance) frame by
-    frame; the state arrays are updated for the next call."""
-    T, B, J, D = est.shape
+    frame; the state arrays are updated for the next call. Body ``b`` of ``ys``,
+    ``missing`` and the state is body ``b0 + b`` of ``est`` and ``var`` (a chunk)."""
+    T, B, J, D = ys.shape
     for t in range(T):
         for b in range(B):
+            bo = b0 + b
             for j in range(J):
                 both = False  # the input is present at t - 1 and at t
                 if not missing[t, b, j]:
@@ -67,18 +70,18 @@ def guard_frames(
                 else:
                     prev_y[b, j, 0] = math.nan
                 lim = largest[b, j]
-                if both and not math.isnan(prev_out[b, j, 0]) and not math.isnan(est[t, b, j, 0]):
+                if both and not math.isnan(prev_out[b, j, 0]) and not math.isnan(est[t, bo, j, 0]):
                     n = 0.0
                     for k in range(D):
-                        d[k] = est[t, b, j, k] - prev_out[b, j, k]
+                        d[k] = est[t, bo, j, k] - prev_out[b, j, k]
                         n += d[k] * d[k]
                     n = math.sqrt(n)
                     if n > lim:
                         shift = 0.0
                         for k in range(D):
                             new = prev_out[b, j, k] + d[k] * (lim / n)
-                            shift += (est[t, b, j, k] - new) ** 2
-                            est[t, b, j, k] = new
-                        var[t, b, j] += shift / D
+                            shift += (est[t, bo, j, k] - new) ** 2
+                            est[t, bo, j, k] = new
+                        var[t, bo, j] += shift / D
                 for k in range(D):
-                    prev_out[b, j, k] = est[t, b, j, k]
+                    prev_out[b, j, k] = est[t, bo, j, k]

@@ -116,7 +116,7 @@ from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     frame_steps,
     frame_times,
-    inferred_r_scale,
+    inferred_sample_scale,
     readonly,
 )
 
@@ -253,8 +253,8 @@ def _inferred_scale(
     """Measurement-variance multiplier per sample: ``factor`` for valid INFERRED ones,
     times ``1 / confidence²`` where a confidence is given (the standard deviation grows
     as the estimator's score falls; NaN confidence: 1)."""
-    scale = inferred_r_scale(states, ~missing, factor)
-    out = np.ones(missing.shape) if scale is None else np.ascontiguousarray(scale[..., 0])
+    scale = inferred_sample_scale(states, ~missing, factor)
+    out = np.ones(missing.shape) if scale is None else scale
     if confidence is not None:
         c = np.asarray(confidence, dtype=float)
         w = np.where(np.isnan(c), 1.0, 1.0 / np.maximum(c, MIN_CONFIDENCE_WEIGHT) ** 2)
@@ -278,30 +278,31 @@ def _offline(
     params: dict[str, Any],
     L_fixed: Array,
     inferred: NDArray[np.bool_],
-) -> tuple[Array, NDArray[np.bool_], Array, Any]:
+    out: tuple[Array, NDArray[np.bool_], Array],
+    b0: int,
+) -> Any:
     """``robust``: gates both ways, short runs, chain, carrying, OU filter + RTS.
 
     One kernel call per stage for all bodies (compiling them as one would take longer).
-    Returns ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J), fits)``, ``var`` the
-    smoothed position variance (per axis; the axes share it), ``fits`` None (fixed
-    noise) or the fitted per-joint arrays ``(B, J)`` and the per-body region fits.
+    Writes bodies ``b0 ..`` of ``out = (est (T, B0, J, 3), rejected (T, B0, J), var (T,
+    B0, J))``, ``var`` the smoothed position variance (per axis; the axes share it);
+    returns ``fits``: None (fixed noise) or the fitted per-joint arrays ``(B, J)`` and
+    the per-body region fits.
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
-    gate_args = (par, order, pj, pf, L_fixed, bool(params["bones"]), False,
-                 float(params["max_reject"]))  # fmt: skip
     B, J = missing.shape[1:]
-    acc = k.gate_run(ys, times, *gate_args, k.new_state(B, J, 0))
-    if params["two_pass"]:
-        back = k.gate_run(readonly(np.ascontiguousarray(ys[::-1])),
-                          np.ascontiguousarray(-times[::-1]), *gate_args,
-                          k.new_state(B, J, 0))  # fmt: skip
-        acc &= back[::-1]
+    acc = k.gate_both(ys, times, np.ascontiguousarray(-times[::-1]), par, order, pj, pf,
+                      L_fixed, bool(params["bones"]), float(params["max_reject"]),
+                      bool(params["two_pass"]), k.new_state(B, J, 0),
+                      k.new_state(B, J, 0))  # fmt: skip
     if params["min_run"] > 0:
         acc = k.drop_short_runs_run(acc, ~missing & ~acc, times, float(params["min_run"]))
     if params["two_pass"]:
         acc = k.enforce_chain_run(acc, ys, times, par, order, pj, float(params["margin"]), True)
-    rejected = ~missing & ~acc
+    est, rejected, var = out
+    bs = slice(b0, b0 + missing.shape[1])
+    np.logical_and(~missing, ~acc, out=rejected[:, bs])
     yk = np.where(acc[..., None], ys, np.nan)
     fits = None
     sd = np.broadcast_to(pj[:, k.J_SD], missing.shape[1:])
@@ -309,25 +310,12 @@ def _offline(
         # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
         fits = _fit_noise(yk, acc & ~inferred, rinf, steps, setup, params)
         sd = fits[0]["noise_sd"]
-    r = sd**2
-    rvar = r * rinf
+    rvar = sd**2 * rinf  # a new (T, B, J) array: the carried samples' are written in
     if params["carry"]:
-        pseudo, radius = k.carry_run(ys, acc, par, order, False)
-        # a stretch with no earlier good offset takes the next one
-        pb, rb = k.carry_run(ys, acc, par, order, True)
-        take = ~np.isfinite(radius) & np.isfinite(rb)
-        pseudo[take], radius[take] = pb[take], rb[take]
-        carried = np.isfinite(radius)
-        yk[carried] = pseudo[carried]
-        # standard deviation = the bone length: the joint may have rotated about its parent
-        with np.errstate(invalid="ignore"):
-            scale = np.maximum(1.0, (radius / sd) ** 2)
-        rvar = np.where(carried, r * scale, rvar)
-        del pseudo, radius, pb, rb, take, scale  # before the smoother allocates its own
-    var = np.empty(missing.shape)
-    rvar = np.ascontiguousarray(rvar)
+        k.carry_both(ys, acc, par, order, np.ascontiguousarray(np.broadcast_to(sd, (B, J))),
+                     yk, rvar)  # fmt: skip
     if fits is None:
-        est = k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), var)
+        k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), est, var, b0)
     else:
         f = fits[0]
         tau = float(params["tau"])
@@ -336,16 +324,18 @@ def _offline(
         # not as fitted on the tracked samples: failures come with fast motion and
         # occlusion, so the physical typical speed is the floor there
         q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
-        est = fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau,
-                                       f["error_tau"], var)  # fmt: skip
+        fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau, f["error_tau"],
+                                 est, var, b0)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
-    before = np.cumsum(~missing, axis=0) == 0
-    est[before] = np.nan
-    var[before] = np.nan
-    never = ~acc.any(axis=0)
-    est[:, never] = ys[:, never]
-    var[:, never] = np.nan  # raw, not smoothed: no posterior
-    return est, rejected, var, fits
+    valid = ~missing
+    first = np.where(valid.any(axis=0), valid.argmax(axis=0), missing.shape[0])
+    for b, j in zip(*np.nonzero(first), strict=True):
+        est[: first[b, j], b0 + b, j] = np.nan
+        var[: first[b, j], b0 + b, j] = np.nan
+    for b, j in zip(*np.nonzero(~acc.any(axis=0)), strict=True):
+        est[:, b0 + b, j] = ys[:, b, j]
+        var[:, b0 + b, j] = np.nan  # raw, not smoothed: no posterior
+    return fits
 
 
 def fit_kernels() -> Any:
@@ -409,35 +399,26 @@ def _robust_bodies(
     setup = _Setup(topo, params)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
-
-    def part(b: slice) -> tuple[Array, NDArray[np.bool_], Array, Array | None, Any]:
-        return _robust_chunk(
+    est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
+    rejected = np.zeros((T, B, J), dtype=bool)
+    L = np.empty((B, J)) if params["bones"] else None
+    fits: Any = None
+    # a chunk of bodies at a time, written into the outputs in place
+    for b in chunks(B, T * J * 3 * 8):
+        lengths, f = _robust_chunk(
             ys[:, b], missing[:, b], None if states is None else states[:, b],
             None if confidence is None else confidence[:, b],
             None if centre is None else centre[b], times, steps, topo, setup, params, factor,
-            offline,
+            offline, (est, rejected, var), b.start,
         )  # fmt: skip
-
-    slices = chunks(B, T * J * 3 * 8)
-    if len(slices) == 1:
-        est, rejected, var, L, fits = part(slices[0])
-    else:
-        est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
-        rejected = np.empty((T, B, J), dtype=bool)
-        L = np.empty((B, J)) if params["bones"] else None
-        fits = None
-        for b in slices:
-            e, r, v, lengths, f = part(b)
-            est[:, b], rejected[:, b], var[:, b] = e, r, v
-            del e, r, v  # freed before the next chunk allocates its own
-            if L is not None:
-                L[b] = lengths
-            if f is not None:
-                if fits is None:
-                    fits = ({name: np.empty((B, J)) for name in f[0]}, [])
-                for name, a in f[0].items():
-                    fits[0][name][b] = a
-                fits[1].extend(f[1])
+        if L is not None:
+            L[b] = lengths
+        if f is not None:
+            if fits is None:
+                fits = ({name: np.empty((B, J)) for name in f[0]}, [])
+            for name, a in f[0].items():
+                fits[0][name][b] = a
+            fits[1].extend(f[1])
     std = np.sqrt(var, out=var)
     diags = [
         {
@@ -473,11 +454,14 @@ def _robust_chunk(
     params: dict[str, Any],
     factor: float,
     offline: bool,
-) -> tuple[Array, NDArray[np.bool_], Array, Array | None, Any]:
+    out: tuple[Array, NDArray[np.bool_], Array],
+    b0: int,
+) -> tuple[Array | None, Any]:
     """The per-body work of :func:`_robust_bodies` for some bodies, parameters resolved:
-    ``(est (T, B, J, 3), rejected (T, B, J), var (T, B, J), bone lengths (B, J) or None,
-    fits)``; ``centre`` (B, J): the 2-D bone gate's lengths from the recording, or None."""
-    T, B, J = missing.shape
+    writes bodies ``b0 ..`` of ``out = (est (T, B0, J, 3), rejected (T, B0, J), var (T,
+    B0, J))`` and returns ``(bone lengths (B, J) or None, fits)``; ``centre`` (B, J):
+    the 2-D bone gate's lengths from the recording, or None."""
+    B, J = missing.shape[1:]
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     # (B, J): the median bone lengths (reported), and what the offline bone gate compares
     # with (2-D from the recording: the centre of the one-sided range)
@@ -492,17 +476,16 @@ def _robust_chunk(
         inferred = np.zeros(missing.shape, dtype=bool)
         if states is not None:
             inferred = np.asarray(states) == TrackingState.INFERRED
-        est, rejected, var, fits = _offline(ys, missing, times, steps, rinf, setup, params,
-                                            L_fixed, inferred)  # fmt: skip
+        fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
+                        b0)  # fmt: skip
     else:
+        est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
-        est, rejected = np.empty((T, B, J, 3)), np.zeros((T, B, J), dtype=bool)
-        var = np.empty((T, B, J))
         k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
-                        *k.new_work(B, J), est, rejected, var)  # fmt: skip
+                        *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         guard = step_guard()
-        guard.guard_frames(ys, missing, est, var, *guard.new_state(B, J, ys.shape[-1]))
-    return est, rejected, var, L, fits
+        guard.guard_frames(ys, missing, est, var, b0, *guard.new_state(B, J, ys.shape[-1]))
+    return L, fits
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
@@ -555,9 +538,9 @@ class RobustStepper:
         k.online_frames(
             y1, m1, _inferred_scale(states, missing, self.factor)[None],
             np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
-            *self._scratch, out, self.rejected[None], self.std[None],
+            *self._scratch, out, self.rejected[None], self.std[None], 0,
         )  # fmt: skip
-        step_guard().guard_frames(y1, m1, out, self.std[None], *self._guard)
+        step_guard().guard_frames(y1, m1, out, self.std[None], 0, *self._guard)
         np.sqrt(self.std, out=self.std)
         return out[0]
 

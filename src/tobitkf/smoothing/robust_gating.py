@@ -164,10 +164,11 @@ def gate_measurements(
     pj, pf = _gate_params(J, v_max, margin, bone_tol_abs, bone_tol_rel)
     L = np.full((1, J), np.nan) if bone_len is None else np.asarray(bone_len, float)[None]
     k = kernels()
-    acc = k.gate_run(
+    acc = np.zeros(y.shape[:3], dtype=bool)
+    k.gate_pass(
         y, np.ascontiguousarray(times, dtype=float), par, order, pj, pf,
         np.ascontiguousarray(L), bone_len is not None, bool(online_bones), float(max_reject),
-        k.new_state(1, J, 0),
+        k.new_state(1, J, 0), False, acc,
     )  # fmt: skip
     return acc[:, 0]
 
