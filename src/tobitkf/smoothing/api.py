@@ -202,10 +202,14 @@ def sample_states(
     rejected = np.asarray(rejected, dtype=bool) & ~missing
     used = ~missing & ~rejected
     out = np.full(missing.shape, SampleState.EXTRAPOLATED, dtype=np.int8)
-    if not causal and missing.shape[0]:
-        before = np.logical_or.accumulate(used, axis=0)
-        after = np.logical_or.accumulate(used[::-1], axis=0)[::-1]
-        out[before & after] = SampleState.MISSING
+    T = missing.shape[0]
+    if not causal and T:
+        # between a joint's first and last used sample (none used: first T, last -1)
+        seen = used.any(axis=0)
+        first = np.where(seen, used.argmax(axis=0), T)
+        last = np.where(seen, T - 1 - used[::-1].argmax(axis=0), -1)
+        t = np.arange(T).reshape((T,) + (1,) * (missing.ndim - 1))
+        out[(t >= first) & (t <= last)] = SampleState.MISSING
     out[rejected] = SampleState.REJECTED
     out[used] = SampleState.MEASURED
     out[~np.asarray(finite, dtype=bool)] = SampleState.NONE
@@ -220,10 +224,12 @@ def _output_states(states: np.ndarray | None, sample: np.ndarray) -> np.ndarray 
     if states is None:
         if not filled.any():
             return None
-        states = np.full(sample.shape, TrackingState.TRACKED, dtype=np.int8)
-    out = np.where(filled, TrackingState.INFERRED, states)
-    out = np.where(sample == SampleState.NONE, TrackingState.NOT_TRACKED, out)
-    return out.astype(np.int8)
+        out = np.full(sample.shape, TrackingState.TRACKED, dtype=np.int8)
+    else:
+        out = np.array(states, dtype=np.int8)
+    out[filled] = TrackingState.INFERRED
+    out[sample == SampleState.NONE] = TrackingState.NOT_TRACKED
+    return out
 
 
 def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any]) -> dict:
@@ -445,6 +451,10 @@ def _smooth_group(
         used["min_confidence"] = min_conf
     if untangled is not None:
         used["untangle"] = True
+    # (T, B, J) booleans: one contiguous pass, not one strided pass per body
+    finite_all = all_last(np.isfinite(est))
+    if std is not None and (~finite_all & ~np.isnan(std)).any():
+        std = np.where(finite_all, std, np.nan)  # as a rule the method's NaN are there
     out = []
     for b, s in enumerate(seqs):
         # body by body: (T, J) temporaries, not (T, B, J) ones
@@ -452,11 +462,9 @@ def _smooth_group(
         rejected = np.broadcast_to(
             np.asarray(extra[b].get("rejected", False), dtype=bool), missing_b.shape
         )
-        finite = all_last(np.isfinite(est[:, b]))
+        finite = finite_all[:, b]
         sample = sample_states(missing_b, rejected, finite, causal)
         std_b = None if std is None else std[:, b]
-        if std_b is not None and (~finite & ~np.isnan(std_b)).any():
-            std_b = np.where(finite, std_b, np.nan)  # as a rule the method's NaN are there
         filled = (missing_b | rejected) & finite
         used_b = {**used, **(result.body_params[b] if result.body_params else {})}
         diagnostics = {
