@@ -463,15 +463,16 @@ def _robust_chunk(
     the 2-D bone gate's lengths from the recording, or None."""
     B, J = missing.shape[1:]
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
-    # (B, J): the median bone lengths (reported), and what the offline bone gate compares
-    # with (2-D from the recording: the centre of the one-sided range)
-    L = bone_lengths(ys, topo.parents) if params["bones"] else None
-    L_gate = L if centre is None else centre
     k = kernels()
     missing = np.ascontiguousarray(missing, dtype=bool)
     rinf = _inferred_scale(states, missing, factor, confidence)
     fits = None
+    L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     if offline:
+        # the recording's median bone lengths (2-D from the recording: the gate compares
+        # with the centre of the one-sided range)
+        L = bone_lengths(ys, topo.parents) if params["bones"] else None
+        L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
         inferred = np.zeros(missing.shape, dtype=bool)
         if states is not None:
@@ -485,6 +486,8 @@ def _robust_chunk(
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         guard = step_guard()
         guard.guard_frames(ys, missing, est, var, b0, *guard.new_state(B, J, ys.shape[-1]))
+        if params["bones"]:  # the lengths learnt by the end of the recording
+            L = state[3][..., k.S_L_CUR].copy()
     return L, fits
 
 
@@ -607,8 +610,9 @@ def robust_smooth(
         Positions replaced; ``metadata["diagnostics"]`` = ``rejected_fraction`` (J,),
         ``filled_fraction`` (J,) (missing or rejected samples that got an estimate),
         ``clipped_fraction`` (J,) zeros (no censoring here), ``rejected`` (T, J) bool
-        mask, ``bone_lengths`` (J,), ``method`` (``"robust"`` / ``"robust_online"``) and
-        ``params``.
+        mask, ``bone_lengths`` (J,) (the lengths the bone gate compared with: offline
+        the recording's medians, online the ones learnt by its end), ``method``
+        (``"robust"`` / ``"robust_online"``) and ``params``.
     """
     if not isinstance(sequence, SkeletonSequence):
         raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
