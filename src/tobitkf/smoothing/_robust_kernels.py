@@ -766,13 +766,14 @@ def carry_both(
     parents: np.ndarray,
     order: np.ndarray,
     sd: np.ndarray,  # (B, J) measurement standard deviation
-    yk: np.ndarray,  # (T, B, J, 3) the smoother's samples: pseudo-measurements written in
+    yk: np.ndarray,  # out (T, B, J, 3) the smoother's samples
     rvar: np.ndarray,  # (T, B, J) their variances: the carried ones' written in
 ) -> None:
-    """Offline carrying: forwards in time, and backwards for the samples with no earlier
-    good offset. A carried sample's variance is ``sd² max(1, (radius / sd)²)``: its
-    standard deviation is the bone's length, the joint may have rotated about its
-    parent (at least the measurement's own)."""
+    """Offline carrying: the smoother's samples ``yk`` are the accepted measurements,
+    the rejected ones carried (forwards in time, and backwards for the samples with no
+    earlier good offset), NaN elsewhere. A carried sample's variance is
+    ``sd² max(1, (radius / sd)²)``: its standard deviation is the bone's length, the
+    joint may have rotated about its parent (at least the measurement's own)."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     radius = np.full((T, B, J), np.nan)
     off = np.full((B, J, 3), np.nan)
@@ -784,6 +785,11 @@ def carry_both(
         for i in range(T):
             t = T - 1 - i if back else i
             for b in range(B):
+                if not back:
+                    for j in range(J):
+                        a = acc[t, b, j]
+                        for c in range(3):
+                            yk[t, b, j, c] = ys[t, b, j, c] if a else math.nan
                 carry_frame(ys[t, b], acc[t, b], parents, order, off[b], anchor, pseudo, rad)
                 for j in range(J):
                     if math.isfinite(rad[j]) and not (back and math.isfinite(radius[t, b, j])):

@@ -303,17 +303,19 @@ def _offline(
     est, rejected, var = out
     bs = slice(b0, b0 + missing.shape[1])
     np.logical_and(~missing, ~acc, out=rejected[:, bs])
-    yk = np.where(acc[..., None], ys, np.nan)
     fits = None
     sd = np.broadcast_to(pj[:, k.J_SD], missing.shape[1:])
     if params["noise"] == "fit":
         # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
-        fits = _fit_noise(yk, acc & ~inferred, rinf, steps, setup, params)
+        fits = _fit_noise(ys, acc & ~inferred, rinf, steps, setup, params)
         sd = fits[0]["noise_sd"]
     rvar = sd**2 * rinf  # a new (T, B, J) array: the carried samples' are written in
     if params["carry"]:
+        yk = np.empty(ys.shape)  # the accepted samples and the carried ones
         k.carry_both(ys, acc, par, order, np.ascontiguousarray(np.broadcast_to(sd, (B, J))),
                      yk, rvar)  # fmt: skip
+    else:
+        yk = np.where(acc[..., None], ys, np.nan)
     if fits is None:
         k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), est, var, b0)
     else:
@@ -349,7 +351,8 @@ def _fit_noise(
     yk: Array, use: NDArray[np.bool_], rinf: Array, steps: Array, setup: _Setup,
     params: dict[str, Any],
 ) -> tuple[dict[str, Array], list[dict[str, Any]]]:  # fmt: skip
-    """Noise per body and region by maximum likelihood (:mod:`.robust_fit`)."""
+    """Noise per body and region by maximum likelihood (:mod:`.robust_fit`), on the
+    samples of ``yk`` marked in ``use``."""
     from tobitkf.smoothing.robust_fit import fit_noise_bodies
 
     return fit_noise_bodies(
