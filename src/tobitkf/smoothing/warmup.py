@@ -3,8 +3,9 @@
 The compiled methods (the robust pair, the Kalman-type ones, the Kinect and 1€ filters)
 are numba kernels, cached on disk (numba's cache: ``__pycache__`` beside the package, or
 ``NUMBA_CACHE_DIR``). The first call on a new machine, or after an upgrade, compiles them:
-seconds for the Kalman methods, about ten for ``robust``, whose noise fit has kernels of
-its own; every later process loads them from the cache in well under a second.
+seconds for the Kalman methods, about twenty for ``robust``, whose noise fit has kernels of
+its own (its likelihood and optimiser); every later process loads them from the cache in
+well under a second.
 
 :func:`warm` runs a method on a small built-in recording (and, for causal methods with a
 live stepper, a few live frames), so its kernels are compiled and cached before the real
