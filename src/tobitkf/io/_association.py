@@ -17,7 +17,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 __all__ = ["associate"]
 
@@ -57,6 +56,9 @@ def associate(
     """
     tracks: list[dict[int, int]] = []
     last: list[np.ndarray] = []  # last observed position of each keypoint, per track
+    # scipy.optimize takes 0.4 s to import: only when a file has people to associate
+    from scipy.optimize import linear_sum_assignment
+
     for t, dets in enumerate(frames):
         n_det = len(dets)
         assigned: dict[int, int] = {}

@@ -575,26 +575,27 @@ def write_csv(
                 header.append(_quoted(f"{n}{suffix}"))
     lines = [sep.join(header)]
     for k, s in enumerate(seqs):
-        times = s.times() if with_time else None
-        body = int(ids[k])
-        for t in range(s.n_frames):
-            vals = []
-            if times is not None:
-                vals.append(fmt_float(times[t]))
-            if multi:
-                vals.append(str(body))
-            for j in range(s.n_joints):
-                vals += [fmt_float(v) for v in s.positions[t, j]]
-                if with_state:
-                    st = 2 if s.tracking_state is None else int(s.tracking_state[t, j])
-                    vals.append(str(st))
-                if with_std:
-                    vals.append("" if s.std is None else fmt_float(s.std[t, j]))
-                if with_sample:
-                    vals.append("" if s.sample_state is None else str(int(s.sample_state[t, j])))
-                if with_conf:
-                    vals.append("" if s.confidence is None else fmt_float(s.confidence[t, j]))
-            lines.append(sep.join(vals))
+        T = s.n_frames
+        # column by column, from Python numbers (tolist): no numpy scalar per field
+        cols: list[list[str]] = []
+        if with_time:
+            cols.append(_floats(s.times()))
+        if multi:
+            cols.append([str(int(ids[k]))] * T)
+        for j in range(s.n_joints):
+            cols += [_floats(s.positions[:, j, a]) for a in range(n_dims)]
+            if with_state:
+                st = s.tracking_state
+                cols.append(["2"] * T if st is None else _ints(st[:, j]))
+            if with_std:
+                cols.append([""] * T if s.std is None else _floats(s.std[:, j]))
+            if with_sample:
+                ss = s.sample_state
+                cols.append([""] * T if ss is None else _ints(ss[:, j]))
+            if with_conf:
+                cf = s.confidence
+                cols.append([""] * T if cf is None else _floats(cf[:, j]))
+        lines += map(sep.join, zip(*cols, strict=True))
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
     if doc is not None:
         side.write_text(doc, encoding="utf-8")
@@ -643,6 +644,15 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         "provenance": shared,
     }
     return json.dumps(to_jsonable(doc), indent=2) + "\n"  # ASCII: any name survives
+
+
+def _floats(a: np.ndarray) -> list[str]:
+    """:func:`fmt_float` of every value (shortest text that reads back exactly)."""
+    return list(map(fmt_float, np.asarray(a, dtype=float).tolist()))
+
+
+def _ints(a: np.ndarray) -> list[str]:
+    return list(map(str, np.asarray(a).astype(int).tolist()))
 
 
 def _check_writable(text: str, what: str) -> str:

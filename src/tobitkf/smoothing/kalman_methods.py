@@ -53,7 +53,7 @@ import dataclasses
 import itertools
 import warnings
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,8 +61,6 @@ from numpy.typing import NDArray
 from tobitkf.core.engine import sum_last
 from tobitkf.core.kalman import kalman_filter, rts_smooth
 from tobitkf.core.model import LinearGaussian
-from tobitkf.core.streaming import StreamingFilter
-from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import paper
 from tobitkf.smoothing.params import limit_vec, optional, positive_float, positive_vec
@@ -73,6 +71,9 @@ from tobitkf.smoothing.timebase import (
     inferred_sample_scale,
     readonly,
 )
+
+if TYPE_CHECKING:
+    from tobitkf.core.streaming import StreamingFilter
 
 __all__ = ["atkf_c", "run_kalman", "run_kalman_core"]
 
@@ -299,6 +300,9 @@ def run_kalman_core(
     """:func:`run_kalman` through the numpy core (``kalman_filter``, ``tobit_filter``,
     ``adaptive_tobit_filter``, ``rts_smooth``): the reference the compiled kernel is
     tested against (tests/test_kalman_kernels.py)."""
+    # the numpy Tobit core imports scipy.special (0.25 s): only when this path runs
+    from tobitkf.core.tobit import adaptive_tobit_filter, tobit_filter
+
     ys, missing = inp.ys, inp.missing
     T = ys.shape[0]
     bshape = ys.shape[1:-1]
@@ -394,6 +398,8 @@ class KalmanStepper:
         self.clipped: NDArray[np.bool_] | None = None
 
     def _make_filter(self, ys: Array, valid: NDArray[np.bool_]) -> StreamingFilter:
+        from tobitkf.core.streaming import StreamingFilter
+
         x0 = np.where(valid[..., None], ys, 0.0)
         model = LinearGaussian(A=np.eye(3), H=np.eye(3), Q=self._Q, R=self._R, x0=x0, P0=self._R)
         if self.kind == "atkf":
