@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
@@ -400,6 +400,7 @@ def test_long_runs_with_wild_measurements_stay_finite_psd(seed, method, diagonal
     method=st.sampled_from(["tkf", "tkfc", "atkf", "atkf_I"]),
     missing=st.floats(0, 0.4),
 )
+@example(seed=1264, method="tkf", missing=0.0)  # 2.3e-11 apart: rounding, not logic
 def test_diagonal_path_equals_general_path(seed, method, missing):
     rng = np.random.default_rng(seed)
     model = _diag_model(rng, n=3, batch=(2,), a_identity=method == "atkf_I")
@@ -420,11 +421,14 @@ def test_diagonal_path_equals_general_path(seed, method, missing):
         )
     d, g = run(None), run(False)
     assert d.diagonal and not g.diagonal
-    _close(d.means, g.means)
-    _close(d.covs, g.covs)
-    _close(d.loglik, g.loglik, 1e-11)
-    _close(d.p_uncensored, g.p_uncensored)
-    _close(d.lower, g.lower)
+    # the two paths round differently (scalar recursions against matrix solves through
+    # the truncated moments); with sd scales up to 25x apart they drift to ~1e-11 in 15
+    # steps (seed 1264), while a wrong formula is off by far more than 1e-10
+    _close(d.means, g.means, 1e-10)
+    _close(d.covs, g.covs, 1e-10)
+    _close(d.loglik, g.loglik, 1e-10)
+    _close(d.p_uncensored, g.p_uncensored, 1e-10)
+    _close(d.lower, g.lower, 1e-10)
     np.testing.assert_array_equal(d.clipped, g.clipped)
 
 
