@@ -192,12 +192,23 @@ def smooth_run(
     cs = np.empty(W)
     ou = ou_table(steps, tau)
     # exp(-dt / tau_c) per frame for each distinct tau_c (a few per body: one per region)
-    tcs = np.unique(tau_c.ravel())
-    phis = np.empty((T, tcs.shape[0]))
-    for u in range(tcs.shape[0]):
+    # (found by hand: np.unique would add seconds to the compilation)
+    tcs = np.empty(N)
+    ui = np.empty(N, dtype=np.int64)
+    nu = 0
+    for n in range(N):
+        v = tau_c[n // J, n % J]
+        u = 0
+        while u < nu and tcs[u] != v:
+            u += 1
+        if u == nu:
+            tcs[nu] = v
+            nu += 1
+        ui[n] = u
+    phis = np.empty((T, nu))
+    for u in range(nu):
         for t in range(T):
             phis[t, u] = math.exp(-steps[t] / tcs[u])
-    ui = np.searchsorted(tcs, tau_c.ravel())
     for n0 in range(0, N, W):
         w_n = min(W, N - n0)
         for w in range(w_n):
