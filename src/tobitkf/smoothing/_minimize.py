@@ -2,7 +2,7 @@
 
 It is the optimiser of the robust smoother's noise fit (:mod:`tobitkf.smoothing.robust_fit`):
 three parameters, a compiled objective. :func:`scipy.optimize.minimize` (L-BFGS-B) adds its
-Python work to every iteration, there about 60 % of the objective's own time; here the
+Python work to every one of its iterations (and its import, to the start-up); here the
 whole fit is one compiled call (:func:`minimize_profile`).
 
 The algorithm is L-BFGS-B's (Byrd, Lu, Nocedal & Zhu 1995, with the projection of Morales &

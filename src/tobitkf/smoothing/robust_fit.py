@@ -35,12 +35,12 @@ and the total well (tests/test_robust_fit.py).
 The optimiser is L-BFGS-B's algorithm compiled together with the objective
 (:func:`tobitkf.smoothing._minimize.minimize_profile`): one compiled call per region.
 :func:`scipy.optimize.minimize` (L-BFGS-B), the optimiser before, added its own Python
-work to each of its some 20 iterations per region, about 60 % of the objective's time:
-on 60 recordings of 3000 frames the fit took 0.49 s with it and takes 0.37 s now. The
-stopping rule is scipy's (``ftol`` = :data:`FIT_FTOL`, projected gradient 1e-5) with one
-more condition (the quasi-Newton model sees no larger decrease ahead), so that in the
-flat valleys of this likelihood it stops closer to the maximum than scipy's did, for
-15–20 % more evaluations of the objective (tests/test_robust_fit.py).
+work to each of its some 20 iterations per region, and importing it cost the command
+line a noticeable part of its start-up. The stopping rule is scipy's (``ftol`` =
+:data:`FIT_FTOL`, projected gradient 1e-5) with one more condition (the quasi-Newton
+model sees no larger decrease ahead), so that in the flat valleys of this likelihood it
+stops closer to the maximum than scipy's did, for 15–20 % more evaluations of the
+objective (tests/test_robust_fit.py).
 """
 
 from __future__ import annotations
