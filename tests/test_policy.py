@@ -791,6 +791,20 @@ def test_online_is_causal():
         np.testing.assert_allclose(e, est[:cut], rtol=0, atol=1e-12)
 
 
+def test_offline_gate_rejects_what_only_the_backward_pass_flags():
+    # v_max 1 m/s at 30 fps: a step of at most 1/30 + 0.05 = 0.083 m passes. The joint
+    # drifts away in steps of 0.07 m (frames 30-32, accepted going forwards), stays 0.28 m
+    # off until frame 59 and jumps back at frame 60. Going backwards, frames 59..54 are
+    # 0.28 m from frame 60 with gates k / 30 + 0.05 < 0.28 (k = 1..6 frames) and are
+    # rejected, frame 53 (k = 7: 0.283) is accepted; going forwards, the return 60..65
+    # is rejected the same way. Offline a sample is rejected when either pass rejects it.
+    pos = _point(90)
+    pos[30:33, 0, 0] = [0.07, 0.14, 0.21]
+    pos[33:60, 0, 0] = 0.28
+    _, rej = _run(pos, "robust", v_max=1.0)
+    assert _frames(rej[:, 0]) == _span(54, 65)
+
+
 def test_offline_carry_takes_the_next_offset_when_there_is_no_earlier_one():
     # the shoulder walks 0.6 m along x; the elbow (0.3 m beside it) is wrong from the
     # first frame until frame 19, so there is no earlier good offset: the stretch is
