@@ -87,6 +87,7 @@ from tobitkf.smoothing.registry import (
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     all_last,
+    first_true,
     frame_steps,
     frame_times,
 )
@@ -205,9 +206,8 @@ def sample_states(
     T = missing.shape[0]
     if not causal and T:
         # between a joint's first and last used sample (none used: first T, last -1)
-        seen = used.any(axis=0)
-        first = np.where(seen, used.argmax(axis=0), T)
-        last = np.where(seen, T - 1 - used[::-1].argmax(axis=0), -1)
+        first = first_true(used)
+        last = T - 1 - first_true(used[::-1])
         t = np.arange(T).reshape((T,) + (1,) * (missing.ndim - 1))
         out[(t >= first) & (t <= last)] = SampleState.MISSING
     out[rejected] = SampleState.REJECTED

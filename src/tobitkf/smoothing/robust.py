@@ -114,6 +114,7 @@ from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, 
 from tobitkf.smoothing.robust_scale import recording_gates
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
+    first_true,
     frame_steps,
     frame_times,
     inferred_sample_scale,
@@ -329,8 +330,7 @@ def _offline(
         fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau, f["error_tau"],
                                  est, var, b0)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
-    valid = ~missing
-    first = np.where(valid.any(axis=0), valid.argmax(axis=0), missing.shape[0])
+    first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
         est[: first[b, j], b0 + b, j] = np.nan
         var[: first[b, j], b0 + b, j] = np.nan
@@ -348,15 +348,15 @@ def fit_kernels() -> Any:
 
 
 def _fit_noise(
-    yk: Array, use: NDArray[np.bool_], rinf: Array, steps: Array, setup: _Setup,
+    ys: Array, use: NDArray[np.bool_], rinf: Array, steps: Array, setup: _Setup,
     params: dict[str, Any],
 ) -> tuple[dict[str, Array], list[dict[str, Any]]]:  # fmt: skip
     """Noise per body and region by maximum likelihood (:mod:`.robust_fit`), on the
-    samples of ``yk`` marked in ``use``."""
+    measurements ``ys`` marked in ``use``."""
     from tobitkf.smoothing.robust_fit import fit_noise_bodies
 
     return fit_noise_bodies(
-        yk, use, rinf, steps, setup.groups, tau=float(params["tau"]), speed_sd=setup.spd,
+        ys, use, rinf, steps, setup.groups, tau=float(params["tau"]), speed_sd=setup.spd,
         noise_sd=setup.sd, v_max=setup.vmax, max_seconds=float(params["fit_seconds"]),
     )  # fmt: skip
 

@@ -99,6 +99,12 @@ def any_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return a.any(axis=-1)
 
 
+def first_true(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Index along axis 0 of each column's first True, ``mask.shape[0]`` where it has none
+    (``mask (T, ...)`` gives ``(...)``)."""
+    return np.where(mask.any(axis=0), mask.argmax(axis=0), mask.shape[0])
+
+
 def all_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """``a.all(axis=-1)``, written out for 3 axes."""
     if a.shape[-1] == 3:

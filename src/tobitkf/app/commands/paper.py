@@ -48,6 +48,22 @@ def _show_paper_result(
             err_console.print(f"wrote {p}")
 
 
+def _paper_output(out_help: str) -> Any:
+    """The output options of a reproduction with figures: ``--json``, ``--markdown`` (next
+    to the paper's numbers) and ``--out`` (a folder for the figures, ``out_help``)."""
+
+    def wrap(fn: Any) -> Any:
+        fn = click.option(
+            "--out", "outdir", type=click.Path(file_okay=False), default=None, help=out_help
+        )(fn)
+        fn = click.option(
+            "--markdown", "as_markdown", is_flag=True, help="Print Markdown, next to the paper's."
+        )(fn)
+        return click.option("--json", "as_json", is_flag=True, help="Print as JSON.")(fn)
+
+    return wrap
+
+
 @reproduce.command("covariance-example")
 @click.option(
     "--samples",
@@ -57,17 +73,7 @@ def _show_paper_result(
     help="Monte Carlo samples for eq. 23.",
 )
 @click.option("--seed", default=0, show_default=True)
-@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
-@click.option(
-    "--markdown", "as_markdown", is_flag=True, help="Print Markdown, next to the paper's."
-)
-@click.option(
-    "--out",
-    "outdir",
-    type=click.Path(file_okay=False),
-    default=None,
-    help="Write figures (PNG) here.",
-)
+@_paper_output("Write figures (PNG) here.")
 def covariance_example_cmd(samples, seed, as_json, as_markdown, outdir):
     """Section 3.4: exact censored covariance vs the standard TKF's vs Monte Carlo."""
     from tobitkf.paper.covariance import covariance_example
@@ -95,17 +101,7 @@ def covariance_example_cmd(samples, seed, as_json, as_markdown, outdir):
     type=click.IntRange(1, 1000),
     help="Repeat with this many seeds and report the spread.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
-@click.option(
-    "--markdown", "as_markdown", is_flag=True, help="Print Markdown, next to the paper's."
-)
-@click.option(
-    "--out",
-    "outdir",
-    type=click.Path(file_okay=False),
-    default=None,
-    help="Write Fig. 2 and Fig. 3 (PNG) here.",
-)
+@_paper_output("Write Fig. 2 and Fig. 3 (PNG) here.")
 @click.option(
     "--random-x0",
     is_flag=True,
