@@ -86,7 +86,9 @@ def _brute_loglik(yk, rscale, steps, frames, restart, q, r, sc2, tau, tau_c) -> 
 
 
 def _brute_smooth(y, rvar, steps, q, sc2, tau, tau_c):
-    """Filter from frame 0 at the first sample (that sample updated too), then RTS."""
+    """Filter from frame 0 at the first sample (that sample updated too), then RTS (the
+    gain with the pseudo-inverse of the prediction's covariance: without coloured error
+    it is singular)."""
     T = y.shape[0]
     H = np.array([1.0, 0.0, 1.0])
     first = int(np.flatnonzero(np.isfinite(y))[0])
@@ -109,7 +111,7 @@ def _brute_smooth(y, rvar, steps, q, sc2, tau, tau_c):
     est[-1], var[-1] = xs[-1][0], Ps[-1][0, 0]
     sx, sP = xs[-1], Ps[-1]
     for t in range(T - 2, -1, -1):
-        G = Ps[t] @ As[t + 1].T @ np.linalg.inv(Pp[t + 1])
+        G = Ps[t] @ As[t + 1].T @ np.linalg.pinv(Pp[t + 1])
         sx = xs[t] + G @ (sx - xp[t + 1])
         sP = Ps[t] + G @ (sP - Pp[t + 1]) @ G.T
         est[t], var[t] = sx[0], sP[0, 0]
@@ -219,6 +221,53 @@ def test_smoother_equals_a_brute_force_rts_smoother():
                                    tau_c)  # fmt: skip
         np.testing.assert_allclose(est[:, 0, 0, i], want, rtol=0, atol=1e-11)
         np.testing.assert_allclose(var[:, 0, 0], wvar, rtol=1e-8, atol=1e-16)
+
+
+def test_smoother_in_several_blocks_equals_the_brute_force_smoother_per_joint():
+    # more joints than one block of SIMD lanes holds, the last block partly filled, each
+    # joint with its own noise, gaps and coloured error: every joint as if smoothed alone
+    rng = np.random.default_rng(6)
+    T, B, J = 25, 3, nk.L // 2 + 3
+    steps = _irregular_steps(T, rng)
+    y = np.cumsum(rng.normal(scale=0.01, size=(T, B, J, 3)), axis=0)
+    y[rng.random((T, B, J)) < 0.2] = np.nan
+    y[:, 1, 2] = np.nan  # a joint without samples: no estimate
+    rvar = rng.choice([1e-4, 9e-4], size=(T, B, J))
+    q = rng.choice([2.0, 13.0], size=(T, B, J))
+    sc2 = rng.choice([0.0, 2e-4], size=(B, J))
+    tau_c = rng.choice([0.05, 0.3], size=(B, J))
+    var, est = np.empty((T, B, J)), np.empty((T, B, J, 3))
+    nk.smooth_run(y, rvar, steps, q, sc2, TAU, tau_c, est, var, 0)
+    assert np.isnan(est[:, 1, 2]).all() and np.isnan(var[:, 1, 2]).all()
+    for b in range(B):
+        for j in range(J):
+            if (b, j) == (1, 2):
+                continue
+            for i in range(3):
+                want, wvar = _brute_smooth(y[:, b, j, i], rvar[:, b, j], steps, q[:, b, j],
+                                           sc2[b, j], TAU, tau_c[b, j])  # fmt: skip
+                np.testing.assert_allclose(est[:, b, j, i], want, rtol=0, atol=1e-11)
+                np.testing.assert_allclose(var[:, b, j], wvar, rtol=1e-8, atol=1e-16)
+
+
+def test_smoother_of_a_constant_position_is_the_weighted_mean():
+    # no motion noise, no coloured error: the prediction's covariance has rank one (the
+    # position's variance), the singular branch of the RTS gain. The position is then a
+    # constant seen through white noise: the estimate at every frame is the mean of the
+    # samples, the first counted twice (it starts the filter and updates it), and its
+    # variance r / (n + 1)
+    rng = np.random.default_rng(7)
+    T, r = 30, 4e-4
+    y = rng.normal(scale=0.02, size=(T, 1, 1, 3)) + 1.0
+    y[[0, 1, 7, 8, 20]] = np.nan
+    var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
+    nk.smooth_run(y, np.full((T, 1, 1), r), np.full(T, 1 / 30), np.zeros((T, 1, 1)),
+                  np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0)  # fmt: skip
+    seen = y[np.isfinite(y[:, 0, 0, 0]), 0, 0]
+    n = len(seen)
+    want = (seen.sum(axis=0) + seen[0]) / (n + 1)
+    np.testing.assert_allclose(est[:, 0, 0], np.broadcast_to(want, (T, 3)), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(var[:, 0, 0], r / (n + 1), rtol=1e-9)
 
 
 def _simulate(rng, T, N, dt, spd, sd, esd, etau):

@@ -31,6 +31,19 @@ from numba import njit
 from tobitkf.smoothing._robust_kernels import ou_table
 
 _jit = njit(cache=True, nogil=True)
+# the block loops of smooth_run: a division by zero gives inf or NaN instead of raising
+# (the lanes where it can happen are selected away), so that the loops have no early
+# exit and the compiler can run them in SIMD lanes
+_simd = njit(cache=True, nogil=True, error_model="numpy")
+_inline = njit(inline="always", error_model="numpy")  # inlined into the SIMD loops
+
+#: SIMD lanes of a block of :func:`smooth_run` (joints of all bodies): each quantity of
+#: a block is a row of L lanes in one array. The row length is a compile-time constant,
+#: so the compiler proves the rows apart without run-time checks.
+L = 32
+_P00, _P01, _P02, _P11, _P12, _P22 = (k * L for k in range(9, 15))  # covariance rows
+_NZ, _NU = 15, 6  # rows of a block's state and of its inputs (smooth_run)
+_UR, _UQ, _UPHI = 3 * L, 4 * L, 5 * L  # smooth_run's input rows after the samples
 
 
 @_jit
@@ -63,12 +76,16 @@ def filter_sums(
     started = np.zeros(N, dtype=np.bool_)
     lastS = np.full(N, np.nan)
     lastlog = np.zeros(N)
+    last_step = math.nan
+    phi = om2 = 1.0
     for m in range(M):
         t = frames[m]
         if restart[m]:
             started[:] = False
-        phi = math.exp(-steps[t] / tau_c)  # tau_c >= one frame: 1 - phi² is exact
-        om2 = 1.0 - phi * phi
+        if steps[t] != last_step:  # else the frame before's phi (most steps repeat)
+            last_step = steps[t]
+            phi = math.exp(-last_step / tau_c)  # tau_c >= one frame: 1 - phi² is exact
+            om2 = 1.0 - phi * phi
         a, rr = ou[t, 0], ou[t, 1]
         qa, qb, qc = q * ou[t, 2], q * ou[t, 3], q * ou[t, 4]
         for j in range(N):
@@ -148,12 +165,6 @@ def loglik(
     return -0.5 * (n * math.log(2 * math.pi) + sl + se), n
 
 
-#: columns (joints of all bodies) a block of :func:`smooth_run` runs together: time is
-#: the outer loop inside a block, so each frame reads a contiguous row of the block
-#: instead of one joint's samples at a stride of the whole batch
-SMOOTH_BLOCK = 16
-
-
 @_jit
 def smooth_run(
     yk: np.ndarray,  # (T, B, J, 3) samples, NaN = none
@@ -174,22 +185,28 @@ def smooth_run(
     the ``q`` of that sample's frame) and is then updated with every sample, the first
     one included: with ``sc2 = 0`` it is exactly that two-state smoother.
 
-    The joints run in blocks of :data:`SMOOTH_BLOCK`, time outside, the block's joints
-    inside (each joint's arithmetic is that of its own recursion: the blocks change
-    the memory order, not the numbers). The RTS pass recomputes each prediction from
-    the stored filtered moments with the forward pass's expressions (same values)
-    instead of storing it."""
+    The joints run in blocks of :data:`L` columns, time outside, the block's
+    columns inside, without branches (a missing sample selects the prediction; the
+    inverse selects its singular fall-backs), so that the inner loops are SIMD loops.
+    Each column's arithmetic is that of its own recursion, operation for operation: the
+    blocks change the memory order, not the numbers. The RTS pass recomputes each
+    prediction from the stored filtered moments with the forward pass's expressions
+    (same values) instead of storing it. Every array is C-contiguous."""
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
     N = B * J
-    W = min(SMOOTH_BLOCK, N)
-    X = np.empty((T, W, 9))  # filtered (x, v, c) of each axis
-    Pf = np.empty((T, W, 6))  # filtered p00, p01, p02, p11, p12, p22
-    S = np.empty((W, 6))  # smoothed covariance of the frame after
-    first = np.empty(W, dtype=np.int64)
-    cb = np.empty(W, dtype=np.int64)  # each column's body, joint, tau_c index and sc2
-    cj = np.empty(W, dtype=np.int64)
-    cu = np.empty(W, dtype=np.int64)
-    cs = np.empty(W)
+    # columns n = b J + j (the arrays are C-contiguous)
+    y2, r2, q2 = yk.reshape((T, N * 3)), rvar.reshape((T, N)), q.reshape((T, N))
+    e2, v2 = est.reshape((T, est.shape[1] * J * 3)), var.reshape((T, var.shape[1] * J))
+    # The block's columns are the SIMD lanes, each quantity a row of L lanes. Rows of a
+    # state: (x, v, c) of axis i at 3i..3i+2, then the covariance p00, p01, p02, p11,
+    # p12, p22 (_P..). Rows of an input: the samples of the three axes, their variance
+    # (_UR), q (_UQ) and exp(-dt / tau_c) (_UPHI) of the step before the frame.
+    Z = np.empty((T, _NZ * L))  # filtered states
+    U = np.empty((T, _NU * L))  # inputs
+    cur = np.empty(_NZ * L)  # the state being filtered, then smoothed
+    first = np.empty(L, dtype=np.int64)
+    cu = np.empty(L, dtype=np.int64)  # each column's tau_c index and sc2
+    cs = np.empty(L)
     ou = ou_table(steps, tau)
     # exp(-dt / tau_c) per frame for each distinct tau_c (a few per body: one per region)
     # (found by hand: np.unique would add seconds to the compilation)
@@ -209,160 +226,248 @@ def smooth_run(
     for u in range(nu):
         for t in range(T):
             phis[t, u] = math.exp(-steps[t] / tcs[u])
-    for n0 in range(0, N, W):
-        w_n = min(W, N - n0)
+    for n0 in range(0, N, L):
+        w_n = min(L, N - n0)
         for w in range(w_n):
-            b, j = (n0 + w) // J, (n0 + w) % J
-            cb[w], cj[w], cu[w], cs[w] = b, j, ui[n0 + w], sc2[b, j]
+            cu[w], cs[w] = ui[n0 + w], sc2[(n0 + w) // J, (n0 + w) % J]
             first[w] = -1
-        for t in range(T):  # each column's first sample
+        for t in range(T):  # the block's inputs, one row per quantity
             for w in range(w_n):
-                if first[w] < 0 and math.isfinite(yk[t, cb[w], cj[w], 0]):
+                n = n0 + w
+                y0 = y2[t, 3 * n]
+                U[t, w], U[t, L + w], U[t, 2 * L + w] = y0, y2[t, 3 * n + 1], y2[t, 3 * n + 2]
+                U[t, _UR + w], U[t, _UQ + w] = r2[t, n], q2[t, n]
+                U[t, _UPHI + w] = phis[t, cu[w]]
+                if first[w] < 0 and math.isfinite(y0):
                     first[w] = t
+        for w in range(w_n):  # frame 0 starts at the column's first sample
+            fw, sj = first[w], cs[w]
+            if fw < 0:  # no sample: NaN throughout, written as such below
+                for k in range(_NZ):
+                    cur[k * L + w] = math.nan
+                continue
+            v0 = U[fw, _UQ + w] * tau / 2 if math.isfinite(tau) else 1.0
+            for i in range(3):
+                cur[3 * i * L + w] = U[fw, i * L + w]
+                cur[(3 * i + 1) * L + w] = 0.0
+                cur[(3 * i + 2) * L + w] = 0.0
+            cur[_P00 + w], cur[_P01 + w], cur[_P02 + w] = U[fw, _UR + w] + sj, 0.0, -sj
+            cur[_P11 + w], cur[_P12 + w], cur[_P22 + w] = v0, 0.0, sj
+        for t in range(T):
+            if t > 0:
+                _predict_block(cur, U[t], ou[t, 0], ou[t, 1], ou[t, 2], ou[t, 3], ou[t, 4],
+                               cs, w_n)  # fmt: skip
+            _update_block(cur, U[t], w_n)
+            for k in range(_NZ * L):
+                Z[t, k] = cur[k]
+        # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
+        # S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ; cur holds the smoothed state of the frame
+        # after (the last frame's is its filtered one)
+        _write_block(cur, e2[T - 1], v2[T - 1], b0 * J + n0, w_n)
+        for t in range(T - 2, -1, -1):
+            o = ou[t + 1]
+            _rts_block(cur, Z[t], U[t + 1], o[0], o[1], o[2], o[3], o[4], cs, w_n)
+            _write_block(cur, e2[t], v2[t], b0 * J + n0, w_n)
         for w in range(w_n):
             if first[w] < 0:  # no sample: no estimate
+                n = b0 * J + n0 + w
                 for t in range(T):
-                    var[t, b0 + cb[w], cj[w]] = math.nan
+                    v2[t, n] = math.nan
                     for i in range(3):
-                        est[t, b0 + cb[w], cj[w], i] = math.nan
-        for t in range(T):
-            a, rr = ou[t, 0], ou[t, 1]
-            for w in range(w_n):
-                fw = first[w]
-                if fw < 0:
-                    continue
-                b, j, sj = cb[w], cj[w], cs[w]
-                if t > 0:
-                    phi, qq = phis[t, cu[w]], q[t, b, j]
-                    for i in range(3):
-                        X[t, w, 3 * i] = X[t - 1, w, 3 * i] + a * X[t - 1, w, 3 * i + 1]
-                        X[t, w, 3 * i + 1] = rr * X[t - 1, w, 3 * i + 1]
-                        X[t, w, 3 * i + 2] = phi * X[t - 1, w, 3 * i + 2]
-                    p00, p01, p02 = Pf[t - 1, w, 0], Pf[t - 1, w, 1], Pf[t - 1, w, 2]
-                    p11, p12, p22 = Pf[t - 1, w, 3], Pf[t - 1, w, 4], Pf[t - 1, w, 5]
-                    n00 = p00 + 2 * a * p01 + a * a * p11 + qq * ou[t, 2]
-                    n01 = rr * (p01 + a * p11) + qq * ou[t, 3]
-                    n11 = rr * rr * p11 + qq * ou[t, 4]
-                    n02 = phi * (p02 + a * p12)
-                    n12 = phi * rr * p12
-                    n22 = phi * phi * p22 + sj * (1.0 - phi * phi)
-                    p00, p01, p11, p02, p12, p22 = n00, n01, n11, n02, n12, n22
-                else:  # frame 0 starts at the first sample, as ou_smooth_run
-                    v0 = q[fw, b, j] * tau / 2 if math.isfinite(tau) else 1.0
-                    rf = rvar[fw, b, j]
-                    p00, p01, p02, p11, p12, p22 = rf + sj, 0.0, -sj, v0, 0.0, sj
-                    for i in range(3):
-                        X[t, w, 3 * i] = yk[fw, b, j, i]
-                        X[t, w, 3 * i + 1] = 0.0
-                        X[t, w, 3 * i + 2] = 0.0
-                if math.isfinite(yk[t, b, j, 0]):
-                    h0 = p00 + p02
-                    h1 = p01 + p12
-                    h2 = p02 + p22
-                    Sv = h0 + h2 + rvar[t, b, j]
-                    iS = 1.0 / Sv
-                    k0, k1, k2 = h0 * iS, h1 * iS, h2 * iS
-                    for i in range(3):
-                        e = yk[t, b, j, i] - X[t, w, 3 * i] - X[t, w, 3 * i + 2]
-                        X[t, w, 3 * i] += k0 * e
-                        X[t, w, 3 * i + 1] += k1 * e
-                        X[t, w, 3 * i + 2] += k2 * e
-                    p00, p01, p02 = p00 - k0 * h0, p01 - k0 * h1, p02 - k0 * h2
-                    p11, p12, p22 = p11 - k1 * h1, p12 - k1 * h2, p22 - k2 * h2
-                Pf[t, w, 0], Pf[t, w, 1], Pf[t, w, 2] = p00, p01, p02
-                Pf[t, w, 3], Pf[t, w, 4], Pf[t, w, 5] = p11, p12, p22
-        # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
-        # S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ; X becomes the smoothed state
-        for w in range(w_n):
-            if first[w] < 0:
-                continue
-            b, j = cb[w], cj[w]
-            for k in range(6):
-                S[w, k] = Pf[T - 1, w, k]
-            for i in range(3):
-                est[T - 1, b0 + b, j, i] = X[T - 1, w, 3 * i]
-            var[T - 1, b0 + b, j] = S[w, 0]
-        for t in range(T - 2, -1, -1):
-            a, rr = ou[t + 1, 0], ou[t + 1, 1]
-            for w in range(w_n):
-                if first[w] < 0:
-                    continue
-                b, j, sj = cb[w], cj[w], cs[w]
-                phi, qq = phis[t + 1, cu[w]], q[t + 1, b, j]
-                f00, f01, f02 = Pf[t, w, 0], Pf[t, w, 1], Pf[t, w, 2]
-                f11, f12, f22 = Pf[t, w, 3], Pf[t, w, 4], Pf[t, w, 5]
-                # the prediction of frame t + 1, as the forward pass computed it
-                n00 = f00 + 2 * a * f01 + a * a * f11 + qq * ou[t + 1, 2]
-                n01 = rr * (f01 + a * f11) + qq * ou[t + 1, 3]
-                n11 = rr * rr * f11 + qq * ou[t + 1, 4]
-                n02 = phi * (f02 + a * f12)
-                n12 = phi * rr * f12
-                n22 = phi * phi * f22 + sj * (1.0 - phi * phi)
-                # M = P_t Aᵀ (rows i, columns k)
-                m00, m01, m02 = f00 + a * f01, rr * f01, phi * f02
-                m10, m11, m12 = f01 + a * f11, rr * f11, phi * f12
-                m20, m21, m22 = f02 + a * f12, rr * f12, phi * f22
-                i00, i01, i02, i11, i12, i22 = _inv3s(n00, n01, n02, n11, n12, n22)
-                g00 = m00 * i00 + m01 * i01 + m02 * i02
-                g01 = m00 * i01 + m01 * i11 + m02 * i12
-                g02 = m00 * i02 + m01 * i12 + m02 * i22
-                g10 = m10 * i00 + m11 * i01 + m12 * i02
-                g11 = m10 * i01 + m11 * i11 + m12 * i12
-                g12 = m10 * i02 + m11 * i12 + m12 * i22
-                g20 = m20 * i00 + m21 * i01 + m22 * i02
-                g21 = m20 * i01 + m21 * i11 + m22 * i12
-                g22 = m20 * i02 + m21 * i12 + m22 * i22
-                d00, d01, d02 = S[w, 0] - n00, S[w, 1] - n01, S[w, 2] - n02
-                d11, d12, d22 = S[w, 3] - n11, S[w, 4] - n12, S[w, 5] - n22
-                # E = G D
-                e00 = g00 * d00 + g01 * d01 + g02 * d02
-                e01 = g00 * d01 + g01 * d11 + g02 * d12
-                e02 = g00 * d02 + g01 * d12 + g02 * d22
-                e10 = g10 * d00 + g11 * d01 + g12 * d02
-                e11 = g10 * d01 + g11 * d11 + g12 * d12
-                e12 = g10 * d02 + g11 * d12 + g12 * d22
-                e20 = g20 * d00 + g21 * d01 + g22 * d02
-                e21 = g20 * d01 + g21 * d11 + g22 * d12
-                e22 = g20 * d02 + g21 * d12 + g22 * d22
-                S[w, 0] = f00 + e00 * g00 + e01 * g01 + e02 * g02
-                S[w, 1] = f01 + e00 * g10 + e01 * g11 + e02 * g12
-                S[w, 2] = f02 + e00 * g20 + e01 * g21 + e02 * g22
-                S[w, 3] = f11 + e10 * g10 + e11 * g11 + e12 * g12
-                S[w, 4] = f12 + e10 * g20 + e11 * g21 + e12 * g22
-                S[w, 5] = f22 + e20 * g20 + e21 * g21 + e22 * g22
-                var[t, b0 + b, j] = S[w, 0]
-                for i in range(3):
-                    x0, x1, x2 = X[t, w, 3 * i], X[t, w, 3 * i + 1], X[t, w, 3 * i + 2]
-                    u0 = X[t + 1, w, 3 * i] - (x0 + a * x1)
-                    u1 = X[t + 1, w, 3 * i + 1] - rr * x1
-                    u2 = X[t + 1, w, 3 * i + 2] - phi * x2
-                    X[t, w, 3 * i] = x0 + (g00 * u0 + g01 * u1 + g02 * u2)
-                    X[t, w, 3 * i + 1] = x1 + (g10 * u0 + g11 * u1 + g12 * u2)
-                    X[t, w, 3 * i + 2] = x2 + (g20 * u0 + g21 * u1 + g22 * u2)
-                    est[t, b0 + b, j, i] = X[t, w, 3 * i]
+                        e2[t, 3 * n + i] = math.nan
+
+
+@_simd
+def _predict_block(
+    z: np.ndarray,  # (_NZ * L,) a block's filtered state of the frame before, predicted
+    u: np.ndarray,  # (_NU * L,) this frame's inputs
+    a: float,  # this step's ou_table row
+    rr: float,
+    o2: float,
+    o3: float,
+    o4: float,
+    sc2: np.ndarray,  # (L,)
+    w_n: int,
+) -> None:
+    """The prediction step of :func:`smooth_run`'s block, in place (a SIMD loop)."""
+    for w in range(w_n):
+        ph = u[_UPHI + w]
+        n00, n01, n02, n11, n12, n22 = _predicted_cov(z, w, a, rr, o2, o3, o4, ph,
+                                                      u[_UQ + w], sc2[w])  # fmt: skip
+        z[_P00 + w], z[_P01 + w], z[_P02 + w] = n00, n01, n02
+        z[_P11 + w], z[_P12 + w], z[_P22 + w] = n11, n12, n22
+        _predict_axis(z, w, a, rr, ph)  # the axes, unrolled (the SIMD loop is w's)
+        _predict_axis(z, 3 * L + w, a, rr, ph)
+        _predict_axis(z, 6 * L + w, a, rr, ph)
+
+
+@_simd
+def _update_block(z: np.ndarray, u: np.ndarray, w_n: int) -> None:
+    """The measurement update of :func:`smooth_run`'s block, in place; a column without
+    a sample keeps its prediction (selected, not branched: a SIMD loop)."""
+    for w in range(w_n):
+        m = abs(u[w]) < math.inf  # finite
+        p00, p01, p02 = z[_P00 + w], z[_P01 + w], z[_P02 + w]
+        p11, p12, p22 = z[_P11 + w], z[_P12 + w], z[_P22 + w]
+        h0 = p00 + p02
+        h1 = p01 + p12
+        h2 = p02 + p22
+        iS = 1.0 / (h0 + h2 + u[_UR + w])
+        k0, k1, k2 = h0 * iS, h1 * iS, h2 * iS
+        _update_axis(z, u, w, 0, k0, k1, k2, m)  # the axes, unrolled (SIMD over w)
+        _update_axis(z, u, w, 1, k0, k1, k2, m)
+        _update_axis(z, u, w, 2, k0, k1, k2, m)
+        z[_P00 + w] = p00 - k0 * h0 if m else p00
+        z[_P01 + w] = p01 - k0 * h1 if m else p01
+        z[_P02 + w] = p02 - k0 * h2 if m else p02
+        z[_P11 + w] = p11 - k1 * h1 if m else p11
+        z[_P12 + w] = p12 - k1 * h2 if m else p12
+        z[_P22 + w] = p22 - k2 * h2 if m else p22
+
+
+@_simd
+def _rts_block(
+    s: np.ndarray,  # (_NZ * L,) smoothed state of frame t + 1 in, of frame t out
+    f: np.ndarray,  # (_NZ * L,) filtered state of frame t
+    u: np.ndarray,  # (_NU * L,) inputs of frame t + 1
+    a: float,  # ou_table row of frame t + 1
+    rr: float,
+    o2: float,
+    o3: float,
+    o4: float,
+    sc2: np.ndarray,  # (L,)
+    w_n: int,
+) -> None:
+    """One RTS step of :func:`smooth_run`'s block, in place (a SIMD loop over columns).
+
+    The prediction's covariance ``[[a, b, c], [b, d, e], [c, e, f]]`` is inverted by
+    cofactors; when it is singular (a state without variance: no coloured error, or a
+    rank-deficient start) the (x, v) block is inverted and the rest set to zero, or, rank
+    one, ``P / trace²`` is used (the minimum-norm gain). The three cases are selects."""
+    for w in range(w_n):
+        ph = u[_UPHI + w]
+        f00, f01, f02 = f[_P00 + w], f[_P01 + w], f[_P02 + w]
+        f11, f12, f22 = f[_P11 + w], f[_P12 + w], f[_P22 + w]
+        # the prediction of frame t + 1, as the forward pass computed it
+        n00, n01, n02, n11, n12, n22 = _predicted_cov(f, w, a, rr, o2, o3, o4, ph,
+                                                      u[_UQ + w], sc2[w])  # fmt: skip
+        # M = P_t Aᵀ (rows i, columns k)
+        m00, m01, m02 = f00 + a * f01, rr * f01, ph * f02
+        m10, m11, m12 = f01 + a * f11, rr * f11, ph * f12
+        m20, m21, m22 = f02 + a * f12, rr * f12, ph * f22
+        # the inverse of the prediction's covariance (docstring)
+        c00 = n11 * n22 - n12 * n12
+        c01 = n02 * n12 - n01 * n22
+        c02 = n01 * n12 - n02 * n11
+        det = n00 * c00 + n01 * c01 + n02 * c02
+        scale = n00 * n00 + n11 * n11 + n22 * n22
+        reg = abs(det) > 1e-14 * scale * math.sqrt(scale)
+        idet = 1.0 / det
+        dd = n00 * n11 - n01 * n01
+        two = (n22 <= 0.0) & (dd != 0.0)
+        tr = n00 + n11 + n22
+        wr = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
+        i00 = c00 * idet if reg else (n11 / dd if two else n00 * wr)
+        i01 = c01 * idet if reg else (-n01 / dd if two else n01 * wr)
+        i02 = c02 * idet if reg else (0.0 if two else n02 * wr)
+        i11 = (n00 * n22 - n02 * n02) * idet if reg else (n00 / dd if two else n11 * wr)
+        i12 = (n01 * n02 - n00 * n12) * idet if reg else (0.0 if two else n12 * wr)
+        i22 = (n00 * n11 - n01 * n01) * idet if reg else (0.0 if two else n22 * wr)
+        g00 = m00 * i00 + m01 * i01 + m02 * i02
+        g01 = m00 * i01 + m01 * i11 + m02 * i12
+        g02 = m00 * i02 + m01 * i12 + m02 * i22
+        g10 = m10 * i00 + m11 * i01 + m12 * i02
+        g11 = m10 * i01 + m11 * i11 + m12 * i12
+        g12 = m10 * i02 + m11 * i12 + m12 * i22
+        g20 = m20 * i00 + m21 * i01 + m22 * i02
+        g21 = m20 * i01 + m21 * i11 + m22 * i12
+        g22 = m20 * i02 + m21 * i12 + m22 * i22
+        d00, d01, d02 = s[_P00 + w] - n00, s[_P01 + w] - n01, s[_P02 + w] - n02
+        d11, d12, d22 = s[_P11 + w] - n11, s[_P12 + w] - n12, s[_P22 + w] - n22
+        # E = G D
+        e00 = g00 * d00 + g01 * d01 + g02 * d02
+        e01 = g00 * d01 + g01 * d11 + g02 * d12
+        e02 = g00 * d02 + g01 * d12 + g02 * d22
+        e10 = g10 * d00 + g11 * d01 + g12 * d02
+        e11 = g10 * d01 + g11 * d11 + g12 * d12
+        e12 = g10 * d02 + g11 * d12 + g12 * d22
+        e20 = g20 * d00 + g21 * d01 + g22 * d02
+        e21 = g20 * d01 + g21 * d11 + g22 * d12
+        e22 = g20 * d02 + g21 * d12 + g22 * d22
+        s[_P00 + w] = f00 + e00 * g00 + e01 * g01 + e02 * g02
+        s[_P01 + w] = f01 + e00 * g10 + e01 * g11 + e02 * g12
+        s[_P02 + w] = f02 + e00 * g20 + e01 * g21 + e02 * g22
+        s[_P11 + w] = f11 + e10 * g10 + e11 * g11 + e12 * g12
+        s[_P12 + w] = f12 + e10 * g20 + e11 * g21 + e12 * g22
+        s[_P22 + w] = f22 + e20 * g20 + e21 * g21 + e22 * g22
+        g = (g00, g01, g02, g10, g11, g12, g20, g21, g22)
+        _rts_axis(s, f, w, a, rr, ph, g)  # the axes, unrolled (the SIMD loop is w's)
+        _rts_axis(s, f, 3 * L + w, a, rr, ph, g)
+        _rts_axis(s, f, 6 * L + w, a, rr, ph, g)
+
+
+@_inline
+def _predicted_cov(p: np.ndarray, w: int, a: float, rr: float, o2: float, o3: float,
+                   o4: float, ph: float, qq: float, sj: float) -> tuple:  # fmt: skip
+    """The predicted covariance ``(n00, n01, n02, n11, n12, n22)`` of lane ``w`` of the
+    block state ``p`` (the forward pass and the RTS pass share these expressions)."""
+    p00, p01, p02 = p[_P00 + w], p[_P01 + w], p[_P02 + w]
+    p11, p12, p22 = p[_P11 + w], p[_P12 + w], p[_P22 + w]
+    return (p00 + 2 * a * p01 + a * a * p11 + qq * o2, rr * (p01 + a * p11) + qq * o3,
+            ph * (p02 + a * p12), rr * rr * p11 + qq * o4, ph * rr * p12,
+            ph * ph * p22 + sj * (1.0 - ph * ph))  # fmt: skip
+
+
+@_inline
+def _predict_axis(z: np.ndarray, k: int, a: float, rr: float, ph: float) -> None:
+    """(x, v, c) of one axis at ``z[k], z[k + L], z[k + 2L]`` predicted, in place."""
+    x, v, c = z[k], z[k + L], z[k + 2 * L]
+    z[k] = x + a * v
+    z[k + L] = rr * v
+    z[k + 2 * L] = ph * c
+
+
+@_inline
+def _update_axis(z: np.ndarray, u: np.ndarray, w: int, i: int, k0: float, k1: float,
+                 k2: float, m: bool) -> None:  # fmt: skip
+    """(x, v, c) of axis ``i`` of lane ``w`` updated with its sample (kept without)."""
+    r = 3 * i * L + w
+    x, v, c = z[r], z[r + L], z[r + 2 * L]
+    e = u[i * L + w] - x - c
+    z[r] = x + k0 * e if m else x
+    z[r + L] = v + k1 * e if m else v
+    z[r + 2 * L] = c + k2 * e if m else c
+
+
+@_inline
+def _rts_axis(s: np.ndarray, f: np.ndarray, k: int, a: float, rr: float, ph: float,
+              g: tuple) -> None:  # fmt: skip
+    """(x, v, c) of one axis at ``k, k + L, k + 2L`` smoothed: ``s`` the frame after's
+    smoothed in, this frame's out, ``f`` this frame's filtered, ``g`` the gain G."""
+    x0, x1, x2 = f[k], f[k + L], f[k + 2 * L]
+    u0 = s[k] - (x0 + a * x1)
+    u1 = s[k + L] - rr * x1
+    u2 = s[k + 2 * L] - ph * x2
+    s[k] = x0 + (g[0] * u0 + g[1] * u1 + g[2] * u2)
+    s[k + L] = x1 + (g[3] * u0 + g[4] * u1 + g[5] * u2)
+    s[k + 2 * L] = x2 + (g[6] * u0 + g[7] * u1 + g[8] * u2)
 
 
 @_jit
-def _inv3s(a: float, b: float, c: float, d: float, e: float, f: float) -> tuple:
-    """Inverse ``(i00, i01, i02, i11, i12, i22)`` of the symmetric matrix
-    ``[[a, b, c], [b, d, e], [c, e, f]]``; singular (a state without variance: no
-    coloured error, or a rank-deficient start): the (x, v) block is inverted and the
-    rest set to zero, or, rank one, ``P / trace²`` (the minimum-norm gain)."""
-    c00 = d * f - e * e
-    c01 = c * e - b * f
-    c02 = b * e - c * d
-    det = a * c00 + b * c01 + c * c02
-    scale = a * a + d * d + f * f
-    if abs(det) > 1e-14 * scale * math.sqrt(scale):
-        idet = 1.0 / det
-        return (c00 * idet, c01 * idet, c02 * idet, (a * f - c * c) * idet,
-                (b * c - a * e) * idet, (a * d - b * b) * idet)  # fmt: skip
-    dd = a * d - b * b
-    if f <= 0.0 and dd != 0.0:
-        return d / dd, -b / dd, 0.0, a / dd, 0.0, 0.0
-    tr = a + d + f
-    w = 0.0 if tr == 0.0 else 1.0 / (tr * tr)
-    return a * w, b * w, c * w, d * w, e * w, f * w
+def _write_block(
+    s: np.ndarray,  # (_NZ * L,) a block's smoothed state of one frame
+    est: np.ndarray,  # out (B0 * J * 3,) that frame's estimates
+    var: np.ndarray,  # out (B0 * J,)
+    n0: int,  # the block's first column in them
+    w_n: int,
+) -> None:
+    """The block's smoothed positions and variances of one frame into the outputs."""
+    for w in range(w_n):
+        n = n0 + w
+        var[n] = s[_P00 + w]
+        est[3 * n] = s[w]
+        est[3 * n + 1] = s[3 * L + w]
+        est[3 * n + 2] = s[6 * L + w]
 
 
 @_jit
