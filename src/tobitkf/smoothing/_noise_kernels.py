@@ -88,6 +88,7 @@ def filter_sums(
             om2 = 1.0 - phi * phi
         a, rr = ou[t, 0], ou[t, 1]
         qa, qb, qc = q * ou[t, 2], q * ou[t, 3], q * ou[t, 4]
+        frame_S = frame_log = math.nan  # the last S of this frame and its 3 log S
         for j in range(N):
             y0, y1, y2 = yk[t, j, 0], yk[t, j, 1], yk[t, j, 2]
             ok = math.isfinite(y0)
@@ -128,7 +129,9 @@ def filter_sums(
             se += (e * e + f * f + g * g) * iS
             if S != lastS[j]:  # the covariance settles: most steps repeat the last S
                 lastS[j] = S
-                lastlog[j] = 3 * math.log(S)
+                # tracks seen at the same frames share S: the log of the track before
+                lastlog[j] = frame_log if S == frame_S else 3 * math.log(S)
+            frame_S, frame_log = S, lastlog[j]
             sl += lastlog[j]
             n += 3
             X[j, 0] += k0 * e
