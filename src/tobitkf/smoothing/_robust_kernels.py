@@ -291,29 +291,34 @@ def _window_median(val: np.ndarray, mult: np.ndarray, cnt: np.ndarray, j: int) -
 def _select(a: np.ndarray, lo: int, hi: int, k: int) -> float:
     """The ``k``-th smallest of ``a[lo:hi + 1]`` (``lo <= k <= hi``), left at ``a[k]`` with
     nothing larger before it and nothing smaller after it (within ``lo..hi``).
-    Quickselect with a three-way partition (many equal values, as in
-    hierarchy-converted skeletons, cost nothing)."""
+
+    Quickselect whose partitions do not branch on the data (a swap every element and a
+    counter moved by the comparison: on lengths scattered about their median a branch
+    per element is mispredicted half the time). The values equal to the pivot are
+    gathered by a second pass, so many equal values (hierarchy-converted skeletons) cost
+    nothing."""
     while lo < hi:
         mid = (lo + hi) // 2
         p0, p1, p2 = a[lo], a[mid], a[hi]
         pivot = max(min(p0, p1), min(max(p0, p1), p2))  # median of three
-        lt, i, gt = lo, lo, hi
-        while i <= gt:
-            if a[i] < pivot:
-                a[lt], a[i] = a[i], a[lt]
-                lt += 1
-                i += 1
-            elif a[i] > pivot:
-                a[i], a[gt] = a[gt], a[i]
-                gt -= 1
-            else:
-                i += 1
+        lt = lo  # a[lo:lt] < pivot
+        for i in range(lo, hi + 1):
+            v = a[i]
+            a[i] = a[lt]
+            a[lt] = v
+            lt += v < pivot
         if k < lt:
             hi = lt - 1
-        elif k > gt:
-            lo = gt + 1
-        else:
-            break
+            continue
+        eq = lt  # a[lt:eq] == pivot (a[lt:] are not smaller)
+        for i in range(lt, hi + 1):
+            v = a[i]
+            a[i] = a[eq]
+            a[eq] = v
+            eq += v == pivot
+        if k < eq:
+            return pivot
+        lo = eq
     return a[k]
 
 
