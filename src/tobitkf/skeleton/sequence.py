@@ -283,6 +283,20 @@ class SkeletonSequence:
         """Copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
+    def _replace_valid(self, **changes: Any) -> SkeletonSequence:
+        """Copy with some fields changed, not validated: each value must be one that
+        :meth:`__post_init__` accepts and stores as it is (float64 / int8 arrays of the
+        right shapes, no inf, codes in range). For :func:`tobitkf.smooth`, which checks
+        its output once for a whole batch; users go through :meth:`replace`."""
+        names = [f.name for f in dataclasses.fields(self)]
+        unknown = set(changes) - set(names)
+        if unknown:
+            raise TypeError(f"not fields of SkeletonSequence: {sorted(unknown)}")
+        new = object.__new__(SkeletonSequence)
+        for name in names:
+            object.__setattr__(new, name, changes[name] if name in changes else getattr(self, name))
+        return new
+
     def missing(self) -> np.ndarray:
         """Boolean ``(T, J)``: joint position missing (any coordinate NaN)."""
         return np.isnan(self.positions).any(axis=-1)

@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from tobitkf.core.version import __version__
-from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SkeletonSequence
 
 # the built-in methods register themselves when imported
 from tobitkf.smoothing import baselines as _baselines  # noqa: F401
@@ -73,6 +73,7 @@ from tobitkf.smoothing.keypoints import (
     length_scale,
     method_view,
 )
+from tobitkf.smoothing.output_states import output_states, sample_states
 from tobitkf.smoothing.params import as_bool, check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import (
     MethodSpec,
@@ -84,13 +85,7 @@ from tobitkf.smoothing.registry import (
     register_method,
     unregister_method,
 )
-from tobitkf.smoothing.timebase import (
-    DEFAULT_INFERRED_NOISE_FACTOR,
-    all_last,
-    first_true,
-    frame_steps,
-    frame_times,
-)
+from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR, frame_steps, frame_times
 from tobitkf.smoothing.untangle import untangle_sequences
 
 __all__ = [
@@ -184,51 +179,6 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
             f"method {spec.name!r} returned std of shape {np.shape(out.std)}; expected "
             f"{inp.missing.shape} (frames, bodies, joints)"
         )
-    return out
-
-
-def sample_states(
-    missing: np.ndarray, rejected: np.ndarray, finite: np.ndarray, causal: bool
-) -> np.ndarray:
-    """:class:`SampleState` of every sample, time first (arrays of one shape (T, ...)).
-
-    ``missing``: no measurement (NaN or NOT_TRACKED); ``rejected``: a measurement the
-    method judged impossible; ``finite``: the output has a position; ``causal``: the
-    output at frame k used frames up to k only. A sample without a position is NONE; one
-    whose measurement was used is MEASURED; a rejected one REJECTED; any other fill is
-    MISSING when the method is not causal and used measurements of that joint exist both
-    before and after it, else EXTRAPOLATED.
-    """
-    missing = np.asarray(missing, dtype=bool)
-    rejected = np.asarray(rejected, dtype=bool) & ~missing
-    used = ~missing & ~rejected
-    out = np.full(missing.shape, SampleState.EXTRAPOLATED, dtype=np.int8)
-    T = missing.shape[0]
-    if not causal and T:
-        # between a joint's first and last used sample (none used: first T, last -1)
-        first = first_true(used)
-        last = T - 1 - first_true(used[::-1])
-        t = np.arange(T).reshape((T,) + (1,) * (missing.ndim - 1))
-        out[(t >= first) & (t <= last)] = SampleState.MISSING
-    out[rejected] = SampleState.REJECTED
-    out[used] = SampleState.MEASURED
-    out[~np.asarray(finite, dtype=bool)] = SampleState.NONE
-    return out
-
-
-def _output_states(states: np.ndarray | None, sample: np.ndarray) -> np.ndarray | None:
-    """The output's tracking states: filled samples INFERRED, no estimate NOT_TRACKED,
-    measured ones as given (TRACKED when the input had no states but something was
-    filled; None when the input had none and nothing was filled)."""
-    filled = SampleState.filled(sample)
-    if states is None:
-        if not filled.any():
-            return None
-        out = np.full(sample.shape, TrackingState.TRACKED, dtype=np.int8)
-    else:
-        out = np.array(states, dtype=np.int8)
-    out[filled] = TrackingState.INFERRED
-    out[sample == SampleState.NONE] = TrackingState.NOT_TRACKED
     return out
 
 
@@ -451,28 +401,27 @@ def _smooth_group(
         used["min_confidence"] = min_conf
     if untangled is not None:
         used["untangle"] = True
-    # (T, B, J) booleans: one contiguous pass, not one strided pass per body
-    finite_all = all_last(np.isfinite(est))
-    if std is not None and (~finite_all & ~np.isnan(std)).any():
-        std = np.where(finite_all, std, np.nan)  # as a rule the method's NaN are there
+    body_shape = (missing.shape[0], missing.shape[2])  # (T, J)
+    rejected = np.stack(
+        [
+            np.broadcast_to(np.asarray(e.get("rejected", False), dtype=bool), body_shape)
+            for e in extra
+        ],
+        axis=1,
+    )
+    # (T, B, J) at once; checked once for the batch: when a body would fail the sequence's
+    # checks, every body goes through replace(), which raises the sequence's own error
+    states_out = output_states(est, std, missing, rejected, states, causal)
+    make = SkeletonSequence._replace_valid if states_out.valid else SkeletonSequence.replace
     out = []
     for b, s in enumerate(seqs):
-        # body by body: (T, J) temporaries, not (T, B, J) ones
-        missing_b = missing[:, b]
-        rejected = np.broadcast_to(
-            np.asarray(extra[b].get("rejected", False), dtype=bool), missing_b.shape
-        )
-        finite = finite_all[:, b]
-        sample = sample_states(missing_b, rejected, finite, causal)
-        std_b = None if std is None else std[:, b]
-        filled = (missing_b | rejected) & finite
         used_b = {**used, **(result.body_params[b] if result.body_params else {})}
         diagnostics = {
             **extra[b],
             "clipped_fraction": (
                 np.zeros(missing.shape[-1]) if clipped is None else clipped[:, b].sum(axis=0) / T
             ),
-            "filled_fraction": filled.sum(axis=0) / T,
+            "filled_fraction": states_out.filled[b] / T,
             "method": spec.name,
             "params": used_b,
             **({} if untangled is None else untangled[b]),
@@ -481,12 +430,14 @@ def _smooth_group(
         meta["diagnostics"] = diagnostics
         meta["provenance"] = _provenance(spec, used_b, s.metadata)
         out.append(
-            s.replace(
+            make(
+                s,
                 positions=est[:, b],
                 metadata=meta,
-                std=std_b,
-                sample_state=sample,
-                tracking_state=_output_states(None if states is None else states[:, b], sample),
+                std=None if states_out.std is None else states_out.std[:, b],
+                sample_state=states_out.sample[:, b],
+                tracking_state=states_out.tracking_state(b),
+                confidence=None if s.confidence is None else s.confidence.copy(),
             )
         )
     return out

@@ -14,7 +14,6 @@ from tobitkf.smoothing.paper import REFERENCE_DT
 
 __all__ = [
     "DEFAULT_INFERRED_NOISE_FACTOR",
-    "all_last",
     "any_last",
     "elapsed_since_valid",
     "frame_steps",
@@ -77,7 +76,9 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
         if not_tracked.any():
             missing |= not_tracked
             return np.where(missing[..., None], np.nan, ys), missing
-    if not np.array_equal(missing, all_last(nan)):  # a partly-NaN sample: all its axes NaN
+    # a partly-NaN sample gets all its axes NaN; there is one when the NaN are fewer than
+    # D per missing sample (a count, not a second (..., D) reduction)
+    if np.count_nonzero(nan) != ys.shape[-1] * np.count_nonzero(missing):
         ys = np.where(missing[..., None], np.nan, ys)
     return ys, missing
 
@@ -103,13 +104,6 @@ def first_true(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
     """Index along axis 0 of each column's first True, ``mask.shape[0]`` where it has none
     (``mask (T, ...)`` gives ``(...)``)."""
     return np.where(mask.any(axis=0), mask.argmax(axis=0), mask.shape[0])
-
-
-def all_last(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """``a.all(axis=-1)``, written out for 3 axes."""
-    if a.shape[-1] == 3:
-        return (a[..., 0] & a[..., 1]) & a[..., 2]
-    return a.all(axis=-1)
 
 
 def inferred_sample_scale(

@@ -1,11 +1,13 @@
 """Compile the methods' kernels ahead of the work (``tobitkf warmup``).
 
 The compiled methods (the robust pair, the Kalman-type ones, the Kinect and 1€ filters)
-are numba kernels, cached on disk (numba's cache: ``__pycache__`` beside the package, or
-``NUMBA_CACHE_DIR``). The first call on a new machine, or after an upgrade, compiles them:
-seconds for the Kalman methods, about twenty for ``robust``, whose noise fit has kernels of
-its own (its likelihood and optimiser); every later process loads them from the cache in
-well under a second.
+are numba kernels, and so are the output states :func:`~tobitkf.smoothing.api.smooth`
+works out for every method (:mod:`tobitkf.smoothing.output_states`); all are cached on
+disk (numba's cache: ``__pycache__`` beside the package, or ``NUMBA_CACHE_DIR``). The
+first call on a new machine, or after an upgrade, compiles them: seconds for the Kalman
+methods, about twenty for ``robust``, whose noise fit has kernels of its own (its
+likelihood and optimiser); every later process loads them from the cache in well under a
+second.
 
 :func:`warm` runs a method on a small built-in recording (and, for causal methods with a
 live stepper, a few live frames), so its kernels are compiled and cached before the real
