@@ -64,7 +64,6 @@ from tobitkf.io._text import (
     check_rate,
     check_times,
     decode,
-    fmt_float,
     nonempty,
     parse_number,
     parse_rows,
@@ -647,8 +646,9 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
 
 
 def _floats(a: np.ndarray) -> list[str]:
-    """:func:`fmt_float` of every value (shortest text that reads back exactly)."""
-    return list(map(fmt_float, np.asarray(a, dtype=float).tolist()))
+    """:func:`~tobitkf.io._text.fmt_float` of every value (shortest text that reads back
+    exactly): the ``repr`` of the Python floats ``tolist`` gives, no call per value."""
+    return list(map(repr, np.asarray(a, dtype=float).tolist()))
 
 
 def _ints(a: np.ndarray) -> list[str]:
