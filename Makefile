@@ -12,6 +12,9 @@ $(PY):
 
 $(STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
+	# bytecode of the (editable) sources, written even where PYTHONDONTWRITEBYTECODE is
+	# set (containers): every start-up would otherwise compile the package again
+	$(PY) -m compileall -q src
 	$(VENV)/bin/tobitkf warmup --jobs 2  # compile the numba kernels once, into the cache
 	touch $(STAMP)
 
