@@ -18,16 +18,17 @@ import math
 import numpy as np
 from numba import njit
 
-# SampleState codes (tobitkf.skeleton.sequence), as plain ints for the kernel
-_MEASURED = 0
-_REJECTED = 1
-_MISSING = 2
-_EXTRAPOLATED = 3
-_NONE = 4
-# TrackingState codes
-_NOT_TRACKED = 0
-_INFERRED = 1
-_TRACKED = 2
+from tobitkf.skeleton.sequence import SampleState, TrackingState
+
+# the codes as plain ints (frozen into the kernels), from the enums themselves
+_MEASURED = int(SampleState.MEASURED)
+_REJECTED = int(SampleState.REJECTED)
+_MISSING = int(SampleState.MISSING)
+_EXTRAPOLATED = int(SampleState.EXTRAPOLATED)
+_NONE = int(SampleState.NONE)
+_NOT_TRACKED = int(TrackingState.NOT_TRACKED)
+_INFERRED = int(TrackingState.INFERRED)
+_TRACKED = int(TrackingState.TRACKED)
 
 
 @njit(cache=True, nogil=True)
