@@ -10,6 +10,7 @@ from hypothesis.extra import numpy as hnp
 
 from conftest import data_file
 from tobitkf.io import ReadError, detect_format, load, save
+from tobitkf.io._text import NUMBER, fmt_floats
 from tobitkf.io.generic_csv import read_csv
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
@@ -98,6 +99,43 @@ def test_csv_round_trip_property(tmp_path_factory, T, state, times, seed, topo_n
     save(s, p)
     (r,) = load(p)
     _assert_same(s, r)
+
+
+@settings(max_examples=200, deadline=None)
+@given(hnp.arrays(np.float64, hnp.array_shapes(max_dims=3, max_side=6), elements=st.floats()))
+def test_fmt_floats_reads_back_bit_for_bit(a):
+    texts = fmt_floats(a, nan="gone")
+    flat = a.reshape(-1)
+    assert len(texts) == flat.size
+    for v, text in zip(flat.tolist(), texts, strict=True):
+        if v != v:
+            assert text == "gone"
+        elif np.isinf(v):
+            assert text == repr(v)
+        else:  # the reader's number syntax, and the same bits (sign of zero included)
+            assert NUMBER.fullmatch(text), text
+            assert np.float64(float(text)).tobytes() == np.float64(v).tobytes()
+            assert len(text.lstrip("-").replace(".", "").lstrip("0")) <= 24  # not %.40g
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32))
+def test_csv_round_trip_of_tiny_huge_and_subnormal_values_and_sd(tmp_path_factory, seed):
+    rng = np.random.default_rng(seed)
+    topo = get_topology("kinect_v2")
+    T = 5
+    mag = 10.0 ** rng.uniform(-320, 3, size=(T, topo.n_joints, 3))  # subnormals to 1 km
+    pos = np.where(rng.random(mag.shape) < 0.5, -mag, mag)
+    pos[0, 0] = [0.0, -0.0, 5e-324]
+    sd = 10.0 ** rng.uniform(-12, 0, size=(T, topo.n_joints))
+    sd[1, 1] = np.nan
+    s = SkeletonSequence(pos, topo, None, None, 30.0, None, {}, std=sd)
+    p = tmp_path_factory.mktemp("csv") / "r.csv"
+    save(s, p)
+    (r,) = load(p)
+    np.testing.assert_array_equal(np.signbit(r.positions), np.signbit(pos))
+    _assert_same(s, r)
+    np.testing.assert_array_equal(r.std, sd)
 
 
 def test_csv_multibody_round_trip(tmp_path):

@@ -25,6 +25,7 @@ import zlib
 from collections.abc import Sequence
 
 import numpy as np
+import orjson
 
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import KNOWN_UNITS
@@ -483,3 +484,23 @@ def missing_state(positions: np.ndarray) -> np.ndarray | None:
 def fmt_float(x: float) -> str:
     """Shortest text that reads back to exactly ``x`` (``nan`` for NaN)."""
     return repr(float(x))
+
+
+def fmt_floats(a: np.ndarray, nan: str = "nan") -> list[str]:
+    """Shortest text that reads back to exactly each value of ``a`` (flattened in C
+    order); ``nan`` for NaN, ``inf`` / ``-inf`` for infinities.
+
+    The digits are orjson's (Ryu: the shortest digits that round-trip), about 30 times
+    faster than ``repr`` on full-precision doubles, which made writing a smoothed CSV
+    cost more than smoothing it. The text can differ from ``repr`` in form, not in
+    value: ``0.00001`` for ``1e-05``, ``1e-7`` for ``1e-07``.
+    """
+    flat = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
+    if flat.size == 0:
+        return []
+    text = orjson.dumps(flat, option=orjson.OPT_SERIALIZE_NUMPY).decode("ascii")
+    out = text[1:-1].split(",")
+    bad = np.flatnonzero(~np.isfinite(flat))  # orjson writes them as null
+    for i, v in zip(bad.tolist(), flat[bad].tolist(), strict=True):
+        out[i] = nan if v != v else repr(v)
+    return out

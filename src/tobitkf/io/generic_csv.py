@@ -64,6 +64,7 @@ from tobitkf.io._text import (
     check_rate,
     check_times,
     decode,
+    fmt_floats,
     nonempty,
     parse_number,
     parse_rows,
@@ -578,22 +579,26 @@ def write_csv(
         # column by column, from Python numbers (tolist): no numpy scalar per field
         cols: list[list[str]] = []
         if with_time:
-            cols.append(_floats(s.times()))
+            cols.append(fmt_floats(s.times()))
         if multi:
             cols.append([str(int(ids[k]))] * T)
-        for j in range(s.n_joints):
-            cols += [_floats(s.positions[:, j, a]) for a in range(n_dims)]
+        # each array formatted in one call, its columns then taken as strided slices
+        J = s.n_joints
+        pos = fmt_floats(s.positions)
+        std = None if s.std is None else fmt_floats(s.std)
+        conf = None if s.confidence is None else fmt_floats(s.confidence)
+        for j in range(J):
+            cols += [pos[j * n_dims + a :: J * n_dims] for a in range(n_dims)]
             if with_state:
                 st = s.tracking_state
                 cols.append(["2"] * T if st is None else _ints(st[:, j]))
             if with_std:
-                cols.append([""] * T if s.std is None else _floats(s.std[:, j]))
+                cols.append([""] * T if std is None else std[j::J])
             if with_sample:
                 ss = s.sample_state
                 cols.append([""] * T if ss is None else _ints(ss[:, j]))
             if with_conf:
-                cf = s.confidence
-                cols.append([""] * T if cf is None else _floats(cf[:, j]))
+                cols.append([""] * T if conf is None else conf[j::J])
         lines += map(sep.join, zip(*cols, strict=True))
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
     if doc is not None:
@@ -643,12 +648,6 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         "provenance": shared,
     }
     return json.dumps(to_jsonable(doc), indent=2) + "\n"  # ASCII: any name survives
-
-
-def _floats(a: np.ndarray) -> list[str]:
-    """:func:`~tobitkf.io._text.fmt_float` of every value (shortest text that reads back
-    exactly): the ``repr`` of the Python floats ``tolist`` gives, no call per value."""
-    return list(map(repr, np.asarray(a, dtype=float).tolist()))
 
 
 def _ints(a: np.ndarray) -> list[str]:

@@ -37,6 +37,7 @@ from tobitkf.io._text import (
     check_output_size,
     check_positions,
     fmt_float,
+    fmt_floats,
     nonempty,
     parse_int,
     parse_number,
@@ -355,14 +356,15 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
         """(F, 25) lists of the space-joined fields of ``arr`` (F, 25, width)."""
         if arr is None:
             return [[" ".join(["0"] * width)] * N_JOINTS] * F
-        vals = arr.reshape(F * N_JOINTS, width).tolist()
-        flat = [" ".join("0" if v != v else repr(v) for v in row) for row in vals]
+        vals = fmt_floats(arr, nan="0")
+        flat = [" ".join(vals[i * width : (i + 1) * width]) for i in range(F * N_JOINTS)]
         return [flat[f * N_JOINTS : (f + 1) * N_JOINTS] for f in range(F)]
 
     lines_of = []
     for s, _, _, _, _, depth, color, orient, raw_state in prepared:
-        pos = s.positions.reshape(F * N_JOINTS, 3).tolist()
-        xyz = ["0 0 0" if any(v != v for v in row) else " ".join(map(repr, row)) for row in pos]
+        txt = fmt_floats(s.positions)
+        gone = np.isnan(s.positions.reshape(F * N_JOINTS, 3)).any(axis=1).tolist()
+        xyz = ["0 0 0" if g else " ".join(txt[3 * i : 3 * i + 3]) for i, g in enumerate(gone)]
         extra = [_texts(depth, 2), _texts(color, 2), _texts(orient, 4)]
         states = raw_state.astype(np.int64).tolist()
         lines_of.append(

@@ -43,6 +43,7 @@ from tobitkf.io._text import (
     check_rate,
     check_times,
     fmt_float,
+    fmt_floats,
     nonempty,
     parse_int,
     parse_number,
@@ -211,10 +212,11 @@ def write_trc(
         "\t".join(["Frame#", "Time", *(f"{n}\t\t" for n in names)]).rstrip("\t"),
         "\t\t" + "\t".join(f"X{i}\tY{i}\tZ{i}" for i in range(1, M + 1)),
     ]
-    flat = pos.reshape(T, M * 3)
+    vals = fmt_floats(pos, nan="")
+    stamps = fmt_floats(times)
+    W = M * 3
     for t in range(T):
-        vals = ["" if np.isnan(v) else fmt_float(v) for v in flat[t]]
-        out.append("\t".join([str(t + 1), fmt_float(times[t]), *vals]))
+        out.append("\t".join([str(t + 1), stamps[t], *vals[t * W : (t + 1) * W]]))
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(out) + "\n")
 
