@@ -24,6 +24,8 @@ method) over a folder of small recordings, start-up included, with 1 and 2 proce
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import subprocess
 import sys
 import tempfile
@@ -54,6 +56,32 @@ def synthetic_recordings(n: int = 12, T: int = 1500) -> list:
             )
         )
     return out
+
+
+#: methods that run their chunks of bodies in threads (tobitkf.smoothing.chunks): also
+#: timed in one thread, beside the core (which runs in one)
+THREADED = ("robust", "robust_online")
+
+
+@contextlib.contextmanager
+def one_thread():
+    """TOBITKF_THREADS=1 inside the block."""
+    old = os.environ.get("TOBITKF_THREADS")
+    os.environ["TOBITKF_THREADS"] = "1"
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["TOBITKF_THREADS"]
+        else:
+            os.environ["TOBITKF_THREADS"] = old
+
+
+def _variants(name: str) -> list[tuple[str, contextlib.AbstractContextManager]]:
+    """(row name, context) of each timing of ``name``: threaded methods twice."""
+    if name not in THREADED:
+        return [(name, contextlib.nullcontext())]
+    return [(name, contextlib.nullcontext()), (f"{name}, 1 thread", one_thread())]
 
 
 def core_rate(batches: list[np.ndarray], repeats: int) -> float:
@@ -109,9 +137,11 @@ def main() -> None:
                     tk.smooth(c if len(c) > 1 else c[0], method=name)
 
             run()  # warm-up: kernels loaded or compiled, caches filled
-            sec = best_of(run, args.repeats)
-            base = max(base, core_rate(batches, args.repeats))
-            rows.append((name, sec, jf / sec))
+            for row, context in _variants(name):
+                with context:
+                    sec = best_of(run, args.repeats)
+                base = max(base, core_rate(batches, args.repeats))
+                rows.append((row, sec, jf / sec))
         print(f"\n{label}: {jf} joint-frames; tk.kalman_filter core {base:,.0f} joint-frames/s")
         print(f"{'method':>14} {'seconds':>9} {'joint-frames/s':>15} {'/ core':>8}")
         for name, sec, rate in rows:
@@ -143,10 +173,13 @@ def big_batch(n: int, repeats: int, names: list[str]) -> list[tuple[str, str, fl
     core = core_rate([batch], repeats)
     for name in (m for m in (DEFAULT_METHOD, DEFAULT_LIVE_METHOD) if m in names):
         tk.smooth(seqs[:2], method=name)  # kernels loaded
-        sec = best_of(lambda name=name: tk.smooth(seqs, method=name), repeats)
-        core = max(core, core_rate([batch], repeats))
-        rows.append((label, name, jf / sec, jf / sec / core))
-        print(f"{label}: {name} {jf / sec:,.0f} joint-frames/s, {jf / sec / core:.3f} of the core")
+        for row, context in _variants(name):
+            with context:
+                sec = best_of(lambda name=name: tk.smooth(seqs, method=name), repeats)
+            core = max(core, core_rate([batch], repeats))
+            rows.append((label, row, jf / sec, jf / sec / core))
+            rate = jf / sec
+            print(f"{label}: {row} {rate:,.0f} joint-frames/s, {rate / core:.3f} of the core")
     return rows
 
 
@@ -227,6 +260,16 @@ def print_markdown(table: list, live: dict, files: dict, n_files: int) -> None:
 
     print("\x1e")  # docs_results keeps what follows
     print(f"Measured {machine()}.")
+    print()
+    from tobitkf.smoothing.chunks import threads
+
+    n = threads()
+    print(
+        f"{' and '.join(THREADED)} run their chunks of bodies in {n} thread"
+        f"{'s' if n > 1 else ''} (the CPUs here; `TOBITKF_THREADS` sets it), the core and "
+        "the other methods in one; the rows `, 1 thread` time them with "
+        "`TOBITKF_THREADS=1`. A single recording of one body is one chunk."
+    )
     print()
     print("| data | method | joint-frames / s | / `kalman_filter` core |")
     print("|---|---|---|---|")

@@ -111,6 +111,7 @@ def test_chunked_run_equals_one_piece(monkeypatch, method, data):
         calls, smallest = _count_calls(monkeypatch, robust, "_robust_chunk"), B
     else:
         calls, smallest = _count_calls(monkeypatch, baselines, "_savgol_columns"), B * 75
+    monkeypatch.setenv("TOBITKF_THREADS", "1")  # the budget is a single chunk's
     for budget, n_chunks in ((1, smallest), (2 * per_body, 3)):
         monkeypatch.setattr(chunks, "CHUNK_BYTES", budget)
         calls.clear()
@@ -140,3 +141,64 @@ def test_savgol_column_does_not_depend_on_its_neighbours():
         tail = np.polyval(np.polyfit(u, x[-9:, c], 3), u[5:])
         np.testing.assert_allclose(together[:4, c], head, rtol=0, atol=1e-11)
         np.testing.assert_allclose(together[-4:, c], tail, rtol=0, atol=1e-11)
+
+
+@pytest.mark.parametrize("method", ["robust", "robust_online"])
+def test_chunks_in_threads_give_the_numbers_of_one_thread(monkeypatch, method):
+    import threading
+
+    seqs = _metric()
+    monkeypatch.setattr(chunks, "CHUNK_BYTES", 1)  # a body per chunk: five chunks
+    monkeypatch.setenv("TOBITKF_THREADS", "1")
+    one = tk.smooth(seqs, method=method)
+    names: list[str] = []
+    original = robust._robust_chunk
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        names.append(threading.current_thread().name)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(robust, "_robust_chunk", spy)
+    monkeypatch.setenv("TOBITKF_THREADS", "3")
+    _compare(one, tk.smooth(seqs, method=method))
+    assert len(names) == B and all(n.startswith("tobitkf-chunk") for n in names)
+
+
+def test_threads_come_from_the_environment_or_the_cpus(monkeypatch):
+    import os
+
+    monkeypatch.setenv("TOBITKF_THREADS", " 3 ")
+    assert chunks.threads() == 3
+    for bad in ("0", "-1", "two", "1.5"):
+        monkeypatch.setenv("TOBITKF_THREADS", bad)
+        with pytest.raises(ValueError, match="TOBITKF_THREADS"):
+            chunks.threads()
+    monkeypatch.delenv("TOBITKF_THREADS")
+    assert chunks.threads() == len(os.sched_getaffinity(0))
+
+
+def test_a_large_batch_is_spread_over_the_threads(monkeypatch):
+    monkeypatch.setattr(chunks, "SPREAD_BYTES", 50)
+    assert chunks.chunks(7, 10, spread=3) == [slice(0, 2), slice(2, 4), slice(4, 7)]
+    assert chunks.chunks(2, 30, spread=3) == [slice(0, 1), slice(1, 2)]  # an item at least
+    assert chunks.chunks(4, 10, spread=3) == [slice(0, 4)]  # 40 bytes: not worth threads
+    assert chunks.chunks(7, 10) == [slice(0, 7)]
+    monkeypatch.setattr(chunks, "CHUNK_BYTES", 40)  # two threads share it: 20 bytes each
+    assert chunks.chunks(6, 10, spread=2) == [slice(0, 2), slice(2, 4), slice(4, 6)]
+
+
+def test_worker_processes_share_the_cpus(monkeypatch):
+    import os
+
+    from tobitkf.app.pool import run_in_workers
+
+    def died(i: int) -> str:
+        raise AssertionError("a worker died")
+
+    monkeypatch.delenv("TOBITKF_THREADS", raising=False)
+    cpus = len(os.sched_getaffinity(0))
+    got = run_in_workers(os.getenv, ["TOBITKF_THREADS"] * 2, 2, on_worker_death=died)
+    assert set(got.values()) == {str(max(1, cpus // 2))}
+    monkeypatch.setenv("TOBITKF_THREADS", "5")  # the person's choice is kept
+    got = run_in_workers(os.getenv, ["TOBITKF_THREADS"], 2, on_worker_death=died)
+    assert got == {0: "5"}

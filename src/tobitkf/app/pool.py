@@ -41,8 +41,14 @@ class Interrupted(Exception):
         self.done = done
 
 
-def _worker_init(parent: int) -> None:
+def _worker_init(parent: int, n_workers: int = 1) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    # the workers share the CPUs: each runs its share of threads in a chunked runner
+    # (tobitkf.smoothing.chunks), unless the person set TOBITKF_THREADS
+    if not os.environ.get("TOBITKF_THREADS", "").strip():
+        from tobitkf.smoothing.chunks import threads
+
+        os.environ["TOBITKF_THREADS"] = str(max(1, threads() // max(1, n_workers)))
     # a handler inherited from the parent (the CLI turns SIGTERM into KeyboardInterrupt)
     # would not end a worker blocked waiting for work: SIGTERM ends a worker
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -122,7 +128,9 @@ def _run_batch(
 ) -> list[int]:
     """Run pending tasks in one pool until done or a worker dies; returns the tasks that
     were running when it died (to be retried one by one)."""
-    pool = ProcessPoolExecutor(n_workers, initializer=_worker_init, initargs=(os.getpid(),))
+    pool = ProcessPoolExecutor(
+        n_workers, initializer=_worker_init, initargs=(os.getpid(), n_workers)
+    )
     inflight: dict[Future, int] = {}
     try:
         while pending or inflight:

@@ -92,7 +92,7 @@ from numpy.typing import NDArray
 
 from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology
-from tobitkf.smoothing.chunks import chunks
+from tobitkf.smoothing.chunks import chunks, map_chunks, threads
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
@@ -406,14 +406,19 @@ def _robust_bodies(
     rejected = np.zeros((T, B, J), dtype=bool)
     L = np.empty((B, J)) if params["bones"] else None
     fits: Any = None
-    # a chunk of bodies at a time, written into the outputs in place
-    for b in chunks(B, T * J * 3 * 8):
-        lengths, f = _robust_chunk(
+
+    def run(b: slice) -> tuple[Array | None, Any]:
+        return _robust_chunk(
             ys[:, b], missing[:, b], None if states is None else states[:, b],
             None if confidence is None else confidence[:, b],
             None if centre is None else centre[b], times, steps, topo, setup, params, factor,
             offline, (est, rejected, var), b.start,
         )  # fmt: skip
+
+    # a chunk of bodies at a time, written into the outputs in place (chunks in threads)
+    n_threads = threads()
+    parts = chunks(B, T * J * 3 * 8, spread=n_threads)
+    for b, (lengths, f) in zip(parts, map_chunks(run, parts, n_threads), strict=True):
         if L is not None:
             L[b] = lengths
         if f is not None:
