@@ -202,3 +202,22 @@ def test_worker_processes_share_the_cpus(monkeypatch):
     monkeypatch.setenv("TOBITKF_THREADS", "5")  # the person's choice is kept
     got = run_in_workers(os.getenv, ["TOBITKF_THREADS"], 2, on_worker_death=died)
     assert got == {0: "5"}
+
+
+def test_a_failing_chunk_stops_the_others_and_raises():
+    import time
+
+    started: list[int] = []
+
+    def fn(part: slice) -> int:
+        started.append(part.start)
+        if part.start == 0:
+            raise RuntimeError("chunk 0 failed")
+        time.sleep(0.05)
+        return part.start
+
+    parts = [slice(i, i + 1) for i in range(40)]
+    with pytest.raises(RuntimeError, match="chunk 0 failed"):
+        chunks.map_chunks(fn, parts, 2)
+    assert len(started) < 10  # the queued chunks were cancelled, not all run
+    assert chunks.map_chunks(lambda p: p.start, parts, 3) == list(range(40))  # in order

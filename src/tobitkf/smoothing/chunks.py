@@ -78,4 +78,6 @@ def map_chunks(fn: Callable[[slice], R], parts: Sequence[slice], n_threads: int)
     if n <= 1:
         return [fn(p) for p in parts]
     with ThreadPoolExecutor(n, thread_name_prefix="tobitkf-chunk") as pool:
+        # a chunk that raises, or Ctrl-C, cancels the chunks not yet started (map's own
+        # clean-up), so the error surfaces after the running ones, not after all
         return list(pool.map(fn, parts))
