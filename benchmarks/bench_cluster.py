@@ -39,6 +39,12 @@ PROJECT_WORKERS = (8, 32, 128)
 MARKER = "bench-cluster.json"
 
 
+def _marker(folder: Path) -> Path:
+    """The file that says what ``folder`` holds: beside it, not in it (``tobitkf smooth
+    FOLDER`` takes every file in the folder as an input)."""
+    return folder.parent / f".{folder.name}.{MARKER}"
+
+
 def _part(args: tuple[str, int, int]) -> int:
     from tobitkf.evaluation.ntu_like import write_ntu_like
 
@@ -48,10 +54,11 @@ def _part(args: tuple[str, int, int]) -> int:
 
 def make_dataset(folder: Path, n: int, workers: int = 2) -> None:
     """``n`` NTU-like files in ``folder`` (kept when a previous call wrote the same)."""
-    marker = folder / MARKER
-    if marker.exists() and json.loads(marker.read_text()) == {"files": n}:
+    marker = _marker(folder)
+    if marker.exists() and folder.is_dir() and json.loads(marker.read_text()) == {"files": n}:
         print(f"data set: {n} files in {folder} (reused)", flush=True)
         return
+    marker.unlink(missing_ok=True)  # until the folder is complete again
     if folder.exists():
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
@@ -129,7 +136,15 @@ def smooth(data: Path, out: Path, *extra: str) -> tuple[float, list[dict]]:
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     sec = time.perf_counter() - t0
     if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{done.stderr[-3000:]}")
+        try:  # with --json the files that failed are in the summary, not on stderr
+            failed = [s for s in json.loads(done.stdout) if not s.get("ok", True)]
+        except ValueError:
+            failed = []
+        why = "\n".join(f"{s.get('source')}: {s.get('error')}" for s in failed[:20])
+        raise RuntimeError(
+            f"{' '.join(cmd)} failed ({done.returncode}, {len(failed)} file(s)):\n{why}\n"
+            f"{done.stderr[-3000:]}"
+        )
     return sec, json.loads(done.stdout)
 
 
@@ -201,6 +216,7 @@ def main() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
         if args.data is not None and not args.keep:
             shutil.rmtree(args.data, ignore_errors=True)
+            _marker(args.data).unlink(missing_ok=True)
 
 
 def print_markdown(rows, n, W, start, cost, overhead, projection) -> None:
