@@ -3,6 +3,7 @@ at a time gives exactly the numbers of the batch in one piece."""
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -143,6 +144,12 @@ def test_savgol_column_does_not_depend_on_its_neighbours():
         np.testing.assert_allclose(together[-4:, c], tail, rtol=0, atol=1e-11)
 
 
+def _cpus() -> int:
+    if hasattr(os, "sched_getaffinity"):  # Linux: the CPUs this process may use
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 @pytest.mark.parametrize("method", ["robust", "robust_online"])
 def test_chunks_in_threads_give_the_numbers_of_one_thread(monkeypatch, method):
     import threading
@@ -165,8 +172,6 @@ def test_chunks_in_threads_give_the_numbers_of_one_thread(monkeypatch, method):
 
 
 def test_threads_come_from_the_environment_or_the_cpus(monkeypatch):
-    import os
-
     monkeypatch.setenv("TOBITKF_THREADS", " 3 ")
     assert chunks.threads() == 3
     for bad in ("0", "-1", "two", "1.5"):
@@ -174,7 +179,7 @@ def test_threads_come_from_the_environment_or_the_cpus(monkeypatch):
         with pytest.raises(ValueError, match="TOBITKF_THREADS"):
             chunks.threads()
     monkeypatch.delenv("TOBITKF_THREADS")
-    assert chunks.threads() == len(os.sched_getaffinity(0))
+    assert chunks.threads() == _cpus()
 
 
 def test_a_large_batch_is_spread_over_the_threads(monkeypatch):
@@ -188,15 +193,13 @@ def test_a_large_batch_is_spread_over_the_threads(monkeypatch):
 
 
 def test_worker_processes_share_the_cpus(monkeypatch):
-    import os
-
     from tobitkf.app.pool import run_in_workers
 
     def died(i: int) -> str:
         raise AssertionError("a worker died")
 
     monkeypatch.delenv("TOBITKF_THREADS", raising=False)
-    cpus = len(os.sched_getaffinity(0))
+    cpus = _cpus()
     got = run_in_workers(os.getenv, ["TOBITKF_THREADS"] * 2, 2, on_worker_death=died)
     assert set(got.values()) == {str(max(1, cpus // 2))}
     monkeypatch.setenv("TOBITKF_THREADS", "5")  # the person's choice is kept
