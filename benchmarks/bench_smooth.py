@@ -17,7 +17,8 @@ The first call of each method is not timed (it loads, or compiles, the robust ke
 Live: the per-frame latency of the live default (``robust_online``) and of ``atkf``
 through ``LiveSmoother`` for one body, six bodies in one array and six bodies keyed by id,
 next to a minimal numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
-method) over a folder of small recordings, start-up included, with 1 and 2 processes.
+method) over a folder of small recordings, start-up included, with 1 and 2 processes, and
+over the KIMORE folder (best of 3 runs).
 ``--markdown`` ends with the README's table (``make bench``).
 """
 
@@ -151,8 +152,9 @@ def main() -> None:
         table += big_batch(args.big, args.repeats, names)
     live = live_latency(args.live_frames)
     files = files_per_second(args.files) if args.files > 0 else {}
+    kimore = kimore_command()
     if args.markdown:
-        print_markdown(table, live, files, args.files)
+        print_markdown(table, live, files, args.files, kimore)
 
 
 def big_batch(n: int, repeats: int, names: list[str]) -> list[tuple[str, str, float, float]]:
@@ -242,6 +244,24 @@ def live_latency(
     return out
 
 
+def kimore_command(repeats: int = 3) -> float | None:
+    """Wall seconds of ``tobitkf smooth`` (default method) on the KIMORE folder, a new
+    process each time, start-up included, into a new output folder: the best of
+    ``repeats`` (None without the data)."""
+    if not (KIMORE.is_dir() and any(KIMORE.glob("*.csv"))):
+        return None
+    best = float("inf")
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeats):
+            cmd = [sys.executable, "-m", "tobitkf", "smooth", str(KIMORE), "-o",
+                   str(Path(tmp) / f"out{i}")]  # fmt: skip
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True, capture_output=True)
+            best = min(best, time.perf_counter() - t0)
+    print(f"tobitkf smooth on the KIMORE folder: {best:.2f} s (best of {repeats})")
+    return best
+
+
 def files_per_second(n: int) -> dict[int, float]:
     """``tobitkf smooth`` (default method) over ``n`` small recordings: files/s by --jobs."""
     topo = tk.get_topology("kinect_v2")
@@ -267,7 +287,9 @@ def files_per_second(n: int) -> dict[int, float]:
     return out
 
 
-def print_markdown(table: list, live: dict, files: dict, n_files: int) -> None:
+def print_markdown(
+    table: list, live: dict, files: dict, n_files: int, kimore: float | None = None
+) -> None:
     from bench_filters import machine
 
     print("\x1e")  # docs_results keeps what follows
@@ -312,6 +334,12 @@ def print_markdown(table: list, live: dict, files: dict, n_files: int) -> None:
         print(
             f"`tobitkf smooth` (default method) over {n_files} NTU files of 60–300 frames, "
             f"start-up included: {rates}."
+        )
+    if kimore is not None:
+        print()
+        print(
+            "`tobitkf smooth ../shared/data/kimore -o OUT` (default method, three recordings, "
+            f"a new process, start-up included): {kimore:.2f} s, the best of 3."
         )
 
 
