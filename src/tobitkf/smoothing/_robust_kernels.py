@@ -81,7 +81,8 @@ I_BONES = 0
 I_CARRY = 1
 I_LOOKBACK = 2
 I_TWO_PASS = 3
-N_PI = 4
+I_INFERRED_BONES = 4
+N_PI = 5
 
 
 # ------------------------------------------------------------------------------ small
@@ -488,7 +489,7 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
 
 def new_work(B: int, J: int) -> tuple:
     """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
-    return np.empty((2, J, 3)), np.full((2, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
+    return np.empty((4, J, 3)), np.full((3, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
 
 
 @_jit
@@ -703,6 +704,62 @@ def confirm_run(
     for b in range(B):
         for t in range(T):
             confirm_frame(acc[t, b], missing[t, b], times[t], min_run, sf[b], out[t, b])
+    return out
+
+
+# ------------------------------------------------------------------------------ inferred bones
+@_jit
+def project_frame(
+    y: np.ndarray,  # (J, 3) this frame, NaN = missing
+    inferred: np.ndarray,  # (J,) the sensor guessed the joint (INFERRED)
+    parents: np.ndarray,
+    order: np.ndarray,
+    L: np.ndarray,  # (J,) bone lengths (NaN = unknown: the joint is left as it is)
+    out: np.ndarray,  # out (J, 3): y with the inferred joints moved
+    shift: np.ndarray,  # scratch (J, 3): how far each joint was moved
+) -> None:
+    """Inferred joints put back at their bone's length: an INFERRED joint keeps its
+    direction from its parent (as placed by the parent's own correction) but moves to
+    the distance ``L`` from it. An inferred joint whose parent is inferred too first
+    moves with the parent's correction (the sensor guessed the chain as a whole).
+    Tracked and missing joints, roots, and joints whose parent or length is unknown are
+    copied unchanged (the last two keep the parent's correction)."""
+    J = parents.shape[0]
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        for i in range(3):
+            out[j, i] = y[j, i]
+            shift[j, i] = 0.0
+        if p < 0 or not inferred[j] or not _finite3(y[j, 0], y[j, 1], y[j, 2]):
+            continue
+        if inferred[p]:
+            for i in range(3):
+                out[j, i] += shift[p, i]
+        d = _dist(out[j, 0], out[j, 1], out[j, 2], out[p, 0], out[p, 1], out[p, 2])
+        if math.isfinite(L[j]) and math.isfinite(d) and d > 0.0:
+            s = L[j] / d
+            for i in range(3):
+                out[j, i] = out[p, i] + (out[j, i] - out[p, i]) * s
+        for i in range(3):
+            shift[j, i] = out[j, i] - y[j, i]
+
+
+@_jit
+def project_run(
+    ys: np.ndarray,  # (T, B, J, 3)
+    inferred: np.ndarray,  # (T, B, J)
+    parents: np.ndarray,
+    order: np.ndarray,
+    L: np.ndarray,  # (B, J)
+) -> np.ndarray:
+    """:func:`project_frame` over a recording: a new ``(T, B, J, 3)`` array."""
+    T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
+    out = np.empty((T, B, J, 3))
+    shift = np.empty((J, 3))
+    for t in range(T):
+        for b in range(B):
+            project_frame(ys[t, b], inferred[t, b], parents, order, L[b], out[t, b], shift)
     return out
 
 
@@ -954,6 +1011,7 @@ def online_frames(
     ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
     missing_n: np.ndarray,  # (n, B, J)
     rinf_n: np.ndarray,  # (n, B, J) variance multiplier of INFERRED samples (else 1)
+    inferred_n: np.ndarray,  # (n, B, J) INFERRED samples (project_frame)
     times: np.ndarray,  # (n,) time of each frame
     steps: np.ndarray,  # (n,) time step of the filter before each frame
     parents: np.ndarray,
@@ -962,8 +1020,8 @@ def online_frames(
     pf: np.ndarray,
     pi: np.ndarray,
     st: tuple,  # new_state(B, J, lookback), carried from call to call
-    scratch: np.ndarray,  # work (2, J, 3)
-    scratch1: np.ndarray,  # work (2, J)
+    scratch: np.ndarray,  # work (4, J, 3)
+    scratch1: np.ndarray,  # work (3, J)
     acc: np.ndarray,  # work (3, B, J)
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
@@ -995,11 +1053,19 @@ def online_frames(
         pseudo = scratch[1]
         radius = scratch1[0]
         no_lengths = scratch1[1]  # the online gate learns its bone lengths (unused)
+        yb = scratch[2]  # this frame of the body, inferred joints at their bone's length
         for b in range(B):
             gate = acc[0, b]
             final = acc[1, b]
             radius.fill(np.nan)
-            gate_frame(y[b], yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
+            if pi[I_INFERRED_BONES] != 0:
+                lengths = scratch1[2]
+                for j in range(J):
+                    lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
+                project_frame(y[b], inferred_n[f, b], parents, order, lengths, yb, scratch[3])
+            else:
+                _copy2(yb, y[b])
+            gate_frame(yb, yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                        no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
                        h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
             if min_run > 0:
@@ -1008,13 +1074,13 @@ def online_frames(
                     prev_final = acc[2, b]  # contiguous, no allocation: one chain_frame type
                     for j in range(J):
                         prev_final[j] = sb[b, j, B_PREV_FINAL]
-                    chain_frame(final, prev_final, y[b], yprev[b], abs(dt_prev), parents, order,
+                    chain_frame(final, prev_final, yb, yprev[b], abs(dt_prev), parents, order,
                                 pj, pf[P_MARGIN])  # fmt: skip
             else:
                 for j in range(J):
                     final[j] = gate[j]
             if carry:
-                carry_frame(y[b], final, parents, order, off[b], anchor, pseudo, radius)
+                carry_frame(yb, final, parents, order, off[b], anchor, pseudo, radius)
             # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
             for j in range(J):
                 a = final[j]
@@ -1059,13 +1125,13 @@ def online_frames(
                     p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
                 if a and not started:  # the filter starts at the sample itself
                     for i in range(3):
-                        x[b, j, i, 0], x[b, j, i, 1] = y[b, j, i], 0.0
+                        x[b, j, i, 0], x[b, j, i, 1] = yb[j, i], 0.0
                     p00, p01, p10, p11 = r, 0.0, 0.0, pj[j, J_V0]
                     sb[b, j, B_STARTED] = True
                 elif started and (a or carried):
                     k0, k1, p00, p01, p10, p11 = _update_P(p00, p01, p10, p11, r)
                     for i in range(3):
-                        e = (y[b, j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
+                        e = (yb[j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
                         x[b, j, i, 0] += k0 * e
                         x[b, j, i, 1] += k1 * e
                 P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
@@ -1080,7 +1146,7 @@ def online_frames(
                 var[b0 + b, j] = p00 if started else np.nan
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
-                    out[b0 + b, j, i] = x[b, j, i, 0] if started else y[b, j, i]
-            _copy2(yprev[b], y[b])
+                    out[b0 + b, j, i] = x[b, j, i, 0] if started else yb[j, i]
+            _copy2(yprev[b], yb)
         clock[0] = tidx + 1
         clock[1] = tt

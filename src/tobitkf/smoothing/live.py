@@ -53,6 +53,7 @@ __all__ = ["LiveSmoother", "live_methods"]
 
 Array = NDArray[np.float64]
 _STATES = tuple(int(s) for s in TrackingState)
+_TRACKED = int(TrackingState.TRACKED)  # a plain int: filling with the enum member is slower
 _INFINITE = "positions: infinite values (use NaN for a missing joint)"
 
 
@@ -131,7 +132,7 @@ def _group_frame(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tupl
         pos[slots] = arr[[rows[s] for s in slots]]
     if sts is None or all(sts[r] is None for r in rows if r >= 0):
         return pos, None
-    states = np.full(pos.shape[:2], TrackingState.TRACKED, np.int8)
+    states = np.full(pos.shape[:2], _TRACKED, np.int8)
     for s, r in enumerate(rows):
         if r >= 0 and sts[r] is not None:
             states[s] = sts[r]
@@ -330,10 +331,12 @@ class LiveSmoother:
         dims = batch_pos.shape[-1]
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
+        kw: dict[str, Any] = {}
         if getattr(stepper, "uses_positions", False):  # the positions as given, too
-            out = stepper.step(ys, missing, batch_states, dt, positions=batch_pos)
-        else:
-            out = stepper.step(ys, missing, batch_states, dt)
+            kw["positions"] = batch_pos
+        if getattr(stepper, "uses_n_dims", False):  # the stream's coordinates (2 or 3)
+            kw["n_dims"] = dims
+        out = stepper.step(ys, missing, batch_states, dt, **kw)
         out = drop_third_axis(np.asarray(out), dims)
         return out[0] if single else out
 

@@ -131,7 +131,9 @@ class LiveStepper(Protocol):
 
     A stepper that reads the positions as given (not only ``ys``, where NOT_TRACKED
     samples are NaN) sets a class attribute ``uses_positions = True``: ``step`` then
-    also receives ``positions=`` (B, J, 3)."""
+    also receives ``positions=`` (B, J, 3). One that depends on the stream's number of
+    coordinates sets ``uses_n_dims = True`` and receives ``n_dims=`` (2 or 3; a 2-D
+    stream reaches ``step`` with a third axis of zeros)."""
 
     def step(
         self,

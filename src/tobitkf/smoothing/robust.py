@@ -43,6 +43,17 @@ state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
 missing; ``INFERRED`` joints get ``inferred_noise_factor`` times the measurement
 variance.
 
+Inferred joints
+---------------
+A joint the sensor only guessed (Kinect's ``INFERRED``, an occluded hand or foot) drifts
+with the whole guessed chain, while the real bone keeps its length. Before the gates, an
+inferred joint is put back at its bone's length from its parent, in the direction the
+guess gives (:func:`~tobitkf.smoothing.robust_gating.project_inferred`; an inferred
+child first moves with its inferred parent's correction). Offline the length is the
+recording's median, online the median learnt so far (none yet: left as guessed); 3-D
+only, since a bone seen in projection has no one length. ``inferred_bones=False`` turns
+this off.
+
 Carrying
 --------
 A rejected joint is not left behind in space while the body moves on: it gets a
@@ -90,7 +101,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.skeleton.sequence import SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing.chunks import chunks, map_chunks, threads
 from tobitkf.smoothing.keypoints import (
@@ -114,6 +125,7 @@ from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, 
 from tobitkf.smoothing.robust_scale import recording_gates
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
+    INFERRED_CODE,
     first_true,
     frame_steps,
     frame_times,
@@ -149,6 +161,8 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "min_run": 0.1,
     # rejected joints follow their parent (offset from the last good frame, sd = bone)
     "carry": True,
+    # INFERRED joints (the sensor's guesses) are put back at their bone's length, 3-D
+    "inferred_bones": True,
     # metric parameters: "physical" (as given, in metres or the data's units), "recording"
     # (taken from the recording: robust_scale), "auto" (physical for lengths, recording
     # for pixels and unknown units)
@@ -175,6 +189,7 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "lookback": at_least_int(0),
     "min_run": nonneg_float,
     "carry": as_bool,
+    "inferred_bones": as_bool,
     "gates": one_of("auto", "physical", "recording"),
     "noise": one_of("fit", "fixed"),
     "fit_seconds": positive_or_inf,
@@ -238,6 +253,7 @@ class _Setup:
         self.pi[k.I_CARRY] = bool(params["carry"])
         self.pi[k.I_LOOKBACK] = int(params["lookback"])
         self.pi[k.I_TWO_PASS] = bool(params["two_pass"])
+        self.pi[k.I_INFERRED_BONES] = bool(params["inferred_bones"])
         self.resolved = {
             "v_max": self.vmax.tolist(),
             "speed_sd": self.spd.tolist(),
@@ -261,6 +277,15 @@ def _inferred_scale(
         w = np.where(np.isnan(c), 1.0, 1.0 / np.maximum(c, MIN_CONFIDENCE_WEIGHT) ** 2)
         out = np.ascontiguousarray(out * w)
     return out
+
+
+def _inferred(states: Any, shape: tuple[int, ...], n_dims: int) -> NDArray[np.bool_]:
+    """The INFERRED samples ``shape`` (T, B, J) that are put back at their bone's length
+    (``project_frame``): none without tracking states, and none in 2-D, where a bone
+    seen in projection has no one length."""
+    if states is None or n_dims != 3:
+        return np.zeros(shape, dtype=bool)
+    return np.ascontiguousarray(np.asarray(states) == INFERRED_CODE)
 
 
 def use_recording_gates(params: dict[str, Any], units: str | None) -> bool:
@@ -412,7 +437,7 @@ def _robust_bodies(
             ys[:, b], missing[:, b], None if states is None else states[:, b],
             None if confidence is None else confidence[:, b],
             None if centre is None else centre[b], times, steps, topo, setup, params, factor,
-            offline, (est, rejected, var), b.start,
+            offline, n_dims, (est, rejected, var), b.start,
         )  # fmt: skip
 
     # a chunk of bodies at a time, written into the outputs in place (chunks in threads)
@@ -462,6 +487,7 @@ def _robust_chunk(
     params: dict[str, Any],
     factor: float,
     offline: bool,
+    n_dims: int,
     out: tuple[Array, NDArray[np.bool_], Array],
     b0: int,
 ) -> tuple[Array | None, Any]:
@@ -474,6 +500,7 @@ def _robust_chunk(
     k = kernels()
     missing = np.ascontiguousarray(missing, dtype=bool)
     rinf = _inferred_scale(states, missing, factor, confidence)
+    inferred = _inferred(states, missing.shape, n_dims)
     fits = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     if offline:
@@ -482,15 +509,16 @@ def _robust_chunk(
         L = bone_lengths(ys, topo.parents) if params["bones"] else None
         L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        inferred = np.zeros(missing.shape, dtype=bool)
-        if states is not None:
-            inferred = np.asarray(states) == TrackingState.INFERRED
+        if params["inferred_bones"] and L is not None and inferred.any():
+            # the sensor's guesses at the recording's bone lengths (3-D: a projected
+            # 2-D bone has no one length)
+            ys = readonly(k.project_run(ys, inferred, setup.parents, setup.order, L_fixed))
         fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
                         b0)  # fmt: skip
     else:
         est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
-        k.online_frames(ys, missing, rinf, times, steps, *setup.args(), state,
+        k.online_frames(ys, missing, rinf, inferred, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         guard = step_guard()
         guard.guard_frames(ys, missing, est, var, b0, *guard.new_state(B, J, ys.shape[-1]))
@@ -528,8 +556,12 @@ class RobustStepper:
         self._state: Any = None
         self._time = 0.0
 
-    def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float) -> Array:
-        """Smooth one frame: ys (B, J, 3) NaN where missing; returns (B, J, 3)."""
+    uses_n_dims = True  # the stream's coordinates: inferred joints keep their bones in 3-D
+
+    def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
+             n_dims: int = 3) -> Array:  # fmt: skip
+        """Smooth one frame: ys (B, J, 3) NaN where missing (``n_dims`` 2: a third axis of
+        zeros); returns (B, J, 3)."""
         k = kernels()
         B, J = missing.shape
         if self._state is None:
@@ -546,10 +578,17 @@ class RobustStepper:
         # compiles twice
         y1 = readonly(np.ascontiguousarray(ys, dtype=float)[None])
         m1 = np.ascontiguousarray(missing, dtype=bool)[None]
+        if states is None:
+            rinf, inferred = np.ones((1, B, J)), np.zeros((1, B, J), dtype=bool)
+        else:  # _inferred_scale and _inferred from one comparison (a frame is microseconds)
+            inferred = np.asarray(states)[None] == INFERRED_CODE
+            rinf = np.where(inferred & ~m1, self.factor, 1.0)
+            if n_dims != 3:
+                inferred = np.zeros((1, B, J), dtype=bool)
         k.online_frames(
-            y1, m1, _inferred_scale(states, missing, self.factor)[None],
-            np.array([self._time]), np.array([float(dt)]), *self.setup.args(), self._state,
-            *self._scratch, out, self.rejected[None], self.std[None], 0,
+            y1, m1, rinf, inferred, np.array([self._time]), np.array([float(dt)]),
+            *self.setup.args(), self._state, *self._scratch, out, self.rejected[None],
+            self.std[None], 0,
         )  # fmt: skip
         step_guard().guard_frames(y1, m1, out, self.std[None], 0, *self._guard)
         np.sqrt(self.std, out=self.std)
@@ -601,6 +640,10 @@ def robust_smooth(
     carry : rejected joints are carried along with their parent (pseudo-measurement at
         the parent plus the last good offset, standard deviation = that bone's length),
         instead of only being predicted by their own motion model (default True).
+    inferred_bones : INFERRED joints (the sensor's guesses) are put back at their bone's
+        length before the gates, keeping their direction from the parent; an inferred
+        chain first moves with its parent's correction (default True; 3-D only). The
+        length is the recording's median offline, the one learnt so far online.
     noise : offline only: ``"fit"`` (default) fits ``speed_sd`` and ``noise_sd`` (given
         values: the start and bounds) and a coloured error (``error_sd``, ``error_tau``)
         to the recording per body region (:mod:`tobitkf.smoothing.robust_fit`; the

@@ -4,7 +4,8 @@ Speed gate, bone gate, chain rule, re-acquisition after ``max_reject``, offline
 ``min_run`` (:func:`drop_short_runs`) and the chain rule on the combined mask
 (:func:`enforce_chain`), online confirmation (:func:`confirm_reacquisition`), and the
 pseudo-measurements that carry a rejected joint with its parent
-(:func:`carry_with_parent`). The rules and their reasons are in
+(:func:`carry_with_parent`), and the sensor's guessed (INFERRED) joints put back at
+their bone's length (:func:`project_inferred`). The rules and their reasons are in
 :mod:`tobitkf.smoothing.robust` and docs/robust.md. Arrays are ``(T, J, 3)`` positions
 with NaN for missing samples and ``(T, J)`` accept masks.
 
@@ -31,6 +32,7 @@ __all__ = [
     "joint_levels",
     "joint_order",
     "kernels",
+    "project_inferred",
     "region_values",
 ]
 
@@ -239,6 +241,23 @@ def carry_with_parent(ys: Array, acc: NDArray[np.bool_], parents: Any) -> tuple[
     par, order = joint_order(parents)
     pseudo, radius = kernels().carry_run(_body(ys), _body(acc, bool), par, order, False)
     return pseudo[:, 0], radius[:, 0]
+
+
+def project_inferred(ys: Array, inferred: NDArray[np.bool_], parents: Any, lengths: Array) -> Array:
+    """The INFERRED joints put back at their bone's length (per frame, roots outwards).
+
+    A joint the sensor only guessed (occluded: Kinect's INFERRED) is often wrong by a
+    drift of the whole guessed chain, while its bone keeps its length: the joint keeps
+    its direction from its parent (as placed by the parent's own correction) and moves
+    to the distance ``lengths[j]`` from it. An inferred joint whose parent is inferred
+    too first moves with the parent's correction. Tracked and missing joints, roots, and
+    joints without a parent position or a length (NaN) are not projected.
+
+    ``ys (T, J, 3)``, ``inferred (T, J)``, ``lengths (J,)``; returns a new ``(T, J, 3)``.
+    """
+    par, order = joint_order(parents)
+    L = np.ascontiguousarray(np.asarray(lengths, dtype=float).reshape(1, -1))
+    return kernels().project_run(_body(ys), _body(inferred, bool), par, order, L)[:, 0]
 
 
 def drop_short_runs(

@@ -29,6 +29,10 @@ Array = NDArray[np.float64]
 #: measurement-variance multiplier for INFERRED joints: twice the standard deviation, the
 #: same doubling the Kinect SDK's own joint filter applies to its radii for inferred joints
 DEFAULT_INFERRED_NOISE_FACTOR = 4.0
+#: the tracking states as plain ints: an array compared with the enum member costs
+#: microseconds per call (numpy converts the member each time), a live frame's budget
+NOT_TRACKED_CODE = int(TrackingState.NOT_TRACKED)
+INFERRED_CODE = int(TrackingState.INFERRED)
 
 
 def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
@@ -72,7 +76,7 @@ def measurements(positions: Any, states: Any | None) -> tuple[Array, NDArray[np.
     nan = np.isnan(ys)
     missing = any_last(nan)
     if states is not None:
-        not_tracked = np.asarray(states) == TrackingState.NOT_TRACKED
+        not_tracked = np.asarray(states) == NOT_TRACKED_CODE
         if not_tracked.any():
             missing |= not_tracked
             return np.where(missing[..., None], np.nan, ys), missing
@@ -116,7 +120,7 @@ def inferred_sample_scale(
     """
     if states is None or factor == 1.0:
         return None
-    inferred = (np.asarray(states) == TrackingState.INFERRED) & valid
+    inferred = (np.asarray(states) == INFERRED_CODE) & valid
     if not inferred.any():
         return None
     return np.where(inferred, factor, 1.0)
