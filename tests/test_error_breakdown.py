@@ -1,4 +1,5 @@
-"""tools/error_breakdown.py --truth-check: the truth's own bone-length failures are found
+"""tools/error_breakdown.py: the bounds of what better gates or bridging could reach, and
+(--truth-check) the truth's own bone-length failures, found
 by the bone gate's rule (docs/robust.md, "Where the remaining KERAAL error is")."""
 
 from __future__ import annotations
@@ -55,3 +56,18 @@ def test_the_default_tolerance_is_the_robust_bone_gates():
     truth[9, 0, 1] -= tol - 0.005  # just within
     off = eb.truth_inconsistent(truth, (-1, 0, 1))
     assert sorted(zip(*np.nonzero(off))) == [(3, 0), (3, 1)]
+
+
+def test_bounds_drop_the_classes_made_exact():
+    # class -> (samples, raw sse, method sse); sums by hand
+    total = {
+        "glitch, accepted": (1, 9.0, 4.0),
+        "glitch, rejected": (1, 16.0, 1.0),
+        "good, accepted": (2, 2.0, 2.0),
+        "good, rejected": (1, 1.0, 3.0),
+    }
+    assert _tool().bounds(total) == [
+        ("as measured", 10.0),
+        ("every rejected sample exactly right", 6.0),
+        ("every glitch and every rejected sample exactly right", 2.0),
+    ]

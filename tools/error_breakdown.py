@@ -235,9 +235,38 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(f"Glitch: raw sample more than {100 * args.threshold:.0f} cm from the truth; "
           "accepted / rejected: by the method's gates.")  # fmt: skip
+    print()
+    _print_bounds(total, args.method)
     if args.truth_check:
         _print_truth_check(results, args.method, args.threshold, args.near)
     return 0
+
+
+def bounds(total: dict) -> list[tuple[str, float]]:
+    """Pooled squared error of the method if some classes were exactly right: as
+    measured; every rejected sample exactly right (a perfect bridge behind the same
+    gates); every glitch and every rejected sample exactly right (perfect gates and
+    bridge: only the smoothing of the good samples left). ``total``: class -> (n, raw
+    sse, method sse)."""
+    est = {name: v[2] for name, v in total.items()}
+    return [
+        ("as measured", sum(est.values())),
+        ("every rejected sample exactly right", est["glitch, accepted"] + est["good, accepted"]),
+        ("every glitch and every rejected sample exactly right", est["good, accepted"]),
+    ]
+
+
+def _print_bounds(total: dict, method: str) -> None:
+    n = sum(v[0] for v in total.values())
+    raw = sum(v[1] for v in total.values())
+    print(f"Pooled RMSE of {method}, cm, if some samples were exactly right (what better "
+          "bridging, or better gates and bridging, could reach at most):")  # fmt: skip
+    print()
+    print(f"| {method} | RMSE | vs raw |")
+    print("|---|---|---|")
+    print(f"| raw | {_rms(raw, n, 2)} | |")
+    for name, sse in bounds(total):
+        print(f"| {name} | {_rms(sse, n, 2)} | {np.sqrt(sse / raw) - 1:+.0%} |")
 
 
 def _print_truth_check(results: dict, method: str, threshold: float, near: float) -> None:
