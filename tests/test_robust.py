@@ -447,8 +447,9 @@ def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None, with_sd=Fal
     ``ys (T, J, 3)`` NaN where missing; nothing is rejected; INFERRED samples get
     ``factor`` times the variance; ``drop``: frames whose samples the filter skips.
     Offline: started at frame 0 from the joint's first sample with velocity 0 and
-    P0 = diag(r, q tau / 2), then updated with every sample. Online: the state *is* the
-    first sample (velocity 0, P = diag(r, q tau / 2)), the filter runs from there.
+    P0 = diag(r0, q tau / 2), then updated with every sample. Online: the state *is* the
+    first sample (velocity 0, P = diag(r0, q tau / 2)), the filter runs from there. r0 is
+    the first sample's variance (times ``factor`` when it is INFERRED).
     """
     from tobitkf.core.kalman import kalman_filter, rts_smooth
     from tobitkf.core.model import LinearGaussian
@@ -470,7 +471,7 @@ def _ou_reference(ys, states, tau, q, r, factor, offline, drop=None, with_sd=Fal
         Aj, Qj = A[s:].copy(), q * Q[s:]
         Aj[0], Qj[0] = np.eye(2), 0.0  # the first step starts at x0 itself
         x0 = np.stack([ys[f, j], np.zeros(3)], axis=-1)  # (3, 2)
-        P0 = np.diag([r * (1.0 if offline else rs[f, j]), q * tau / 2])
+        P0 = np.diag([r * rs[f, j], q * tau / 2])  # the first sample's own variance
         model = LinearGaussian(A=A[1], H=np.array([[1.0, 0.0]]), Q=q * Q[1],
                                R=np.array([[r]]), x0=x0, P0=P0)  # fmt: skip
         scale = np.broadcast_to(rs[s:, j, None, None], (T - s, 3, 1))

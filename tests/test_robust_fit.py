@@ -176,31 +176,47 @@ def test_profile_likelihood_is_the_likelihood_at_the_closed_form_scale():
         assert g[i] == pytest.approx((fp - fm) / 2e-5, rel=1e-3, abs=1e-6)
 
 
-def test_smoother_without_coloured_error_is_the_two_state_smoother():
+def test_smoother_without_coloured_error_is_the_generic_kalman_core():
+    # sc2 = 0: the two-state OU smoother (the fixed-noise `robust`), checked against the
+    # package's generic Kalman filter + RTS smoother, joint by joint
+    from tobitkf.core.kalman import kalman_filter, rts_smooth
+    from tobitkf.core.model import LinearGaussian
+    from tobitkf.smoothing.robust import _ou_matrices
+
     rng = np.random.default_rng(3)
     T, B, J = 90, 2, 4
     steps = _irregular_steps(T, rng)
     yk = np.cumsum(rng.normal(scale=0.01, size=(T, B, J, 3)), axis=0)
     yk[rng.random((T, B, J)) < 0.2] = np.nan
     yk[:7, 0, 1] = np.nan
+    yk[:, 1, 2] = np.nan  # a joint without samples: NaN throughout
     rvar = np.where(rng.random((T, B, J)) < 0.3, 4e-4, 1e-4)
     qj = np.array([2.0, 5.0, 9.0, 1.0])
-    pj = np.zeros((J, rk.N_PJ))
-    pj[:, rk.J_Q] = qj
-    pj[:, rk.J_V0] = qj * TAU / 2
-    pj[:, rk.J_R] = 1e-4  # ou_smooth_run starts with P = diag(r, v0) for this r
-    for b in range(B):  # smooth_run with the first sample's: the same there
-        for j in range(J):
-            rvar[np.flatnonzero(np.isfinite(yk[:, b, j, 0]))[0], b, j] = 1e-4
-    v2, two = np.empty((T, B, J)), np.empty((T, B, J, 3))
-    rk.ou_smooth_run(yk, rvar, steps, pj, TAU, two, v2, 0)
     q = np.ascontiguousarray(np.broadcast_to(qj, (T, B, J)))
     # written as a chunk (bodies 1..B) of larger outputs: the other bodies stay untouched
     v3, three = np.full((T, B + 2, J), -7.0), np.full((T, B + 2, J, 3), -7.0)
     nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1)
     assert (three[:, [0, B + 1]] == -7.0).all() and (v3[:, [0, B + 1]] == -7.0).all()
-    np.testing.assert_allclose(three[:, 1 : B + 1], two, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(v3[:, 1 : B + 1], v2, rtol=1e-9, atol=1e-15)
+    A, Q = _ou_matrices(steps, TAU)
+    for b in range(B):
+        for j in range(J):
+            ok = np.isfinite(yk[:, b, j, 0])
+            if not ok.any():
+                assert np.isnan(three[:, 1 + b, j]).all() and np.isnan(v3[:, 1 + b, j]).all()
+                continue
+            f = int(np.argmax(ok))  # frame 0 starts at the first sample, velocity 0
+            Aj, Qj = A.copy(), qj[j] * Q
+            Aj[0], Qj[0] = np.eye(2), 0.0
+            model = LinearGaussian(
+                A=A[1], H=np.array([[1.0, 0.0]]), Q=Qj[1], R=np.array([[1.0]]),
+                x0=np.stack([yk[f, b, j], np.zeros(3)], axis=-1),
+                P0=np.diag([rvar[f, b, j], qj[j] * TAU / 2]),
+            )  # fmt: skip
+            scale = np.broadcast_to(rvar[:, b, j, None, None], (T, 3, 1))
+            res = kalman_filter(model, yk[:, b, j, :, None], A_seq=Aj, Q_seq=Qj, R_scale=scale)
+            post = rts_smooth(model, res)
+            np.testing.assert_allclose(three[:, 1 + b, j], post.means[..., 0], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(v3[:, 1 + b, j], post.variances[:, 0, 0], rtol=1e-9)
 
 
 def test_smoother_equals_a_brute_force_rts_smoother():

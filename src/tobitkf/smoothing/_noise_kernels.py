@@ -182,11 +182,11 @@ def smooth_run(
     b0: int,  # body b is written at b0 + b (a chunk of the bodies of est and var)
 ) -> None:
     """Kalman filter + RTS smoother of the three-state model per joint: the estimate of
-    ``x`` and its variance (NaN for a joint without samples). As
-    :func:`~tobitkf.smoothing._robust_kernels.ou_smooth_run`, the filter starts at frame
+    ``x`` and its variance (NaN for a joint without samples). The filter starts at frame
     0 from the joint's first sample (velocity 0, the prior of :func:`filter_sums` with
     the ``q`` of that sample's frame) and is then updated with every sample, the first
-    one included: with ``sc2 = 0`` it is exactly that two-state smoother.
+    one included. With ``sc2 = 0`` it is the two-state OU smoother: the robust smoother
+    with fixed noise runs through it too.
 
     The joints run in blocks of :data:`L` columns, time outside, the block's
     columns inside, without branches (a missing sample selects the prediction; the

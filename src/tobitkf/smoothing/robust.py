@@ -342,18 +342,19 @@ def _offline(
                      yk, rvar)  # fmt: skip
     else:
         yk = np.where(acc[..., None], ys, np.nan)
-    if fits is None:
-        k.ou_smooth_run(yk, rvar, steps, pj, float(params["tau"]), est, var, b0)
+    tau = float(params["tau"])
+    if fits is None:  # the constants: the same smoother without a coloured error
+        q = np.ascontiguousarray(np.broadcast_to(pj[:, k.J_Q], missing.shape))
+        sc2, tau_c = np.zeros((B, J)), np.ones((B, J))
     else:
         f = fits[0]
-        tau = float(params["tau"])
         q = 2 * f["speed_sd"] ** 2 / tau if np.isfinite(tau) else f["speed_sd"] ** 2
         # a joint that is not measured (rejected or missing) moves as the physics allows,
         # not as fitted on the tracked samples: failures come with fast motion and
         # occlusion, so the physical typical speed is the floor there
         q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
-        fit_kernels().smooth_run(yk, rvar, steps, q, f["error_sd"] ** 2, tau, f["error_tau"],
-                                 est, var, b0)  # fmt: skip
+        sc2, tau_c = f["error_sd"] ** 2, f["error_tau"]
+    fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0)
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
