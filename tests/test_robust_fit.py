@@ -536,3 +536,25 @@ def test_compiled_optimiser_finds_the_speed_and_total_error_of_the_maximum():
         err = np.abs(speed_and_total(x, lo, hi, args) / want - 1)
         err_scipy = np.abs(speed_and_total(xs, lo, hi, args) / want - 1)
         assert np.all(err <= np.maximum(err_scipy, 0.01)), (kind, err, err_scipy)
+
+
+@pytest.mark.parametrize("dims", [3, 2])
+def test_the_fit_reads_tracked_samples_only(dims):
+    # INFERRED samples are left out of the noise fit: the fit is the one of the same
+    # recording with those samples missing (nothing is rejected in either)
+    from tobitkf.evaluation.synthetic import generate_motion
+
+    truth = generate_motion("arms", duration=4.0, seed=2)
+    rng = np.random.default_rng(5)
+    pos = truth.positions + rng.normal(scale=0.005, size=truth.positions.shape)
+    pos = pos[..., :dims]
+    states = np.full(pos.shape[:2], 2, dtype=np.int8)
+    guessed = rng.random(states.shape) < 0.1
+    states[guessed] = 1
+    with_guesses = truth.replace(positions=pos, tracking_state=states)
+    without = truth.replace(positions=np.where(guessed[..., None], np.nan, pos),
+                            tracking_state=np.full_like(states, 2))  # fmt: skip
+    a = tk.smooth(with_guesses, method="robust").metadata["diagnostics"]
+    b = tk.smooth(without, method="robust").metadata["diagnostics"]
+    assert not a["rejected"].any() and not b["rejected"].any()
+    assert a["noise_fit"] == b["noise_fit"]

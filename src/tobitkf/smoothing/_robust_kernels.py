@@ -722,8 +722,8 @@ def project_frame(
     direction from its parent (as placed by the parent's own correction) but moves to
     the distance ``L`` from it. An inferred joint whose parent is inferred too first
     moves with the parent's correction (the sensor guessed the chain as a whole).
-    Tracked and missing joints, roots, and joints whose parent or length is unknown are
-    copied unchanged (the last two keep the parent's correction)."""
+    Tracked and missing joints and roots are copied unchanged; an inferred joint whose
+    parent position or length is unknown only moves with its parent's correction."""
     J = parents.shape[0]
     for k in range(J):
         j = order[k]

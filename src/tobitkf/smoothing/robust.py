@@ -279,11 +279,9 @@ def _inferred_scale(
     return out
 
 
-def _inferred(states: Any, shape: tuple[int, ...], n_dims: int) -> NDArray[np.bool_]:
-    """The INFERRED samples ``shape`` (T, B, J) that are put back at their bone's length
-    (``project_frame``): none without tracking states, and none in 2-D, where a bone
-    seen in projection has no one length."""
-    if states is None or n_dims != 3:
+def _inferred(states: Any, shape: tuple[int, ...]) -> NDArray[np.bool_]:
+    """The INFERRED samples ``shape`` (T, B, J) (none without tracking states)."""
+    if states is None:
         return np.zeros(shape, dtype=bool)
     return np.ascontiguousarray(np.asarray(states) == INFERRED_CODE)
 
@@ -501,7 +499,10 @@ def _robust_chunk(
     k = kernels()
     missing = np.ascontiguousarray(missing, dtype=bool)
     rinf = _inferred_scale(states, missing, factor, confidence)
-    inferred = _inferred(states, missing.shape, n_dims)
+    inferred = _inferred(states, missing.shape)
+    # the guesses put back at their bone's length: 3-D only (a bone seen in projection has
+    # no one length)
+    project = params["inferred_bones"] and n_dims == 3 and bool(inferred.any())
     fits = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     if offline:
@@ -510,16 +511,15 @@ def _robust_chunk(
         L = bone_lengths(ys, topo.parents) if params["bones"] else None
         L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        if params["inferred_bones"] and L is not None and inferred.any():
-            # the sensor's guesses at the recording's bone lengths (3-D: a projected
-            # 2-D bone has no one length)
+        if project and L is not None:  # at the recording's bone lengths
             ys = readonly(k.project_run(ys, inferred, setup.parents, setup.order, L_fixed))
         fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
                         b0)  # fmt: skip
     else:
         est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
-        k.online_frames(ys, missing, rinf, inferred, times, steps, *setup.args(), state,
+        guesses = inferred if project else np.zeros(missing.shape, dtype=bool)
+        k.online_frames(ys, missing, rinf, guesses, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         guard = step_guard()
         guard.guard_frames(ys, missing, est, var, b0, *guard.new_state(B, J, ys.shape[-1]))
