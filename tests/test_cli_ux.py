@@ -359,3 +359,28 @@ def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
     assert out.count("beyond the censoring limits") == 1
     assert "warning" in out and "low.csv" in out
     assert "UserWarning" not in res.output
+
+
+def test_a_narrow_terminal_gets_whole_words_not_squeezed_columns(monkeypatch):
+    from tobitkf.app.commands import _common
+
+    columns = ["file", "bodies", "% clipped/rejected", "seconds"]
+    rows = [["JointPositionExercise3.csv", 1, 7.594, 0.09], ["b.csv", 2, float("nan"), 1.5]]
+    for width, blocks in ((50, True), (200, False)):
+        buf = io.StringIO()
+        monkeypatch.setattr(_common, "console", Console(file=buf, width=width))
+        _common._print_table("tobitkf smooth", columns, rows)
+        out = buf.getvalue()
+        assert max(len(line) for line in out.splitlines()) <= width
+        # every header and file name whole, on a line of its own or in its column
+        for word in ("JointPositionExercise3.csv", "% clipped/rejected", "7.59", "1.50"):
+            assert word in out
+        assert ("file: JointPositionExercise3.csv" in out) == blocks
+        assert ("% clipped/rejected: -" in out) == blocks  # NaN shown as "-"
+    # a name that folds to a few lines is still a table (only the names fold)
+    buf = io.StringIO()
+    monkeypatch.setattr(_common, "console", Console(file=buf, width=70))
+    _common._print_table("t", columns, [["x" * 40, 1, 2.0, 3.0]])
+    out = buf.getvalue()
+    assert "file:" not in out and "x" * 40 not in out and "x" * 18 in out
+    assert "% clipped/rejected" in out and max(len(line) for line in out.splitlines()) <= 70

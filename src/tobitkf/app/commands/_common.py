@@ -13,6 +13,7 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+from rich.text import Text
 
 console = Console()
 if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
@@ -41,7 +42,29 @@ def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: 
         table.add_column(col, justify="left" if i == 0 else "right", overflow="fold")
     for row in rows:
         table.add_row(*[_fmt(v, digits) for v in row])
+    if rows and _table_width(table, columns, rows, digits) > console.width:
+        # a terminal too narrow for the table: its columns would be squeezed until every
+        # header and name breaks mid-word; one block per row instead, a field per line
+        console.print(Text(title, style="italic"))
+        for row in rows:
+            console.print()
+            for col, v in zip(columns, row, strict=True):
+                console.print(Text.assemble((f"{col}: ", "bold"), _fmt(v, digits)))
+        return
     console.print(table)
+
+
+#: the narrowest the first column (file names) may fold to before a table is printed as
+#: blocks instead
+NAME_FOLD = 18
+
+
+def _table_width(table: Table, columns: list[str], rows: list[list[Any]], digits: int) -> int:
+    """The width ``table`` needs with its first column folded to at most ``NAME_FOLD``
+    characters and every other column whole."""
+    natural = console.measure(table, options=console.options.update_width(10_000)).maximum
+    first = max(len(columns[0]), *(len(_fmt(r[0], digits)) for r in rows))
+    return natural - first + min(first, NAME_FOLD)
 
 
 class _RegistryChoice(click.Choice):
