@@ -81,8 +81,7 @@ I_BONES = 0
 I_CARRY = 1
 I_LOOKBACK = 2
 I_TWO_PASS = 3
-I_INFERRED_BONES = 4
-N_PI = 5
+N_PI = 4
 
 
 # ------------------------------------------------------------------------------ small
@@ -905,7 +904,7 @@ def online_frames(
     ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
     missing_n: np.ndarray,  # (n, B, J)
     rinf_n: np.ndarray,  # (n, B, J) variance multiplier of INFERRED samples (else 1)
-    inferred_n: np.ndarray,  # (n, B, J) INFERRED samples (project_frame)
+    inferred_n: np.ndarray,  # (n, B, J) the guesses put back at their bone's length
     times: np.ndarray,  # (n,) time of each frame
     steps: np.ndarray,  # (n,) time step of the filter before each frame
     parents: np.ndarray,
@@ -952,13 +951,10 @@ def online_frames(
             gate = acc[0, b]
             final = acc[1, b]
             radius.fill(np.nan)
-            if pi[I_INFERRED_BONES] != 0:
-                lengths = scratch1[2]
-                for j in range(J):
-                    lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
-                project_frame(y[b], inferred_n[f, b], parents, order, lengths, yb, scratch[3])
-            else:
-                _copy2(yb, y[b])
+            lengths = scratch1[2]
+            for j in range(J):
+                lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
+            project_frame(y[b], inferred_n[f, b], parents, order, lengths, yb, scratch[3])
             gate_frame(yb, yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                        no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
                        h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip

@@ -47,13 +47,16 @@ from tobitkf.smoothing.keypoints import drop_third_axis, pad_third_axis
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
-from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR, measurements
+from tobitkf.smoothing.timebase import (
+    DEFAULT_INFERRED_NOISE_FACTOR,
+    TRACKED_CODE,
+    measurements,
+)
 
 __all__ = ["LiveSmoother", "live_methods"]
 
 Array = NDArray[np.float64]
 _STATES = tuple(int(s) for s in TrackingState)
-_TRACKED = int(TrackingState.TRACKED)  # a plain int: filling with the enum member is slower
 _INFINITE = "positions: infinite values (use NaN for a missing joint)"
 
 
@@ -83,7 +86,7 @@ class _HistoryStepper:
         if all(s is None for s in st):
             states_arr = None
         else:  # states in some frames only (bodies keyed by id): None means all TRACKED
-            tracked = np.full(missing.shape, TrackingState.TRACKED, np.int8)
+            tracked = np.full(missing.shape, TRACKED_CODE, np.int8)
             states_arr = np.stack([tracked if s is None else s for s in st])
         inp = SmoothInput(
             positions=np.stack(pos),
@@ -132,7 +135,7 @@ def _group_frame(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tupl
         pos[slots] = arr[[rows[s] for s in slots]]
     if sts is None or all(sts[r] is None for r in rows if r >= 0):
         return pos, None
-    states = np.full(pos.shape[:2], _TRACKED, np.int8)
+    states = np.full(pos.shape[:2], TRACKED_CODE, np.int8)
     for s, r in enumerate(rows):
         if r >= 0 and sts[r] is not None:
             states[s] = sts[r]

@@ -129,7 +129,6 @@ from tobitkf.smoothing.timebase import (
     first_true,
     frame_steps,
     frame_times,
-    inferred_sample_scale,
     readonly,
 )
 
@@ -253,7 +252,6 @@ class _Setup:
         self.pi[k.I_CARRY] = bool(params["carry"])
         self.pi[k.I_LOOKBACK] = int(params["lookback"])
         self.pi[k.I_TWO_PASS] = bool(params["two_pass"])
-        self.pi[k.I_INFERRED_BONES] = bool(params["inferred_bones"])
         self.resolved = {
             "v_max": self.vmax.tolist(),
             "speed_sd": self.spd.tolist(),
@@ -264,14 +262,21 @@ class _Setup:
         return self.parents, self.order, self.pj, self.pf, self.pi
 
 
+def _inferred(states: Any, shape: tuple[int, ...]) -> NDArray[np.bool_]:
+    """The INFERRED samples ``shape`` (T, B, J) (none without tracking states)."""
+    if states is None:
+        return np.zeros(shape, dtype=bool)
+    return np.ascontiguousarray(np.asarray(states) == INFERRED_CODE)
+
+
 def _inferred_scale(
-    states: Any, missing: NDArray[np.bool_], factor: float, confidence: Any = None
-) -> Array:
+    inferred: NDArray[np.bool_], missing: NDArray[np.bool_], factor: float,
+    confidence: Any = None,
+) -> Array:  # fmt: skip
     """Measurement-variance multiplier per sample: ``factor`` for valid INFERRED ones,
     times ``1 / confidence²`` where a confidence is given (the standard deviation grows
     as the estimator's score falls; NaN confidence: 1)."""
-    scale = inferred_sample_scale(states, ~missing, factor)
-    out = np.ones(missing.shape) if scale is None else scale
+    out = np.where(inferred & ~missing, factor, 1.0)
     if confidence is not None:
         c = np.asarray(confidence, dtype=float)
         w = np.where(np.isnan(c), 1.0, 1.0 / np.maximum(c, MIN_CONFIDENCE_WEIGHT) ** 2)
@@ -279,11 +284,11 @@ def _inferred_scale(
     return out
 
 
-def _inferred(states: Any, shape: tuple[int, ...]) -> NDArray[np.bool_]:
-    """The INFERRED samples ``shape`` (T, B, J) (none without tracking states)."""
-    if states is None:
-        return np.zeros(shape, dtype=bool)
-    return np.ascontiguousarray(np.asarray(states) == INFERRED_CODE)
+def _guesses(inferred: NDArray[np.bool_], inferred_bones: bool, n_dims: int) -> NDArray[np.bool_]:
+    """The INFERRED samples put back at their bone's length (``project_frame``): none
+    with ``inferred_bones`` off, and none in 2-D, where a bone seen in projection has no
+    one length."""
+    return inferred if inferred_bones and n_dims == 3 else np.zeros(inferred.shape, dtype=bool)
 
 
 def use_recording_gates(params: dict[str, Any], units: str | None) -> bool:
@@ -498,11 +503,9 @@ def _robust_chunk(
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     k = kernels()
     missing = np.ascontiguousarray(missing, dtype=bool)
-    rinf = _inferred_scale(states, missing, factor, confidence)
     inferred = _inferred(states, missing.shape)
-    # the guesses put back at their bone's length: 3-D only (a bone seen in projection has
-    # no one length)
-    project = params["inferred_bones"] and n_dims == 3 and bool(inferred.any())
+    rinf = _inferred_scale(inferred, missing, factor, confidence)
+    guesses = _guesses(inferred, params["inferred_bones"], n_dims)
     fits = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     if offline:
@@ -511,14 +514,13 @@ def _robust_chunk(
         L = bone_lengths(ys, topo.parents) if params["bones"] else None
         L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        if project and L is not None:  # at the recording's bone lengths
-            ys = readonly(k.project_run(ys, inferred, setup.parents, setup.order, L_fixed))
+        if L is not None and guesses.any():  # at the recording's bone lengths
+            ys = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
         fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
                         b0)  # fmt: skip
     else:
         est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
-        guesses = inferred if project else np.zeros(missing.shape, dtype=bool)
         k.online_frames(ys, missing, rinf, guesses, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         guard = step_guard()
@@ -554,6 +556,7 @@ class RobustStepper:
         full.update(params)
         self.setup = _Setup(topology, full)
         self.factor = inferred_noise_factor
+        self.inferred_bones = bool(full["inferred_bones"])
         self._state: Any = None
         self._time = 0.0
 
@@ -579,17 +582,12 @@ class RobustStepper:
         # compiles twice
         y1 = readonly(np.ascontiguousarray(ys, dtype=float)[None])
         m1 = np.ascontiguousarray(missing, dtype=bool)[None]
-        if states is None:
-            rinf, inferred = np.ones((1, B, J)), np.zeros((1, B, J), dtype=bool)
-        else:  # _inferred_scale and _inferred from one comparison (a frame is microseconds)
-            inferred = np.asarray(states)[None] == INFERRED_CODE
-            rinf = np.where(inferred & ~m1, self.factor, 1.0)
-            if n_dims != 3:
-                inferred = np.zeros((1, B, J), dtype=bool)
+        inferred = _inferred(None if states is None else np.asarray(states)[None], m1.shape)
         k.online_frames(
-            y1, m1, rinf, inferred, np.array([self._time]), np.array([float(dt)]),
-            *self.setup.args(), self._state, *self._scratch, out, self.rejected[None],
-            self.std[None], 0,
+            y1, m1, _inferred_scale(inferred, m1, self.factor),
+            _guesses(inferred, self.inferred_bones, n_dims), np.array([self._time]),
+            np.array([float(dt)]), *self.setup.args(), self._state, *self._scratch, out,
+            self.rejected[None], self.std[None], 0,
         )  # fmt: skip
         step_guard().guard_frames(y1, m1, out, self.std[None], 0, *self._guard)
         np.sqrt(self.std, out=self.std)

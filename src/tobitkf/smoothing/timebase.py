@@ -33,6 +33,7 @@ DEFAULT_INFERRED_NOISE_FACTOR = 4.0
 #: microseconds per call (numpy converts the member each time), a live frame's budget
 NOT_TRACKED_CODE = int(TrackingState.NOT_TRACKED)
 INFERRED_CODE = int(TrackingState.INFERRED)
+TRACKED_CODE = int(TrackingState.TRACKED)
 
 
 def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
