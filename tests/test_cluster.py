@@ -219,6 +219,32 @@ def test_a_file_that_kills_its_workers_is_failed_after_two_deaths(client, data, 
     assert sum(r.ok for r in results) == 4
 
 
+@pytest.mark.slow
+def test_good_files_queued_beside_a_killer_are_not_failed(data, tmp_path):
+    # one single-threaded worker: the scheduler queues a task behind the running one and
+    # fails both when the worker dies. Retries in flight together met again on the new
+    # worker, and a good file was failed with the killer after two deaths; one retry at
+    # a time, each good file gets its own try
+    import cloudpickle
+
+    _, files, _ = data
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / f"{KILLER}.skeleton").write_bytes(files[4].path.read_bytes())
+    (src / "z").mkdir()  # the good files after the killer: queued behind it
+    for f in files[:3]:
+        (src / "z" / f.path.name).write_bytes(f.path.read_bytes())
+    with connect("local", workers=1) as one:
+        cloudpickle.register_pickle_by_value(sys.modules[__name__])
+        one.register_plugin(_Killer())
+        try:
+            results = tk.smooth_files(src, tmp_path / "out", METHOD, client=one)
+        finally:
+            cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    assert [Path(r.source).stem for r in results if not r.ok] == [KILLER]
+    assert sum(r.ok for r in results) == 3
+
+
 def test_a_wrong_cluster_address_is_one_clear_message(tmp_path):
     write_ntu_like(tmp_path / "in", 1)
     one = next((tmp_path / "in").rglob("*.skeleton"))

@@ -9,8 +9,11 @@ same paths. Only per-file summaries travel back to the client.
 
 A worker that dies (out of memory, a crash in native code, a lost node) costs only its
 task: the scheduler reschedules the task (or, once its ``allowed-failures`` are spent,
-reports ``KilledWorker``); each file of a killed task is then retried alone, and a file
-that was in a killed task twice is reported as failed, not retried for ever. ``--cluster
+reports ``KilledWorker``); each file of a killed task is then retried alone, one retry
+at a time, and a file that was in a killed task twice is reported as failed, not retried
+for ever. One at a time, because the scheduler fails every task assigned to a dead
+worker, also those queued behind the one that killed it: two retries in flight could
+meet on a worker again, and a good file would be failed with the bad one. ``--cluster
 local`` starts a :class:`distributed.LocalCluster` with ``allowed-failures`` 0, so that a
 file that kills two workers is failed after exactly those two deaths.
 """
@@ -153,19 +156,23 @@ def run_on_cluster(
     order = list(range(len(jobs)))
     futures = [submit(order[k : k + per_task]) for k in range(0, len(order), per_task)]
     pending = distributed.as_completed(futures, loop=client.loop)  # not the default client
+    retries: list[int] = []  # files of killed tasks, each to run alone, one at a time
+    retrying: Any = None  # the retry in flight
     try:
         for fut in pending:
             idx = members.pop(fut)
+            if fut is retrying:
+                retrying = None
             try:
                 summaries = fut.result()
             except distributed.KilledWorker:
+                summaries = []  # each file is failed, or queued for a retry alone
                 for i in idx:
                     deaths[i] = deaths.get(i, 0) + 1
                     if deaths[i] >= MAX_DEATHS:
                         record(i, _died(jobs[i], deaths[i]))
                     else:  # alone this time: a file that kills workers costs only itself
-                        pending.add(submit([i]))
-                continue
+                        retries.append(i)
             except Exception as exc:  # the task could not run (e.g. tobitkf missing there)
                 summaries = [
                     FileSummary(str(jobs[i].source), None, False, f"{type(exc).__name__}: {exc}")
@@ -173,8 +180,11 @@ def run_on_cluster(
                 ]
             finally:
                 fut.release()
-            for i, summary in zip(idx, summaries, strict=True):
+            for i, summary in zip(idx, summaries, strict=False):  # none if the worker died
                 record(i, summary)
+            if retrying is None and retries:
+                retrying = submit([retries.pop(0)])
+                pending.add(retrying)
     except KeyboardInterrupt:
         client.cancel(list(members))
         raise Interrupted(results) from None
