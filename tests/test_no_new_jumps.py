@@ -108,3 +108,28 @@ def test_the_causal_guard_does_not_hold_back_a_joint_that_reappears():
     stream = np.array([live.update(p) for p in pos])
     np.testing.assert_array_equal(stream.reshape(batch.shape), batch)
     assert _new_jumps(seq, "robust_online") == []
+
+
+def test_the_offline_guard_limits_to_the_whole_recordings_largest_step():
+    from tobitkf.smoothing import _step_guard as g
+
+    # the input's largest step (0.5 m) comes late, at t = 6; an estimate that snaps by
+    # 0.3 m at t = 3 is within it offline, while the causal limit then is 0.1 m so far
+    T, D = 8, 3
+    ys = np.zeros((T, 1, 1, D))
+    ys[:, 0, 0, 0] = [0.0, 0.1, 0.2, 0.2, 0.2, 0.2, 0.7, 0.7]
+    missing = np.zeros((T, 1, 1), dtype=bool)
+    missing[4, 0, 0] = True  # a step to or from an absent sample is no step
+    ys[4] = 9.0
+    est = ys.copy()
+    est[4] = 0.0
+    est[3:6, 0, 0, 0] = 0.5
+    state = g.new_state(1, 1, D)
+    g.largest_steps(ys, missing, state[1])
+    assert state[1][0, 0] == pytest.approx(0.5)
+    offline = est.copy()
+    g.guard_frames(ys, missing, offline, np.zeros((T, 1, 1)), 0, *state)
+    np.testing.assert_array_equal(offline, est)
+    causal = est.copy()
+    g.guard_frames(ys, missing, causal, np.zeros((T, 1, 1)), 0, *g.new_state(1, 1, D))
+    np.testing.assert_allclose(causal[:6, 0, 0, 0], [0.0, 0.1, 0.2, 0.3, 0.5, 0.5])

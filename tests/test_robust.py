@@ -255,6 +255,76 @@ def test_gate_relocks_after_max_reject():
     assert 35 <= first_back <= 45
 
 
+def _chain_gate(ys: np.ndarray) -> np.ndarray:
+    """gate_measurements on a root - a - b chain (a 25 cm, b 8 cm further along x), the
+    Kinect arm / hand speed bounds and the robust bone tolerance."""
+    return gate_measurements(
+        ys, np.arange(len(ys)) / FPS, (-1, 0, 1), np.array([3.0, 5.0, 8.0]), margin=0.05,
+        bone_len=np.array([np.nan, 0.25, 0.08]), bone_tol_abs=0.03, bone_tol_rel=0.15,
+    )  # fmt: skip
+
+
+def _chain_track(T: int = 40) -> np.ndarray:
+    ys = np.zeros((T, 3, 3))
+    ys[:, 1, 0] = 0.25
+    ys[:, 2, 0] = 0.33
+    return ys
+
+
+def test_a_child_that_jumps_with_its_rejected_parent_shares_its_failure():
+    # a and b jump 20 cm together in one frame: a's bone breaks (32 cm for 25), b's does
+    # not, and b's step is inside its own speed gate (8 m/s / 30 + 5 cm = 32 cm), so only
+    # the shared step tells that b went with a's impossible place
+    ys = _chain_track()
+    ys[10:30, 1:, 1] += 0.2
+    acc = _chain_gate(ys)
+    assert not acc[10:30, 1].any()
+    assert not acc[10:30, 2].any()  # from the first frame on, until its parent is back
+    assert acc[:10].all() and acc[30:].all()
+    # the same backwards in time: the failure's end is its entry there
+    back = _chain_gate(ys[::-1].copy())[::-1]
+    np.testing.assert_array_equal(back, acc)
+
+
+def test_a_child_that_did_not_share_its_parents_step_stays_accepted():
+    # a alone jumps (b stays put): b did not move, it keeps the chain rule's exception
+    ys = _chain_track()
+    ys[10:30, 1, 1] += 0.2
+    acc = _chain_gate(ys)
+    assert not acc[10:30, 1].any() and acc[:, 2].all()
+    # a and b drift together 3.6 cm a frame (1.1 m/s) until a's bone is off: a shared
+    # step no larger than b's bone tolerance (3 cm + 15 % of 8 cm) is motion, not a failure
+    ys = _chain_track()
+    ys[10:, 1:, 1] += 0.036 * np.arange(1, 31)[:, None]
+    acc = _chain_gate(ys)
+    assert not acc[:, 1].all()  # a is rejected once its bone is 6.75 cm long
+    assert acc[:, 2].all()
+    # a is off from frame 10 on; from frame 20 a and b move together 5 cm a frame: the
+    # steps of a parent that was already wrong are its motion, which a right child shares
+    ys = _chain_track()
+    ys[10:, 1, 1] += 0.2
+    ys[20:, 1:, 0] += 0.05 * np.minimum(np.arange(1, 21), 6)[:, None]
+    acc = _chain_gate(ys)
+    assert not acc[10:, 1].any() and acc[:, 2].all()
+
+
+@pytest.mark.parametrize("offline", [True, False])
+def test_hand_chain_failure_inside_the_hand_speed_gate_is_rejected(offline):
+    # the whole hand chain 25 cm off for 30 frames: a step the hand can make in a frame
+    # (8 m/s), so the wrist's broken bone is what rejects the hand, tip and thumb with it
+    truth = _skeleton_motion()
+    topo = get_topology("kinect_v2")
+    meas = truth + np.random.default_rng(1).normal(scale=0.004, size=truth.shape)
+    chain = _hand_chain(topo)
+    a, b = 100, 130
+    meas[a:b, chain] += np.array([0.0, 0.25, 0.0])
+    out = robust_smooth(_seq(meas), offline=offline)
+    rej = out.metadata["diagnostics"]["rejected"]
+    assert rej[a:b][:, chain].mean() > 0.9
+    err_raw = _rmse(meas[a:b, chain], truth[a:b, chain])
+    assert _rmse(out.positions[a:b, chain], truth[a:b, chain]) < 0.3 * err_raw
+
+
 def test_enforce_chain_rejects_child_that_entered_with_a_rejected_parent():
     # shoulder (root) - elbow - wrist; the elbow is rejected in frames 5-14.  The wrist was
     # rejected in 5-7 (it jumped with the elbow) but then moved smoothly, so gates run in

@@ -420,11 +420,24 @@ def gate_frame(
         parent_acc = is_root or acc[p] or not _finite3(y[pp, 0], y[pp, 1], y[pp, 2])
         bone_ok = True
         blen = math.nan
+        Lj = math.nan
         if use_bones:
             blen = _dist(y[j, 0], y[j, 1], y[j, 2], y[pp, 0], y[pp, 1], y[pp, 2])
             Lj = sf[j, S_L_CUR] if online else L_fixed[j]
-            tol = tol_abs + tol_rel * Lj
+        tol = tol_abs + tol_rel * Lj  # NaN without a bone length (yet): no bone rule
+        if use_bones:
             bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
+        if step_ok and not parent_acc and has_prev and sb[pp, B_PREV_ACC]:
+            # the parent's rejection starts at this step: a joint that made the same step
+            # (to within its bone's tolerance; a step larger than that) kept its bone to
+            # the parent's impossible place, so it shares the failure
+            dp0 = y[pp, 0] - yprev[pp, 0]
+            dp1 = y[pp, 1] - yprev[pp, 1]
+            dp2 = y[pp, 2] - yprev[pp, 2]
+            d_own = _dist(y[j, 0] - yprev[j, 0], y[j, 1] - yprev[j, 1], y[j, 2] - yprev[j, 2],
+                          dp0, dp1, dp2)  # fmt: skip
+            if _dist(dp0, dp1, dp2, 0.0, 0.0, 0.0) > tol and d_own <= tol:
+                step_ok = False
         ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
         acc[j] = ok
         if online and use_bones:

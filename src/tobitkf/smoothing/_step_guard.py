@@ -1,4 +1,4 @@
-"""Causal step guard (numba, ``cache=True``): no output step larger than the input's.
+"""Step guard (numba, ``cache=True``): no output step larger than the input's.
 
 A causal filter that rejected a joint for a while extrapolates it; when the measurements
 are believed again, the estimate would snap back in one frame, and that snap can be
@@ -12,8 +12,12 @@ make it lag behind a joint that reappears elsewhere. The shift ``d`` this adds t
 added to its uncertainty (``std² + |d|² / D``, ``std`` being the RMS over the D axes).
 
 Causal, with explicit state, so the batch runner (whole recording) and the live stepper
-(one frame per call) give the same numbers. Positions are ``(T, B, J, D)``, NaN where
-there is no estimate; ``missing (T, B, J)`` marks absent input samples.
+(one frame per call) give the same numbers. The offline smoother runs the same guard
+with the whole recording's largest input steps as the limit from the first frame on
+(:func:`largest_steps`): a smoothed bridge that rejoins the measurements with a step
+larger than the input ever made is held to it in the same way. Positions are
+``(T, B, J, D)``, NaN where there is no estimate; ``missing (T, B, J)`` marks absent
+input samples.
 """
 
 from __future__ import annotations
@@ -33,6 +37,26 @@ def new_state(B: int, J: int, D: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
         np.full((B, J, D), np.nan),
         np.zeros(D),  # scratch
     )
+
+
+@njit(cache=True, nogil=True)
+def largest_steps(ys: np.ndarray, missing: np.ndarray, largest: np.ndarray) -> None:
+    """``largest (B, J)``: the largest step of each joint's input over the whole
+    recording (between two consecutive present samples; -1 where there is none). Given
+    to :func:`guard_frames` as its starting state, the limit is the whole recording's
+    from the first frame on: the offline guard."""
+    T, B, J, D = ys.shape
+    for t in range(1, T):
+        for b in range(B):
+            for j in range(J):
+                if missing[t, b, j] or missing[t - 1, b, j]:
+                    continue
+                s = 0.0
+                for k in range(D):
+                    s += (ys[t, b, j, k] - ys[t - 1, b, j, k]) ** 2
+                s = math.sqrt(s)
+                if s > largest[b, j]:
+                    largest[b, j] = s
 
 
 @njit(cache=True, nogil=True)

@@ -80,7 +80,8 @@ velocity decays with ``tau`` (0.15 s), so a lost joint is extrapolated by at mos
 will be), and no output step of a joint is larger than the largest step of its input so far
 (:mod:`tobitkf.smoothing._step_guard`): after a long rejection the estimate catches up
 over a few frames instead of snapping back in one, and the shift is added to its
-standard deviation.
+standard deviation. Offline the same guard holds the smoothed output to the largest
+input step of the whole recording (a bridge rarely needs it).
 
 Implementation
 --------------
@@ -391,7 +392,7 @@ def _fit_noise(
 
 
 def step_guard() -> Any:
-    """The compiled causal step guard (imports numba on first use)."""
+    """The compiled step guard (imports numba on first use)."""
     from tobitkf.smoothing import _step_guard
 
     return _step_guard
@@ -514,10 +515,16 @@ def _robust_chunk(
         L = bone_lengths(ys, topo.parents) if params["bones"] else None
         L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
+        given = ys
         if L is not None and guesses.any():  # at the recording's bone lengths
             ys = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
         fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
                         b0)  # fmt: skip
+        # no output step larger than the input's largest (the whole recording's)
+        guard = step_guard()
+        g_state = guard.new_state(B, J, ys.shape[-1])
+        guard.largest_steps(given, missing, g_state[1])
+        guard.guard_frames(given, missing, out[0], out[2], b0, *g_state)
     else:
         est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
