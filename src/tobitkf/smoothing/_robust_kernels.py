@@ -631,7 +631,8 @@ def chain_frame(
 ) -> None:
     """The chain rule on a combined mask: a joint whose parent is rejected (present but
     not accepted; a missing parent says nothing) stays accepted only if it was accepted
-    in the neighbouring frame and did not jump from it."""
+    in the neighbouring frame and did not jump from it (its speed part: the shared step
+    at the start of a parent's rejection was judged in the gate passes)."""
     for k in range(order.shape[0]):
         j = order[k]
         p = parents[j]
@@ -834,20 +835,37 @@ def carry_run(
 
 
 @_jit
+def carried_count(tau: float, dt: float) -> float:
+    """How many carried samples count as one offline: those within the motion's
+    correlation time ``tau`` (``tau / dt``, at least 1; 1 when ``tau`` is infinite). A
+    carried sample is the parent plus the joint's last good offset, so consecutive ones
+    share one error, the limb's rotation about its parent since, which decorrelates over
+    ``tau``; their variance is multiplied by this count, so that a run of them does not
+    outvote the real samples at both ends of the bridge. (Online there is nothing ahead
+    to bridge to: the carried samples keep their single weight, docs/robust.md.)"""
+    if not math.isfinite(tau) or not dt > 0.0:
+        return 1.0
+    return max(1.0, tau / dt)
+
+
+@_jit
 def carry_both(
     ys: np.ndarray,  # (T, B, J, 3)
     acc: np.ndarray,  # (T, B, J)
     parents: np.ndarray,
     order: np.ndarray,
     sd: np.ndarray,  # (B, J) measurement standard deviation
+    steps: np.ndarray,  # (T,) time step before each frame
+    tau: float,
     yk: np.ndarray,  # out (T, B, J, 3) the smoother's samples
     rvar: np.ndarray,  # (T, B, J) their variances: the carried ones' written in
 ) -> None:
     """Offline carrying: the smoother's samples ``yk`` are the accepted measurements,
     the rejected ones carried (forwards in time, and backwards for the samples with no
     earlier good offset), NaN elsewhere. A carried sample's variance is
-    ``sd² max(1, (radius / sd)²)``: its standard deviation is the bone's length, the
-    joint may have rotated about its parent (at least the measurement's own)."""
+    ``sd² max(1, (radius / sd)²)`` (its standard deviation is the bone's length, the
+    joint may have rotated about its parent; at least the measurement's own) times
+    :func:`carried_count`."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     radius = np.full((T, B, J), np.nan)
     off = np.full((B, J, 3), np.nan)
@@ -872,13 +890,14 @@ def carry_both(
                         yk[t, b, j, 1] = pseudo[j, 1]
                         yk[t, b, j, 2] = pseudo[j, 2]
     for t in range(T):
+        n = carried_count(tau, steps[t])
         for b in range(B):
             for j in range(J):
                 if math.isfinite(radius[t, b, j]):
                     s = sd[b, j]
                     v = radius[t, b, j] / s
                     v = v * v
-                    rvar[t, b, j] = (s * s) * (1.0 if v <= 1.0 else v)
+                    rvar[t, b, j] = n * (s * s) * (1.0 if v <= 1.0 else v)
 
 
 # ------------------------------------------------------------------------------ OU filter

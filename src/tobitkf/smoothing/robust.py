@@ -26,7 +26,10 @@ A valid measurement ``y_j(t)`` is *accepted* when
 3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
    joint is accepted only if it was accepted in the previous frame and did not jump
    (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
-   wrist stays rejected until the wrist comes back).
+   wrist stays rejected until the wrist comes back).  Not jumping means a step inside
+   its own speed gate and, at the frame where the parent's rejection starts, not the
+   parent's step: a joint whose bone vector changed by less than its bone tolerance
+   while the parent moved by more kept its bone to the parent's impossible place.
 
 A joint rejected for longer than ``max_reject`` (2 s) is re-acquired as soon as it moves
 plausibly from frame to frame (no lock-out behind a wrong reference).  Offline, the gate
@@ -60,7 +63,11 @@ A rejected joint is not left behind in space while the body moves on: it gets a
 pseudo-measurement at its parent's position plus its offset from the parent the last
 time both were accepted (:func:`carry_with_parent`; offline, a stretch with no earlier
 good offset takes the next one), with a standard deviation equal to that bone's length,
-since the limb may have rotated about the parent.  ``carry=False`` turns this off.
+since the limb may have rotated about the parent.  Offline each carried sample's variance
+is also multiplied by the number of frames in ``tau`` (``carried_count``): consecutive
+carried samples share one error, the limb's rotation since, which decorrelates over
+``tau``, so a run of them counts as about one sample per ``tau`` against the real samples
+at both ends of the bridge.  ``carry=False`` turns this off.
 
 Smoothing
 ---------
@@ -343,7 +350,7 @@ def _offline(
     if params["carry"]:
         yk = np.empty(ys.shape)  # the accepted samples and the carried ones
         k.carry_both(ys, acc, par, order, np.ascontiguousarray(np.broadcast_to(sd, (B, J))),
-                     yk, rvar)  # fmt: skip
+                     steps, float(params["tau"]), yk, rvar)  # fmt: skip
     else:
         yk = np.where(acc[..., None], ys, np.nan)
     tau = float(params["tau"])
