@@ -308,6 +308,29 @@ def test_a_child_that_did_not_share_its_parents_step_stays_accepted():
     assert not acc[10:, 1].any() and acc[:, 2].all()
 
 
+_VEC = st.tuples(*[st.floats(-0.14, 0.14, allow_nan=False)] * 3)
+
+
+@settings(max_examples=200, deadline=None)
+@given(da=_VEC, dev=_VEC, scale=st.sampled_from([0.1, 0.3, 0.5, 1.0]))
+def test_shared_step_rule_property(da, dev, scale):
+    # a and b step by da and db = da + dev (dev scaled, so that both sides of b's bone
+    # tolerance are drawn) at frame 10 and stay there; wherever a is rejected at that
+    # frame, b (accepted before, its step inside its own speed gate) is rejected exactly
+    # when a moved by more than b's bone tolerance and b made the same step
+    da = np.array(da)
+    db = np.clip(da + scale * np.array(dev), -0.14, 0.14)
+    ys = _chain_track(20)
+    ys[10:, 1] += da
+    ys[10:, 2] += db
+    acc = _chain_gate(ys)
+    assert acc[:10].all()
+    tol_b = 0.03 + 0.15 * 0.08
+    shared = np.linalg.norm(da) > tol_b and np.linalg.norm(db - da) <= tol_b
+    if not acc[10, 1]:
+        assert acc[10, 2] == (not shared)
+
+
 @pytest.mark.parametrize("offline", [True, False])
 def test_hand_chain_failure_inside_the_hand_speed_gate_is_rejected(offline):
     # the whole hand chain 25 cm off for 30 frames: a step the hand can make in a frame
