@@ -516,31 +516,29 @@ def _robust_chunk(
     guesses = _guesses(inferred, params["inferred_bones"], n_dims)
     fits = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
+    est, rejected, var = out
+    guard = step_guard()
+    g_state = guard.new_state(B, J, ys.shape[-1])
     if offline:
         # the recording's median bone lengths (2-D from the recording: the gate compares
         # with the centre of the one-sided range)
         L = bone_lengths(ys, topo.parents) if params["bones"] else None
         L_gate = L if centre is None else centre
         L_fixed = np.full((B, J), np.nan) if L_gate is None else np.ascontiguousarray(L_gate)
-        given = ys
+        projected = ys
         if L is not None and guesses.any():  # at the recording's bone lengths
-            ys = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
-        fits = _offline(ys, missing, times, steps, rinf, setup, params, L_fixed, inferred, out,
-                        b0)  # fmt: skip
-        # no output step larger than the input's largest (the whole recording's)
-        guard = step_guard()
-        g_state = guard.new_state(B, J, ys.shape[-1])
-        guard.largest_steps(given, missing, g_state[1])
-        guard.guard_frames(given, missing, out[0], out[2], b0, *g_state)
+            projected = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
+        fits = _offline(projected, missing, times, steps, rinf, setup, params, L_fixed, inferred,
+                        out, b0)  # fmt: skip
+        guard.largest_steps(ys, missing, g_state[1])  # offline: the whole recording's limit
     else:
-        est, rejected, var = out
         state = k.new_state(B, J, int(params["lookback"]))
         k.online_frames(ys, missing, rinf, guesses, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
-        guard = step_guard()
-        guard.guard_frames(ys, missing, est, var, b0, *guard.new_state(B, J, ys.shape[-1]))
         if params["bones"]:  # the lengths learnt by the end of the recording
             L = state[3][..., k.S_L_CUR].copy()
+    # no output step larger than the input's largest (so far online)
+    guard.guard_frames(ys, missing, est, var, b0, *g_state)
     return L, fits
 
 
