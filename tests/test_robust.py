@@ -255,6 +255,78 @@ def test_gate_relocks_after_max_reject():
     assert 35 <= first_back <= 45
 
 
+def _stopped_jump_gate(ys: np.ndarray, min_run: float = 0.1) -> np.ndarray:
+    """gate_measurements on one torso joint: v_max 3 m/s, margin 5 cm, 30 fps."""
+    return gate_measurements(
+        ys, np.arange(len(ys)) / FPS, (-1,), np.array([3.0]), margin=0.05, bone_len=None,
+        bone_tol_abs=0.03, bone_tol_rel=0.15, max_reject=2.0, min_run=min_run,
+    )[:, 0]  # fmt: skip
+
+
+@pytest.mark.parametrize("entry", [[0.26], [0.16, 0.32]])
+def test_a_joint_that_jumped_and_stopped_is_not_taken_back_by_the_grown_gate(entry):
+    # KERAAL ELK's head: accepted for 1 s, then 26 cm away in one frame (the one-frame
+    # gate is 3 m/s / 30 + 5 cm = 15 cm) and still there 20 frames later. The gate has
+    # grown to 26 cm after 3 frames (3 * 10 cm + 5 cm), but a head that got there that
+    # fast would not have stopped dead: the stretch stays rejected until it jumps back.
+    # An entry over two impossible steps counts where the last one put the joint.
+    T = 90
+    ys = np.zeros((T, 1, 3))
+    ys[30:52, 0, 0] = entry[-1]
+    ys[30 : 30 + len(entry), 0, 0] = entry
+    ys[60:, 0, 0] = np.minimum(0.01 * np.arange(T - 60), entry[-1])  # back there, slowly
+    ys[:, 0, 1] = 0.005 * np.sin(np.arange(T))  # jitter well inside the margin
+    acc = _stopped_jump_gate(ys)
+    assert acc[:30].all() and acc[52:].all()
+    assert not acc[30:52].any()
+    # backwards in time the failure's end is its entry, and the same holds (up to where
+    # the entry's last step put the joint: backwards, that step leaves the place)
+    assert not _stopped_jump_gate(ys[::-1].copy())[::-1][29 + len(entry) : 52].any()
+
+
+def test_a_joint_that_jumped_and_moved_on_is_taken_back_as_before():
+    # the same impossible step, but the joint moves on (4 cm a frame): it leaves the
+    # place the step put it, and the grown gate takes it back when it reaches it: frame
+    # 30 + k once 0.26 + 0.04 k <= 0.1 (k + 1) + 0.05, i.e. k >= 2
+    T = 60
+    ys = np.zeros((T, 1, 3))
+    ys[30:, 0, 0] = 0.26 + 0.04 * np.minimum(np.arange(T - 30), 10)
+    acc = _stopped_jump_gate(ys)
+    assert not acc[30:32].any()
+    assert acc[32:].all()
+
+
+def test_a_step_back_during_a_rejection_for_another_reason_is_not_a_stopped_jump():
+    # a fails 40 cm to the side for frames 10-13 and is back at 14, while its parent
+    # fails for frames 11-14: at 14 a's step back is impossible too, and a is still
+    # rejected (its parent is), but the step goes back into the gate, so it is a return,
+    # not a new failure: a is taken back as soon as its parent is, at 15
+    ys = _chain_track()
+    ys[10:14, 1, 1] += 0.4
+    ys[11:15, 0, 1] += 0.4
+    acc = _chain_gate(ys)
+    assert not acc[10:15, 1].any()
+    assert acc[15:, 1].all() and acc[15:, 0].all()
+
+
+def test_the_stopped_jump_rule_needs_an_established_reference():
+    # a wrong first frame (accepted: nothing to judge it by) and then the true, still
+    # position: one sample is no evidence, so the grown gate takes the joint back as
+    # before (after 3 frames: 3 * 10 cm + 5 cm >= 26 cm) ...
+    T = 40
+    ys = np.zeros((T, 1, 3))
+    ys[0, 0, 0] = 0.26
+    acc = _stopped_jump_gate(ys)
+    assert acc[0] and not acc[1:3].any() and acc[3:].all()
+    # ... while behind an accepted run of min_run the still joint stays rejected
+    ys = np.zeros((T, 1, 3))
+    ys[:5, 0, 0] = 0.26  # five frames, 0.13 s
+    acc = _stopped_jump_gate(ys)
+    assert acc[:5].all() and not acc[5:].any()
+    acc = _stopped_jump_gate(ys, min_run=0.2)
+    assert not acc[5:7].any() and acc[7:].all()
+
+
 def _chain_gate(ys: np.ndarray) -> np.ndarray:
     """gate_measurements on a root - a - b chain (a 25 cm, b 8 cm further along x), the
     Kinect arm / hand speed bounds and the robust bone tolerance."""
