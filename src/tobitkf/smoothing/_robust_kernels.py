@@ -54,17 +54,13 @@ S_REJ_SINCE = 1  # start of the current rejection (gate, for max_reject)
 S_L_CUR = 2  # online bone length (median of the window)
 S_REJ_BEGIN = 3  # start of the current rejection stretch (confirmation)
 S_CONF_BEGIN = 4  # start of the current confirmation
-S_FAIL = 5  # 5, 6, 7: where the impossible step of the current rejection put the joint
-S_ACC_SINCE = 8  # start of the current accepted run (gate)
-N_SF = 9
+N_SF = 5
 # bool state per body and joint (sb[..., k])
 B_PREV_ACC = 0  # accepted by the gate in the previous frame
 B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
 B_STARTED = 2  # the joint's filter has started
 B_PREV_OK = 3  # the filter was updated with an accepted sample in the previous frame
-B_ARMED = 4  # the current rejection followed an accepted run of at least min_run
-B_STOPPED = 5  # rejected in this frame by the stopped-jump rule alone (gate_frame)
-N_SB = 6
+N_SB = 4
 # parameters (pf[k])
 P_MARGIN = 0
 P_TOL_ABS = 1
@@ -393,8 +389,7 @@ def gate_frame(
     h_cnt: np.ndarray,  # state (J, N_W)
     acc: np.ndarray,  # out (J,) accepted
 ) -> None:
-    """Speed gate, bone gate, chain rule and re-acquisition for one frame (rules 1-4,
-    and the stopped-jump rule of :func:`tobitkf.smoothing.robust_gating.gate_measurements`)."""
+    """Speed gate, bone gate, chain rule and re-acquisition for one frame (rules 1-4)."""
     J = parents.shape[0]
     margin = pf[P_MARGIN]
     tol_abs = pf[P_TOL_ABS]
@@ -416,7 +411,6 @@ def gate_frame(
         gate_ok = (not math.isfinite(last_t)) or (d <= gate)
         step_ok = sb[j, B_PREV_ACC] and (d <= vmax * dt_prev + margin)
         relock = False
-        raw_step = math.nan
         if has_prev:
             raw_step = _dist(y[j, 0], y[j, 1], y[j, 2], yprev[j, 0], yprev[j, 1], yprev[j, 2])
             relock = (tt - sf[j, S_REJ_SINCE] > max_reject) and (
@@ -445,33 +439,6 @@ def gate_frame(
             if _dist(dp0, dp1, dp2, 0.0, 0.0, 0.0) > tol and d_own <= tol:
                 step_ok = False
         ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
-        stopped = False
-        if ok and not relock and math.isfinite(sf[j, S_FAIL]):
-            # the gate has grown to the place an impossible step put the joint, and the
-            # joint is still there: a real joint that got there that fast would not have
-            # stopped dead, a failure in a wrong but stable place does
-            if _dist(y[j, 0], y[j, 1], y[j, 2], sf[j, S_FAIL], sf[j, S_FAIL + 1],
-                     sf[j, S_FAIL + 2]) <= margin:  # fmt: skip
-                ok = False
-                stopped = True
-        sb[j, B_STOPPED] = stopped
-        if ok:
-            sf[j, S_FAIL] = math.nan
-            sb[j, B_ARMED] = False
-            if not sb[j, B_PREV_ACC]:
-                sf[j, S_ACC_SINCE] = tt
-        elif sb[j, B_PREV_ACC]:
-            # a rejection starts: armed only behind an accepted run of at least min_run
-            # (a reference of a sample or two, e.g. a wrong first frame, is no evidence)
-            sb[j, B_ARMED] = tt - dt_prev - sf[j, S_ACC_SINCE] >= pf[P_MIN_RUN]
-        if (not ok and sb[j, B_ARMED] and valid and raw_step > vmax * dt_prev + margin
-                and d > _dist(yprev[j, 0], yprev[j, 1], yprev[j, 2],
-                              last[j, 0], last[j, 1], last[j, 2])):  # fmt: skip
-            # an impossible step away from the last accepted sample (a step towards it
-            # is a return, whatever else rejects the joint)
-            sf[j, S_FAIL] = y[j, 0]
-            sf[j, S_FAIL + 1] = y[j, 1]
-            sf[j, S_FAIL + 2] = y[j, 2]
         acc[j] = ok
         if online and use_bones:
             # a re-lock means the learnt bone length was wrong: learn it again
@@ -555,31 +522,14 @@ def gate_both(
 ) -> np.ndarray:
     """The offline gate: forwards in time and (``two_pass``) backwards, a sample accepted
     when both passes accept it, ``(T, B, J)``. The backward pass is the forward one on
-    the time-reversed recording (clock ``times_back``), read in place.
-
-    A rejection by the stopped-jump rule alone is a judgement of which side of a jump is
-    wrong; it stands when the other pass rejects the sample too (a failure that jumped
-    out and back is wrong seen from both ends) and is overruled when the other pass
-    accepts it (seen from the other end the jump is where a slow drift ended, or a real
-    shift that never came back: the grown gate's judgement stands, as without the rule).
-    """
+    the time-reversed recording (clock ``times_back``), read in place."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    stopped = np.zeros((T, B, J), dtype=np.bool_)
     gate_pass(ys, times, parents, order, pj, pf, L_fixed, use_bones, False, max_reject, st,
-              False, acc, stopped)  # fmt: skip
+              False, acc)  # fmt: skip
     if two_pass:
-        acc_b = np.zeros((T, B, J), dtype=np.bool_)
-        stopped_b = np.zeros((T, B, J), dtype=np.bool_)
         gate_pass(ys, times_back, parents, order, pj, pf, L_fixed, use_bones, False,
-                  max_reject, st_back, True, acc_b, stopped_b)  # fmt: skip
-        for t in range(T):
-            for b in range(B):
-                for j in range(J):
-                    f, r = acc[t, b, j], acc_b[t, b, j]
-                    acc[t, b, j] = (
-                        (f or stopped[t, b, j]) and (r or stopped_b[t, b, j]) and (f or r)
-                    )
+                  max_reject, st_back, True, acc)  # fmt: skip
     return acc
 
 
@@ -596,9 +546,8 @@ def gate_pass(
     online: bool,
     max_reject: float,
     st: tuple,
-    reverse: bool,  # frame i of the pass is frame T - 1 - i
+    reverse: bool,  # frame i of the pass is frame T - 1 - i, and acc is ANDed
     acc: np.ndarray,  # out (T, B, J)
-    stopped: np.ndarray,  # out (T, B, J): rejected by the stopped-jump rule alone
 ) -> None:
     """Causal accept / reject decision (gate rules 1-4) for every sample into ``acc``:
     :func:`gate_frame` over time, frames outside and bodies inside (a frame of every
@@ -617,10 +566,14 @@ def gate_pass(
             gate_frame(ys[t, b], ys[tp, b], has_prev, times[i], dt_prev, i, parents, order,
                        pj, pf, L_fixed[b], use_bones, online, max_reject, last[b], sf[b],
                        sb[b], h_val[b], h_mult[b], h_cnt[b], out[b])  # fmt: skip
-        for b in range(B):
-            for j in range(J):
-                acc[t, b, j] = out[b, j]
-                stopped[t, b, j] = sb[b, j, B_STOPPED]
+        if reverse:
+            for b in range(B):
+                for j in range(J):
+                    acc[t, b, j] = acc[t, b, j] and out[b, j]
+        else:
+            for b in range(B):
+                for j in range(J):
+                    acc[t, b, j] = out[b, j]
 
 
 # ------------------------------------------------------------------------------ offline rules

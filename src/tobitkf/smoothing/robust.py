@@ -18,11 +18,7 @@ A valid measurement ``y_j(t)`` is *accepted* when
    ``y_j(s)``: ``|y_j(t) - y_j(s)| <= v_max_j (t - s) + margin``.  ``v_max`` is a
    physical bound by body region (hands 8, arms 5, torso 3, legs 10 m/s); the gate grows
    with the time since the last accepted sample, so a joint that really moved faster
-   than ``v_max`` is re-acquired a frame or two later instead of being lost, unless it
-   stopped where an impossible step away from its last accepted sample put it (within
-   ``margin``, after an accepted run of at least ``min_run``): a real joint that got
-   there that fast would not stop dead (offline, the other pass overrules this rule
-   where it accepts the sample);
+   than ``v_max`` is re-acquired a frame or two later instead of being lost;
 2. **bone gate** — if its parent was accepted in this frame, the bone to the parent has
    its normal length: ``| |y_j - y_parent| - L_j | <= bone_tol_abs + bone_tol_rel L_j``
    with ``L_j`` the recording's median bone length (offline) or the median of the

@@ -135,20 +135,8 @@ def gate_measurements(
     bone_tol_rel: float,
     online_bones: bool = False,
     max_reject: float = np.inf,
-    min_run: float = 0.0,
 ) -> NDArray[np.bool_]:
     """Causal accept / reject decision for every measurement (module docstring).
-
-    **Stopped jumps.** The speed gate grows with the time since the last accepted sample,
-    so by itself it would take back, a few frames later, a joint that an impossible step
-    (one frame-to-frame step larger than ``v_max · dt + margin``) put in a wrong place
-    where it then stays. A rejection that began after an accepted run of at least
-    ``min_run`` seconds therefore remembers where such a step away from the last
-    accepted sample put the joint (a step towards it is a return), and the grown gate
-    does not take the joint back while it is still within ``margin`` of that place: a
-    real joint that got there that fast would not have stopped dead. A joint that leaves
-    that place is judged by the gates as before; ``max_reject`` still ends any rejection.
-    (Offline, ``robust`` overrules this rule where the backward pass accepts the sample.)
 
     Parameters
     ----------
@@ -167,8 +155,6 @@ def gate_measurements(
     max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
         its measurement moves plausibly from the previous frame's (no lock-out when the
         reference itself was wrong).
-    min_run : seconds; the accepted run that arms the stopped-jump rule (the robust
-        smoother's ``min_run``; 0 = any accepted sample).
 
     Returns
     -------
@@ -178,14 +164,13 @@ def gate_measurements(
     J = y.shape[2]
     par, order = joint_order(parents)
     pj, pf = _gate_params(J, v_max, margin, bone_tol_abs, bone_tol_rel)
-    k = kernels()
-    pf[k.P_MIN_RUN] = min_run
     L = np.full((1, J), np.nan) if bone_len is None else np.asarray(bone_len, float)[None]
+    k = kernels()
     acc = np.zeros(y.shape[:3], dtype=bool)
     k.gate_pass(
         y, np.ascontiguousarray(times, dtype=float), par, order, pj, pf,
         np.ascontiguousarray(L), bone_len is not None, bool(online_bones), float(max_reject),
-        k.new_state(1, J, 0), False, acc, np.zeros(y.shape[:3], dtype=bool),
+        k.new_state(1, J, 0), False, acc,
     )  # fmt: skip
     return acc[:, 0]
 
