@@ -347,13 +347,13 @@ def _offline(
         fits = _fit_noise(ys, acc & ~inferred, rinf, steps, setup, params)
         sd = fits[0]["noise_sd"]
     rvar = sd**2 * rinf  # a new (T, B, J) array: the carried samples' are written in
+    tau = float(params["tau"])
     if params["carry"]:
         yk = np.empty(ys.shape)  # the accepted samples and the carried ones
         k.carry_both(ys, acc, par, order, np.ascontiguousarray(np.broadcast_to(sd, (B, J))),
-                     steps, float(params["tau"]), yk, rvar)  # fmt: skip
+                     steps, tau, yk, rvar)  # fmt: skip
     else:
         yk = np.where(acc[..., None], ys, np.nan)
-    tau = float(params["tau"])
     if fits is None:  # the constants: the same smoother without a coloured error
         q = np.ascontiguousarray(np.broadcast_to(pj[:, k.J_Q], missing.shape))
         sc2, tau_c = np.zeros((B, J)), np.ones((B, J))
