@@ -48,7 +48,7 @@ timestamps, fps, topology, body id and metadata, plus:
     method, params          the method name and the complete parameter set used
 
 and whatever the method adds (``robust``: ``rejected``, ``rejected_fraction``,
-``bone_lengths``).
+``bone_lengths``, offline ``noise_fit``, ``guess_error_sd``, ``guess_error_changes``).
 """
 
 from __future__ import annotations

@@ -55,7 +55,10 @@ guess gives (:func:`~tobitkf.smoothing.robust_gating.project_inferred`; an infer
 child first moves with its inferred parent's correction). Offline the length is the
 recording's median, online the median learnt so far (none yet: left as guessed); 3-D
 only, since a bone seen in projection has no one length. ``inferred_bones=False`` turns
-this off.
+this off. The guesses of one occlusion share one error, which averaging does not
+remove: offline, its size is estimated from the recording and added to the standard
+deviation of the samples that rest on them (:mod:`tobitkf.smoothing.robust_guesses`,
+``inferred_error="shared"``; the estimate is unchanged).
 
 Carrying
 --------
@@ -179,6 +182,10 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
+    # offline: "shared" = the INFERRED guesses of one occlusion share one error, its size
+    # taken from the recording and added to the sd of the samples resting on them
+    # (robust_guesses.py); "independent" = each guess an independent measurement
+    "inferred_error": "shared",
 }
 
 #: parameter validators (name -> check(name, value) -> value)
@@ -200,14 +207,18 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "gates": one_of("auto", "physical", "recording"),
     "noise": one_of("fit", "fixed"),
     "fit_seconds": positive_or_inf,
+    "inferred_error": one_of("shared", "independent"),
 }
 
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
 
-#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md)
-ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
-ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
+#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md) and
+#: its guesses independent (the shared error is estimated from the whole recording)
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed",
+                                   "inferred_error": "independent"}  # fmt: skip
+ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed"),
+                                     "inferred_error": one_of("independent")}  # fmt: skip
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -323,8 +334,10 @@ def _offline(
     One kernel call per stage for all bodies (compiling them as one would take longer).
     Writes bodies ``b0 ..`` of ``out = (est (T, B0, J, 3), rejected (T, B0, J), var (T,
     B0, J))``, ``var`` the smoothed position variance (per axis; the axes share it);
-    returns ``fits``: None (fixed noise) or the fitted per-joint arrays ``(B, J)`` and
-    the per-body region fits.
+    returns ``(fits, guess)``: ``fits`` None (fixed noise) or the fitted per-joint arrays
+    ``(B, J)`` and the per-body region fits; ``guess`` None (no INFERRED sample used) or
+    the per-axis variance of the guesses' error and the steps it rests on, per body
+    (:mod:`.robust_guesses`).
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
@@ -366,6 +379,14 @@ def _offline(
         q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
         sc2, tau_c = f["error_sd"] ** 2, f["error_tau"]
     fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0)
+    guess = None
+    used = inferred & acc
+    if params["inferred_error"] == "shared" and used.any():  # robust_guesses
+        from tobitkf.smoothing.robust_guesses import add_guess_error, guess_error_variance
+
+        guess = guess_error_variance(ys, acc, inferred)
+        add_guess_error(fit_kernels().smooth_run, yk, rvar, steps, q, sc2, tau, tau_c, used,
+                        guess[0], var, b0)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
@@ -374,7 +395,7 @@ def _offline(
     for b, j in zip(*np.nonzero(~acc.any(axis=0)), strict=True):
         est[:, b0 + b, j] = ys[:, b, j]
         var[:, b0 + b, j] = np.nan  # raw, not smoothed: no posterior
-    return fits
+    return fits, guess
 
 
 def fit_kernels() -> Any:
@@ -444,7 +465,7 @@ def _robust_bodies(
     L = np.empty((B, J)) if params["bones"] else None
     fits: Any = None
 
-    def run(b: slice) -> tuple[Array | None, Any]:
+    def run(b: slice) -> tuple[Array | None, Any, Any]:
         return _robust_chunk(
             ys[:, b], missing[:, b], None if states is None else states[:, b],
             None if confidence is None else confidence[:, b],
@@ -455,9 +476,12 @@ def _robust_bodies(
     # a chunk of bodies at a time, written into the outputs in place (chunks in threads)
     n_threads = threads()
     parts = chunks(B, T * J * 3 * 8, spread=n_threads)
-    for b, (lengths, f) in zip(parts, map_chunks(run, parts, n_threads), strict=True):
+    guess_sd, guess_n = np.full(B, np.nan), np.zeros(B, dtype=np.int64)
+    for b, (lengths, f, g) in zip(parts, map_chunks(run, parts, n_threads), strict=True):
         if L is not None:
             L[b] = lengths
+        if g is not None:
+            guess_sd[b], guess_n[b] = np.sqrt(g[0]), g[1]
         if f is not None:
             if fits is None:
                 fits = ({name: np.empty((B, J)) for name in f[0]}, [])
@@ -473,6 +497,10 @@ def _robust_bodies(
         }
         for b in range(B)
     ]
+    if offline:  # robust_guesses: NaN without inferred samples or with too few changes
+        for b in range(B):
+            diags[b]["guess_error_sd"] = float(guess_sd[b])
+            diags[b]["guess_error_changes"] = int(guess_n[b])
     resolved = dict(setup.resolved)
     for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
         if name in derived:
@@ -502,11 +530,12 @@ def _robust_chunk(
     n_dims: int,
     out: tuple[Array, NDArray[np.bool_], Array],
     b0: int,
-) -> tuple[Array | None, Any]:
+) -> tuple[Array | None, Any, Any]:
     """The per-body work of :func:`_robust_bodies` for some bodies, parameters resolved:
     writes bodies ``b0 ..`` of ``out = (est (T, B0, J, 3), rejected (T, B0, J), var (T,
-    B0, J))`` and returns ``(bone lengths (B, J) or None, fits)``; ``centre`` (B, J):
-    the 2-D bone gate's lengths from the recording, or None."""
+    B0, J))`` and returns ``(bone lengths (B, J) or None, fits, guess)`` (:func:`_offline`;
+    online both None); ``centre`` (B, J): the 2-D bone gate's lengths from the recording,
+    or None."""
     B, J = missing.shape[1:]
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     k = kernels()
@@ -514,7 +543,7 @@ def _robust_chunk(
     inferred = _inferred(states, missing.shape)
     rinf = _inferred_scale(inferred, missing, factor, confidence)
     guesses = _guesses(inferred, params["inferred_bones"], n_dims)
-    fits = None
+    fits = guess = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     est, rejected, var = out
     guard = step_guard()
@@ -528,8 +557,8 @@ def _robust_chunk(
         projected = ys
         if L is not None and guesses.any():  # at the recording's bone lengths
             projected = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
-        fits = _offline(projected, missing, times, steps, rinf, setup, params, L_fixed, inferred,
-                        out, b0)  # fmt: skip
+        fits, guess = _offline(projected, missing, times, steps, rinf, setup, params, L_fixed,
+                               inferred, out, b0)  # fmt: skip
         guard.largest_steps(ys, missing, g_state[1])  # offline: the whole recording's limit
     else:
         state = k.new_state(B, J, int(params["lookback"]))
@@ -539,7 +568,7 @@ def _robust_chunk(
             L = state[3][..., k.S_L_CUR].copy()
     # no output step larger than the input's largest (so far online)
     guard.guard_frames(ys, missing, est, var, b0, *g_state)
-    return L, fits
+    return L, fits, guess
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
@@ -661,6 +690,11 @@ def robust_smooth(
         fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
         uses the values as given (online always).
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
+    inferred_error : offline only: ``"shared"`` (default) adds the INFERRED guesses'
+        shared error, estimated from the recording, to the standard deviation of the
+        samples resting on them (:mod:`tobitkf.smoothing.robust_guesses`; the estimate
+        is unchanged; ``diagnostics["guess_error_sd"]``); ``"independent"`` treats each
+        guess as an independent measurement (online always).
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``
@@ -674,7 +708,10 @@ def robust_smooth(
         ``clipped_fraction`` (J,) zeros (no censoring here), ``rejected`` (T, J) bool
         mask, ``bone_lengths`` (J,) (the lengths the bone gate compared with: offline
         the recording's medians, online the ones learnt by its end), ``method``
-        (``"robust"`` / ``"robust_online"``) and ``params``.
+        (``"robust"`` / ``"robust_online"``) and ``params``; offline also ``noise_fit``
+        (with ``noise="fit"``), ``guess_error_sd`` and ``guess_error_changes`` (the
+        guesses' per-axis error in the smoother's units, metres for lengths, and the
+        steps it rests on: NaN and 0 without an estimate).
     """
     if not isinstance(sequence, SkeletonSequence):
         raise TypeError(f"robust_smooth expects a SkeletonSequence, got {type(sequence).__name__}")
