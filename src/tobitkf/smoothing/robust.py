@@ -57,8 +57,8 @@ recording's median, online the median learnt so far (none yet: left as guessed);
 only, since a bone seen in projection has no one length. ``inferred_bones=False`` turns
 this off. The guesses of one occlusion share one error, which averaging does not
 remove: offline, its size is estimated from the recording and added to the standard
-deviation of the samples that rest on them (:mod:`tobitkf.smoothing.robust_guesses`,
-``inferred_error="shared"``; the estimate is unchanged).
+deviation of the samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`,
+``shared_errors=True``; the estimate is unchanged).
 
 Carrying
 --------
@@ -70,7 +70,11 @@ since the limb may have rotated about the parent.  Offline each carried sample's
 is also multiplied by the number of frames in ``tau`` (``carried_count``): consecutive
 carried samples share one error, the limb's rotation since, which decorrelates over
 ``tau``, so a run of them counts as about one sample per ``tau`` against the real samples
-at both ends of the bridge.  ``carry=False`` turns this off.
+at both ends of the bridge.  ``carry=False`` turns this off. The carried samples of a
+stretch share one error, the joint's turn about its parent since its offset was seen:
+offline, its size at each sample is taken from how far the joint's offset moved over as
+many frames in the rest of the recording, and added to the standard deviation of the
+samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`).
 
 Smoothing
 ---------
@@ -182,10 +186,10 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
-    # offline: "shared" = the INFERRED guesses of one occlusion share one error, its size
-    # taken from the recording and added to the sd of the samples resting on them
-    # (robust_guesses.py); "independent" = each guess an independent measurement
-    "inferred_error": "shared",
+    # offline: the errors that the INFERRED guesses of one occlusion and the carried
+    # samples of one stretch share, taken from the recording, are added to the sd of the
+    # samples resting on them (robust_shared.py); the estimate is unchanged
+    "shared_errors": True,
 }
 
 #: parameter validators (name -> check(name, value) -> value)
@@ -207,18 +211,25 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "gates": one_of("auto", "physical", "recording"),
     "noise": one_of("fit", "fixed"),
     "fit_seconds": positive_or_inf,
-    "inferred_error": one_of("shared", "independent"),
+    "shared_errors": as_bool,
 }
 
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
 
+
+def _offline_only(name: str, value: Any) -> bool:
+    """False, for an offline-only switch of ``robust_online``."""
+    if as_bool(name, value):
+        raise ValueError(f"{name} is offline only (robust): robust_online must have it False")
+    return False
+
+
 #: robust_online keeps the given noise (a causal fit is open work, docs/robust.md) and
-#: its guesses independent (the shared error is estimated from the whole recording)
-ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed",
-                                   "inferred_error": "independent"}  # fmt: skip
+#: no shared errors (they are estimated from the whole recording)
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed", "shared_errors": False}
 ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed"),
-                                     "inferred_error": one_of("independent")}  # fmt: skip
+                                     "shared_errors": _offline_only}  # fmt: skip
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -335,9 +346,9 @@ def _offline(
     Writes bodies ``b0 ..`` of ``out = (est (T, B0, J, 3), rejected (T, B0, J), var (T,
     B0, J))``, ``var`` the smoothed position variance (per axis; the axes share it);
     returns ``(fits, guess)``: ``fits`` None (fixed noise) or the fitted per-joint arrays
-    ``(B, J)`` and the per-body region fits; ``guess`` None (no INFERRED sample used) or
-    the per-axis variance of the guesses' error and the steps it rests on, per body
-    (:mod:`.robust_guesses`).
+    ``(B, J)`` and the per-body region fits; ``guess`` None (no INFERRED sample used, or
+    ``shared_errors`` off) or the per-axis variance of the guesses' error and the steps
+    it rests on, per body (:mod:`.robust_shared`).
     """
     k = kernels()
     par, order, pj, pf, _ = setup.args()
@@ -380,13 +391,9 @@ def _offline(
         sc2, tau_c = f["error_sd"] ** 2, f["error_tau"]
     fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0)
     guess = None
-    used = inferred & acc
-    if params["inferred_error"] == "shared" and used.any():  # robust_guesses
-        from tobitkf.smoothing.robust_guesses import add_guess_error, guess_error_variance
-
-        guess = guess_error_variance(ys, acc, inferred)
-        add_guess_error(fit_kernels().smooth_run, yk, rvar, steps, q, sc2, tau, tau_c, used,
-                        guess[0], var, b0)  # fmt: skip
+    if params["shared_errors"]:  # what the guesses and the carried samples share, in the sd
+        guess = _shared_errors(ys, acc, inferred, (yk, rvar, steps, q, sc2, tau, tau_c),
+                               par, order, float(params["max_reject"]), var, b0)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
@@ -396,6 +403,36 @@ def _offline(
         est[:, b0 + b, j] = ys[:, b, j]
         var[:, b0 + b, j] = np.nan  # raw, not smoothed: no posterior
     return fits, guess
+
+
+def _shared_errors(
+    ys: Array, acc: NDArray[np.bool_], inferred: NDArray[np.bool_], smoother: tuple[Any, ...],
+    par: NDArray[np.int64], order: NDArray[np.int64], max_reject: float, var: Array, b0: int,
+) -> tuple[Array, NDArray[np.int64]] | None:  # fmt: skip
+    """Add to ``var`` the errors the guesses and the carried samples share
+    (:mod:`.robust_shared`); ``smoother`` = the smoother's inputs ``(yk, rvar, steps, q,
+    sc2, tau, tau_c)``. Returns the guesses' per-axis error variance and the steps it
+    rests on, per body (None without guesses)."""
+    from tobitkf.smoothing import robust_shared as rs
+
+    yk, steps = smoother[0], smoother[2]
+    guess = None
+    sds = []
+    used = inferred & acc
+    if used.any():
+        guess = rs.guess_error_variance(ys, acc, inferred)
+        sds.append(np.where(used, np.sqrt(guess[0])[None, :, None], np.nan))
+    carried = ~acc & np.isfinite(yk[..., 0])
+    if carried.any():
+        # the offset's structure function up to max_reject (the longest believable
+        # failure), beyond it the stationary limit
+        dt = float(np.median(steps[1:])) if steps.size > 1 else float(steps[0])
+        lags = max_reject / dt if dt > 0 else np.inf
+        max_lag = int(min(np.ceil(lags), rs.MAX_LAG_FRAMES))
+        sds.append(rs.carried_error_sd(ys, acc, carried, par, order, max(1, max_lag)))
+    if sds:
+        rs.add_shared_errors(fit_kernels().smooth_run, *smoother, sds, var, b0)
+    return guess
 
 
 def fit_kernels() -> Any:
@@ -497,7 +534,7 @@ def _robust_bodies(
         }
         for b in range(B)
     ]
-    if offline:  # robust_guesses: NaN without inferred samples or with too few changes
+    if offline:  # robust_shared: NaN without guesses, with too few changes or switched off
         for b in range(B):
             diags[b]["guess_error_sd"] = float(guess_sd[b])
             diags[b]["guess_error_changes"] = int(guess_n[b])
@@ -690,11 +727,12 @@ def robust_smooth(
         fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
         uses the values as given (online always).
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
-    inferred_error : offline only: ``"shared"`` (default) adds the INFERRED guesses'
-        shared error, estimated from the recording, to the standard deviation of the
-        samples resting on them (:mod:`tobitkf.smoothing.robust_guesses`; the estimate
-        is unchanged; ``diagnostics["guess_error_sd"]``); ``"independent"`` treats each
-        guess as an independent measurement (online always).
+    shared_errors : offline only: True (default) adds the errors that the INFERRED
+        guesses of one occlusion and the carried samples of one stretch share, estimated
+        from the recording, to the standard deviation of the samples resting on them
+        (:mod:`tobitkf.smoothing.robust_shared`; the estimate is unchanged;
+        ``diagnostics["guess_error_sd"]``); False keeps each sample's own error as if
+        independent (online always).
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``
