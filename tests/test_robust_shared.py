@@ -159,6 +159,8 @@ def test_carried_error_is_the_turn_since_the_offset_seen():
     acc = np.ones(ys.shape[:3], dtype=bool)
     acc[100:130, 0, 1:] = False  # elbow and hand rejected, carried
     acc[:5, 0, 1] = False  # a stretch with no offset before it: carried back from frame 5
+    ys[50:60, 0, 1] += 1.0  # a failed elbow under a good hand: no offset of the hand
+    acc[50:60, 0, 1] = False
     carried = ~acc
     sd = carried_error_sd(ys, acc, carried, PARENTS, ORDER, max_lag=60)
     d = np.arange(1, 31)

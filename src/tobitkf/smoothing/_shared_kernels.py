@@ -1,6 +1,6 @@
 """Compiled kernel of :mod:`tobitkf.smoothing.robust_shared` (numba, ``cache=True``):
-the structure function of a joint's offset from its parent. Imported lazily (numba on
-first use)."""
+the carried samples' error from the structure function of each joint's offset from its
+parent. Imported lazily (numba on first use)."""
 
 from __future__ import annotations
 
@@ -13,40 +13,88 @@ _jit = njit(cache=True, nogil=True)
 
 
 @_jit
-def offset_structure(off: np.ndarray, n_lags: int, min_pairs: int) -> np.ndarray:
-    """``S (n_lags + 2, B)`` of ``off (T, B, D)`` (NaN where not known): per body, the
-    mean of ``|o(t + d) - o(t)|²`` over the pairs known at both ends for ``d = 0 ..
-    n_lags``, and last the stationary limit ``2 Var(o)`` (the sum over the axes of the
-    sample variances), which also stands for a lag with fewer than ``min_pairs`` pairs.
-    Each body on its own, in a fixed order."""
-    T, B, D = off.shape
-    S = np.empty((n_lags + 2, B))
+def carried_sd(
+    ys: np.ndarray,  # (T, B, J, D)
+    acc: np.ndarray,  # (T, B, J) accepted
+    carried: np.ndarray,  # (T, B, J) carried
+    parents: np.ndarray,
+    order: np.ndarray,  # the joints from the root outwards
+    max_lag: int,
+    min_pairs: int,
+    max_starts: int,
+) -> np.ndarray:
+    """Per-axis standard deviation ``(T, B, J)`` of each carried sample's error, NaN at
+    every other sample (:mod:`tobitkf.smoothing.robust_shared`): ``S(Δ) / D`` of the
+    joint's offset from its parent at the sample's lag ``Δ`` to the offset it carries
+    (the last frame both were accepted, else the next), plus its parent's variance where
+    the parent is carried too. ``S(Δ)`` is the mean ``|o(t + Δ) - o(t)|²`` over pairs
+    known at both ends, from at most ``max_starts`` start frames ``t`` evenly spread
+    (every ``ceil(T / max_starts)``-th frame); a lag with fewer than ``min_pairs`` pairs,
+    or beyond ``max_lag``, takes the long-lag limit ``2 Var(o)``. Each body on its own."""
+    T, B, J, D = ys.shape
+    sd = np.full((T, B, J), np.nan)
+    off = np.empty((T, D))
+    known = np.empty(T, dtype=np.bool_)
+    lag = np.empty(T, dtype=np.int64)
     mean = np.empty(D)
+    S = np.empty(max(max_lag, 0) + 2)
+    stride = max(1, -(-T // max(max_starts, 1)))
     for b in range(B):
-        n = 0
-        mean[:] = 0.0
-        for t in range(T):
-            if math.isfinite(off[t, b, 0]):
-                n += 1
-                for a in range(D):
-                    mean[a] += off[t, b, a]
-        for a in range(D):
-            mean[a] /= max(n, 1)
-        ss = 0.0
-        for t in range(T):
-            if math.isfinite(off[t, b, 0]):
-                for a in range(D):
-                    ss += (off[t, b, a] - mean[a]) ** 2
-        limit = 2.0 * ss / max(n - 1, 1)
-        S[0, b] = 0.0
-        S[n_lags + 1, b] = limit
-        for d in range(1, n_lags + 1):
-            s = 0.0
-            m = 0
-            for t in range(T - d):
-                if math.isfinite(off[t, b, 0]) and math.isfinite(off[t + d, b, 0]):
-                    m += 1
+        for k in range(J):
+            j = order[k]
+            p = parents[j]
+            if p < 0:
+                continue
+            need = -1
+            last = -1
+            for t in range(T):  # the lag to the last good offset (forwards)
+                known[t] = acc[t, b, j] and acc[t, b, p]
+                if known[t]:
+                    last = t
                     for a in range(D):
-                        s += (off[t + d, b, a] - off[t, b, a]) ** 2
-            S[d, b] = s / m if m >= min_pairs else limit
-    return S
+                        off[t, a] = ys[t, b, j, a] - ys[t, b, p, a]
+                lag[t] = t - last if last >= 0 else -1
+            nxt = -1
+            for t in range(T - 1, -1, -1):  # none before: to the next one
+                if known[t]:
+                    nxt = t
+                if lag[t] < 0:
+                    lag[t] = nxt - t if nxt >= 0 else 0
+                if carried[t, b, j] and lag[t] > need:
+                    need = lag[t]
+            if need < 0:
+                continue
+            n_lags = min(need, max_lag, T - 1)
+            # the long-lag limit: 2 x the sample variance, summed over the axes
+            n = 0
+            mean[:] = 0.0
+            for t in range(T):
+                if known[t]:
+                    n += 1
+                    for a in range(D):
+                        mean[a] += off[t, a]
+            for a in range(D):
+                mean[a] /= max(n, 1)
+            ss = 0.0
+            for t in range(T):
+                if known[t]:
+                    for a in range(D):
+                        ss += (off[t, a] - mean[a]) ** 2
+            limit = 2.0 * ss / max(n - 1, 1)
+            S[0] = 0.0
+            for d in range(1, n_lags + 1):
+                s = 0.0
+                m = 0
+                for t in range(0, T - d, stride):
+                    if known[t] and known[t + d]:
+                        m += 1
+                        for a in range(D):
+                            s += (off[t + d, a] - off[t, a]) ** 2
+                S[d] = s / m if m >= min_pairs else limit
+            for t in range(T):
+                if carried[t, b, j]:
+                    v = (S[lag[t]] if lag[t] <= n_lags else limit) / D
+                    if carried[t, b, p]:
+                        v += sd[t, b, p] ** 2
+                    sd[t, b, j] = math.sqrt(v)
+    return sd

@@ -40,8 +40,10 @@ from its parent, ``o(t)``, is known where both were accepted. Its structure func
 frames gets wrong, on average, in this recording. A carried sample ``Δ`` frames from the
 offset it carries (the last good one, or the next for a stretch with none before) has
 per-axis ``σ² = S(Δ) / D``; where its parent is carried too, the parent's ``σ²`` is added
-(the two turns are independent). Lags with fewer than :data:`MIN_PAIRS` pairs, and
-lags beyond ``max_lag``, take the stationary limit ``2 Var(o)``.
+(the two turns are independent). Each lag is read from at most :data:`MAX_STARTS`
+start frames spread evenly over the recording, so the cost per joint is bounded; lags
+with fewer than :data:`MIN_PAIRS` pairs, and lags beyond ``max_lag``, take the
+stationary limit ``2 Var(o)``.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "MAX_LAG_FRAMES",
+    "MAX_STARTS",
     "MIN_CHANGES",
     "MIN_PAIRS",
     "add_shared_errors",
@@ -70,6 +73,9 @@ MIN_PAIRS = 10
 #: the structure function is read up to this many frames at most (20 s at 30 fps; its
 #: cost grows with the lags), beyond it the stationary limit
 MAX_LAG_FRAMES = 600
+#: each lag of the structure function is read from at most this many start frames,
+#: evenly spread (its cost per joint stays bounded however long the recording)
+MAX_STARTS = 300
 
 
 def guess_error_variance(
@@ -103,7 +109,7 @@ def _body_sums(x: Array) -> Array:
 
 
 def _kernels() -> Any:
-    """The compiled structure function (imports numba on first use)."""
+    """The compiled carried-sample kernel (imports numba on first use)."""
     from tobitkf.smoothing import _shared_kernels
 
     return _shared_kernels
@@ -122,26 +128,11 @@ def carried_error_sd(
     ``carried (T, B, J)`` the carried ones; ``order`` the joints from the root outwards;
     ``max_lag`` frames (at least 1) the longest lag of the structure function read from
     the data."""
-    T, B, J, D = ys.shape
-    sd = np.full((T, B, J), np.nan)
-    frames = np.arange(T)[:, None]
-    for j in order:
-        p = parents[j]
-        c = carried[:, :, j]
-        if p < 0 or not c.any():
-            continue
-        both = acc[:, :, j] & acc[:, :, p]
-        off = np.where(both[..., None], ys[:, :, j] - ys[:, :, p], np.nan)  # (T, B, D)
-        # frames to the offset carried: the last good one, else the next
-        last = np.maximum.accumulate(np.where(both, frames, -1), axis=0)
-        nxt = np.minimum.accumulate(np.where(both, frames, T)[::-1], axis=0)[::-1]
-        lag = np.where(last >= 0, frames - last, nxt - frames)
-        n_lags = min(int(lag[c].max()), max_lag, T - 1)
-        S = _kernels().offset_structure(np.ascontiguousarray(off), n_lags, MIN_PAIRS)
-        var = S[np.minimum(lag, S.shape[0] - 1), np.arange(B)[None]] / D
-        parent = np.where(carried[:, :, p], sd[:, :, p], 0.0)
-        sd[:, :, j] = np.where(c, np.sqrt(var + parent**2), np.nan)
-    return sd
+    return _kernels().carried_sd(
+        np.ascontiguousarray(ys, dtype=float), np.ascontiguousarray(acc, dtype=bool),
+        np.ascontiguousarray(carried, dtype=bool), np.ascontiguousarray(parents, dtype=np.int64),
+        np.ascontiguousarray(order, dtype=np.int64), int(max_lag), MIN_PAIRS, MAX_STARTS,
+    )  # fmt: skip
 
 
 def add_shared_errors(
@@ -171,16 +162,20 @@ def add_shared_errors(
     if not cols.any():
         return
     bb, jj = np.nonzero(cols)
-    T, K = yk.shape[0], bb.size
-    present = np.isfinite(yk[:, bb, jj, 0])
+    T, K, (B, J) = yk.shape[0], bb.size, cols.shape
+    n = bb * J + jj  # flat columns: one gather per array
+    present = np.isfinite(yk.reshape(T, B * J, -1)[:, n, 0])
     sig = np.zeros((T, 1, K, 3))
     for k, sd in enumerate(sds):
-        s = sd[:, bb, jj]
-        sig[:, 0, :, k] = np.where(np.isfinite(s), s, 0.0)
+        sig[:, 0, :, k] = np.nan_to_num(sd.reshape(T, B * J)[:, n], nan=0.0)
     sig[:, 0][~present] = np.nan  # no sample: the smoother predicts
     w = np.empty((T, 1, K, 3))
     wv = np.empty((T, 1, K))
-    smooth(sig, np.ascontiguousarray(rvar[:, bb, jj][:, None]), steps,
-           np.ascontiguousarray(q[:, bb, jj][:, None]), np.ascontiguousarray(sc2[bb, jj][None]),
-           tau, np.ascontiguousarray(tau_c[bb, jj][None]), w, wv, 0)  # fmt: skip
-    var[:, b0 + bb, jj] += np.sum(w[:, 0, :, : len(sds)] ** 2, axis=-1)
+
+    def gather(a: Array) -> Array:  # (T, B, J) -> (T, 1, K), C-contiguous
+        return np.ascontiguousarray(a.reshape(T, B * J)[:, n].reshape(T, 1, K))
+
+    smooth(sig, gather(rvar), steps, gather(q), np.reshape(sc2, B * J)[n].reshape(1, K), tau,
+           np.reshape(tau_c, B * J)[n].reshape(1, K), w, wv, 0)  # fmt: skip
+    wk = w[:, 0, :, : len(sds)]
+    var[:, b0 + bb, jj] += np.einsum("tkc,tkc->tk", wk, wk)
