@@ -145,6 +145,7 @@ from tobitkf.smoothing.timebase import (
     frame_steps,
     frame_times,
     readonly,
+    typical_step,
 )
 
 __all__ = ["ROBUST_DEFAULTS", "ROBUST_VALIDATORS", "robust_smooth"]
@@ -426,7 +427,7 @@ def _shared_errors(
     if carried.any():
         # the offset's structure function up to max_reject (the longest believable
         # failure), beyond it the stationary limit
-        dt = float(np.median(steps[1:])) if steps.size > 1 else float(steps[0])
+        dt = typical_step(steps)
         lags = max_reject / dt if dt > 0 else np.inf
         max_lag = int(min(np.ceil(lags), rs.MAX_LAG_FRAMES))
         sds.append(rs.carried_error_sd(ys, acc, carried, par, order, max(1, max_lag)))

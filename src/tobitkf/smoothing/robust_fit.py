@@ -52,6 +52,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.smoothing.timebase import typical_step
+
 __all__ = ["FIT_BLOCK_SECONDS", "GroupFit", "fit_blocks", "fit_group", "fit_noise_bodies"]
 
 Array = NDArray[np.float64]
@@ -113,7 +115,7 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
         frames = np.arange(T, dtype=np.int64)
         restart = np.zeros(T, dtype=bool)
         return frames, restart
-    dt = float(np.median(steps[1:]))
+    dt = typical_step(steps)
     blen = max(2, round(FIT_BLOCK_SECONDS / dt))
     nblocks = max(1, math.floor(max_seconds / (blen * dt)))  # at most max_seconds
     starts = np.unique(np.linspace(0, T - blen, nblocks).round().astype(np.int64))
@@ -126,8 +128,7 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
 
 def _steps_info(steps: Array, tau: float) -> tuple[float, Array]:
     """The typical step (median) and the OU coefficients of every step of ``steps``."""
-    dt = float(np.median(steps[1:])) if steps.size > 1 else float(steps[0])
-    return dt, kernels().ou_table(steps, tau)
+    return typical_step(steps), kernels().ou_table(steps, tau)
 
 
 def fit_group(

@@ -22,6 +22,7 @@ __all__ = [
     "inferred_sample_scale",
     "measurements",
     "readonly",
+    "typical_step",
 ]
 
 Array = NDArray[np.float64]
@@ -56,6 +57,12 @@ def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
             steps = np.concatenate([[nominal], np.maximum(d, 0.1 * nominal)])
     is_reference = bool(np.allclose(steps, REFERENCE_DT, rtol=1e-9, atol=0.0))
     return steps, nominal, is_reference
+
+
+def typical_step(steps: Array) -> float:
+    """The typical time step of ``steps (T,)`` (:func:`frame_steps`): the median of the
+    steps between frames, ``steps[0]`` (the nominal step) for a single frame."""
+    return float(np.median(steps[1:])) if steps.size > 1 else float(steps[0])
 
 
 def frame_times(sequence: SkeletonSequence, steps: Array | None = None) -> Array:
