@@ -238,6 +238,20 @@ def test_inferred_samples_are_covered_by_their_sd_monte_carlo():
     assert old_hits / n < 0.6  # each guess independent: far too confident
 
 
+def test_image_keypoints_have_two_coordinates_to_share_the_error():
+    # a 2-D sequence reaches the smoother with a third axis of zeros: the guesses' error
+    # is spread over its two real coordinates, s = 0.03 per axis as in 3-D (3 seeds x
+    # 12 joints x 9 occlusions: the standard error of the pooled estimate is about 3 %;
+    # over three axes it would come out 0.03 sqrt(2 / 3) = 0.0245)
+    sds = []
+    for seed in range(3):
+        seq, _, _ = _occluded_joints(seed, 0.03)
+        flat = seq.replace(positions=seq.positions[..., :2], units="m")
+        out = tk.smooth(flat, method="robust", noise="fixed", noise_sd=0.005)
+        sds.append(out.metadata["diagnostics"]["guess_error_sd"])
+    assert np.mean(sds) == pytest.approx(0.03, rel=0.1)
+
+
 def test_sustained_failures_are_covered_by_their_sd_on_the_benchmark():
     # the built-in benchmark's sustained failures (truth known; bridged by carrying):
     # the share of their rejected samples within the 95 % ball of the sd

@@ -54,7 +54,8 @@ S_REJ_SINCE = 1  # start of the current rejection (gate, for max_reject)
 S_L_CUR = 2  # online bone length (median of the window)
 S_REJ_BEGIN = 3  # start of the current rejection stretch (confirmation)
 S_CONF_BEGIN = 4  # start of the current confirmation
-N_SF = 5
+S_OFF_FRAME = 5  # frame of the offset a carried joint carries (online shared errors)
+N_SF = 6
 # bool state per body and joint (sb[..., k])
 B_PREV_ACC = 0  # accepted by the gate in the previous frame
 B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
@@ -81,7 +82,16 @@ I_BONES = 0
 I_CARRY = 1
 I_LOOKBACK = 2
 I_TWO_PASS = 3
-N_PI = 4
+I_SHARED = 4  # online: the carried samples' shared error in the variance
+I_MIN_PAIRS = 5  # pairs a lag of the online structure function needs
+I_NDIMS = 6  # coordinates of the sequence (2: the third axis is zeros)
+N_PI = 7
+#: lags (frames) of the online structure function of a joint's offset from its parent;
+#: a carried sample reads the smallest one at least its own lag, beyond the last one the
+#: stationary limit (:func:`shared_frame`)
+SF_LAGS = np.array([1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64], dtype=np.int64)
+#: the ring of past offsets per joint: the longest lag + 1 frames
+SF_RING = 65
 
 
 # ------------------------------------------------------------------------------ small
@@ -475,9 +485,10 @@ def gate_frame(
         sb[j, B_PREV_ACC] = a
 
 
-def new_state(B: int, J: int, lookback: int) -> tuple:
+def new_state(B: int, J: int, lookback: int, shared: bool = False) -> tuple:
     """The state of ``B`` bodies of ``J`` joints before their first frame (plain numpy:
-    nothing to compile)."""
+    nothing to compile); ``shared``: with the online structure function's ring of
+    offsets (:func:`shared_frame`), else empty."""
     K = lookback + 1
     last = np.full((B, J, 3), np.nan)
     yprev = np.full((B, J, 3), np.nan)
@@ -495,13 +506,24 @@ def new_state(B: int, J: int, lookback: int) -> tuple:
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
+    # online shared errors: the indicator filter (and its lookback history), the ring of
+    # past offsets from the parent (and whether known), the structure function's sums and
+    # pair counts per lag, the offsets' count, mean and sum of squared deviations
+    R = SF_RING if shared else 0
+    xc = np.zeros((B, J, 2))
+    xc_h = np.zeros((K, B, J, 2))
+    o_ring = np.zeros((B, J, R, 3))
+    o_ok = np.zeros((B, J, R), dtype=np.bool_)
+    s_sum = np.zeros((B, J, SF_LAGS.size))
+    s_cnt = np.zeros((B, J, SF_LAGS.size), dtype=np.int64)
+    o_stat = np.zeros((B, J, 5))  # n, mean (3), sum of squared deviations
     return (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-            clock)  # fmt: skip
+            clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat)  # fmt: skip
 
 
 def new_work(B: int, J: int) -> tuple:
     """Work arrays of :func:`online_frames` (``scratch``, ``scratch1``, ``acc``)."""
-    return np.empty((4, J, 3)), np.full((3, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
+    return np.empty((4, J, 3)), np.full((4, J), np.nan), np.zeros((3, B, J), dtype=np.bool_)
 
 
 @_jit
@@ -932,6 +954,77 @@ def _update_P(p00: float, p01: float, p10: float, p11: float, r: float) -> tuple
 
 # ------------------------------------------------------------------------------ online
 @_jit
+def shared_frame(
+    y: np.ndarray,  # (J, 3) this frame of the body
+    final: np.ndarray,  # (J,) accepted
+    radius: np.ndarray,  # (J,) carried joints' offset lengths (carry_frame), NaN elsewhere
+    parents: np.ndarray,
+    order: np.ndarray,
+    tidx: int,  # this frame's index in the stream
+    min_pairs: int,
+    n_dims: int,  # coordinates (2: the third axis is zeros)
+    sf: np.ndarray,  # state (J, N_SF): S_OFF_FRAME
+    o_ring: np.ndarray,  # state (J, SF_RING, 3) the offsets of the last frames
+    o_ok: np.ndarray,  # state (J, SF_RING) whether known
+    s_sum: np.ndarray,  # state (J, n_lags)
+    s_cnt: np.ndarray,  # state (J, n_lags)
+    o_stat: np.ndarray,  # state (J, 5): count, mean (3), sum of squared deviations
+    sig2: np.ndarray,  # out (J,) per-axis variance of each carried sample's error, else 0
+) -> None:
+    """Online shared errors of the carried samples: the causal form of
+    :func:`tobitkf.smoothing._shared_kernels.carried_sd`. A carried sample ``Δ`` frames
+    from the offset it carries has per-axis variance ``S(Δ) / n_dims`` (plus its parent's
+    when that is carried too), ``S`` the structure function of the joint's offset from
+    its parent over the frames so far, read at the smallest of :data:`SF_LAGS` at least
+    ``Δ``; a lag with fewer than ``min_pairs`` pairs, or beyond the last, takes the
+    stationary limit ``2 Var(o)`` of the offsets so far. Then this frame's offsets join
+    the statistics."""
+    J = parents.shape[0]
+    R = o_ring.shape[1]
+    n_lags = SF_LAGS.shape[0]
+    slot = tidx % R
+    for k in range(J):
+        j = order[k]
+        p = parents[j]
+        sig2[j] = 0.0
+        if p < 0:
+            continue
+        if math.isfinite(radius[j]) and not final[j]:  # carried
+            lag = tidx - sf[j, S_OFF_FRAME]
+            n = o_stat[j, 0]
+            v = 2.0 * o_stat[j, 4] / max(n - 1.0, 1.0)
+            for m in range(n_lags):
+                if SF_LAGS[m] >= lag:
+                    if s_cnt[j, m] >= min_pairs:
+                        v = s_sum[j, m] / s_cnt[j, m]
+                    break
+            sig2[j] = v / n_dims + sig2[p]
+        ok = final[j] and final[p] and _finite3(y[j, 0], y[j, 1], y[j, 2]) and _finite3(
+            y[p, 0], y[p, 1], y[p, 2])  # fmt: skip
+        o_ok[j, slot] = ok
+        if not ok:
+            continue
+        o0, o1, o2 = y[j, 0] - y[p, 0], y[j, 1] - y[p, 1], y[j, 2] - y[p, 2]
+        for m in range(n_lags):
+            lg = SF_LAGS[m]
+            if lg > tidx:
+                break
+            s2 = (tidx - lg) % R
+            if o_ok[j, s2]:
+                d0, d1, d2 = o0 - o_ring[j, s2, 0], o1 - o_ring[j, s2, 1], o2 - o_ring[j, s2, 2]
+                s_sum[j, m] += d0 * d0 + d1 * d1 + d2 * d2
+                s_cnt[j, m] += 1
+        n = o_stat[j, 0] + 1.0  # Welford: the running mean and squared deviations
+        o_stat[j, 0] = n
+        for a, v in ((0, o0), (1, o1), (2, o2)):
+            d = v - o_stat[j, 1 + a]
+            o_stat[j, 1 + a] += d / n
+            o_stat[j, 4] += d * (v - o_stat[j, 1 + a])
+        o_ring[j, slot, 0], o_ring[j, slot, 1], o_ring[j, slot, 2] = o0, o1, o2
+        sf[j, S_OFF_FRAME] = tidx
+
+
+@_jit
 def online_frames(
     ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
     missing_n: np.ndarray,  # (n, B, J)
@@ -946,7 +1039,7 @@ def online_frames(
     pi: np.ndarray,
     st: tuple,  # new_state(B, J, lookback), carried from call to call
     scratch: np.ndarray,  # work (4, J, 3)
-    scratch1: np.ndarray,  # work (3, J)
+    scratch1: np.ndarray,  # work (4, J)
     acc: np.ndarray,  # work (3, B, J)
     out_n: np.ndarray,  # out (n, B, J, 3)
     rejected_n: np.ndarray,  # out (n, B, J)
@@ -957,7 +1050,7 @@ def online_frames(
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
     batch runner passes a whole recording, the live stepper one frame per call."""
     (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-     clock) = st  # fmt: skip
+     clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat) = st  # fmt: skip
     B, J = ys.shape[1], ys.shape[2]
     for f in range(ys.shape[0]):
         y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
@@ -974,6 +1067,8 @@ def online_frames(
         min_run = pf[P_MIN_RUN]
         use_bones = pi[I_BONES] != 0
         carry = pi[I_CARRY] != 0
+        shared = carry and pi[I_SHARED] != 0 and o_ring.shape[2] > 0
+        sig2 = scratch1[3]
         anchor = scratch[0]
         pseudo = scratch[1]
         radius = scratch1[0]
@@ -1003,6 +1098,10 @@ def online_frames(
                     final[j] = gate[j]
             if carry:
                 carry_frame(yb, final, parents, order, off[b], anchor, pseudo, radius)
+            if shared:
+                shared_frame(yb, final, radius, parents, order, tidx, pi[I_MIN_PAIRS],
+                             pi[I_NDIMS], sf[b], o_ring[b], o_ok[b], s_sum[b], s_cnt[b],
+                             o_stat[b], sig2)  # fmt: skip
             # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
             for j in range(J):
                 a = final[j]
@@ -1030,6 +1129,7 @@ def online_frames(
                             x[b, j, i, 1] = xs_h[s0, b, j, i, 1]
                         p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
                             Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
+                        xc[b, j, 0], xc[b, j, 1] = xc_h[s0, b, j, 0], xc_h[s0, b, j, 1]
                         for kk in range(tidx - lookback, tidx):
                             c = kk % K
                             for i in range(3):
@@ -1037,6 +1137,8 @@ def online_frames(
                                     x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
                                     x[b, j, i, 1] * coef_h[c, 1],
                                 )
+                            xc[b, j, 0], xc[b, j, 1] = (xc[b, j, 0] + xc[b, j, 1] * coef_h[c, 0],
+                                                        xc[b, j, 1] * coef_h[c, 1])  # fmt: skip
                             p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
                 if has_prev and started:
                     for i in range(3):
@@ -1044,6 +1146,8 @@ def online_frames(
                             x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
                             x[b, j, i, 1] * coef_h[slot, 1],
                         )
+                    xc[b, j, 0], xc[b, j, 1] = (xc[b, j, 0] + xc[b, j, 1] * coef_h[slot, 0],
+                                                xc[b, j, 1] * coef_h[slot, 1])  # fmt: skip
                     p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
                 if a and not started:  # the filter starts at the sample itself
                     for i in range(3):
@@ -1056,16 +1160,22 @@ def online_frames(
                         e = (yb[j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
                         x[b, j, i, 0] += k0 * e
                         x[b, j, i, 1] += k1 * e
+                    # the indicator filter: the same gains on the carried samples' shared
+                    # error sd (0 at accepted samples) give the estimate's share of it
+                    e = (math.sqrt(sig2[j]) if carried and shared else 0.0) - xc[b, j, 0]
+                    xc[b, j, 0] += k0 * e
+                    xc[b, j, 1] += k1 * e
                 P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
                 for i in range(3):
                     xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
+                xc_h[slot, b, j, 0], xc_h[slot, b, j, 1] = xc[b, j, 0], xc[b, j, 1]
                 Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
                 Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
                 ok_h[slot, b, j] = a
                 sb[b, j, B_PREV_OK] = a
                 sb[b, j, B_PREV_FINAL] = a
                 started = sb[b, j, B_STARTED]
-                var[b0 + b, j] = p00 if started else np.nan
+                var[b0 + b, j] = p00 + xc[b, j, 0] ** 2 if started else np.nan
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
                     out[b0 + b, j, i] = x[b, j, i, 0] if started else yb[j, i]

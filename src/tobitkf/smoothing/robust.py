@@ -74,7 +74,9 @@ at both ends of the bridge.  ``carry=False`` turns this off. The carried samples
 stretch share one error, the joint's turn about its parent since its offset was seen:
 offline, its size at each sample is taken from how far the joint's offset moved over as
 many frames in the rest of the recording, and added to the standard deviation of the
-samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`).
+samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`); online, from the
+frames so far (``shared_frame`` in the kernels, with one more scalar filter per joint
+on the same gains for the weight).
 
 Smoothing
 ---------
@@ -138,6 +140,7 @@ from tobitkf.smoothing.params import (
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
 from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
 from tobitkf.smoothing.robust_scale import recording_gates
+from tobitkf.smoothing.robust_shared import MIN_PAIRS
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     INFERRED_CODE,
@@ -187,9 +190,10 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
-    # offline: the errors that the INFERRED guesses of one occlusion and the carried
-    # samples of one stretch share, taken from the recording, are added to the sd of the
-    # samples resting on them (robust_shared.py); the estimate is unchanged
+    # the errors that the INFERRED guesses of one occlusion (offline) and the carried
+    # samples of one stretch share, taken from the recording (online: the frames so far),
+    # are added to the sd of the samples resting on them (robust_shared.py); the
+    # estimate is unchanged
     "shared_errors": True,
 }
 
@@ -219,18 +223,10 @@ ROBUST_VALIDATORS: dict[str, Any] = {
 MIN_CONFIDENCE_WEIGHT = 0.01
 
 
-def _offline_only(name: str, value: Any) -> bool:
-    """False, for an offline-only switch of ``robust_online``."""
-    if as_bool(name, value):
-        raise ValueError(f"{name} is offline only (robust): robust_online must have it False")
-    return False
-
-
-#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md) and
-#: no shared errors (they are estimated from the whole recording)
-ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed", "shared_errors": False}
-ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed"),
-                                     "shared_errors": _offline_only}  # fmt: skip
+#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md); its
+#: shared errors are those of the carried samples, from the frames so far
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
+ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -283,6 +279,9 @@ class _Setup:
         self.pi[k.I_CARRY] = bool(params["carry"])
         self.pi[k.I_LOOKBACK] = int(params["lookback"])
         self.pi[k.I_TWO_PASS] = bool(params["two_pass"])
+        self.pi[k.I_SHARED] = bool(params["shared_errors"])
+        self.pi[k.I_MIN_PAIRS] = MIN_PAIRS
+        self.pi[k.I_NDIMS] = 3  # the sequence's coordinates (set by the runner)
         self.resolved = {
             "v_max": self.vmax.tolist(),
             "speed_sd": self.spd.tolist(),
@@ -393,8 +392,10 @@ def _offline(
     fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0)
     guess = None
     if params["shared_errors"]:  # what the guesses and the carried samples share, in the sd
-        guess = _shared_errors(ys, acc, inferred, (yk, rvar, steps, q, sc2, tau, tau_c),
-                               par, order, float(params["max_reject"]), var, b0)  # fmt: skip
+        # the coordinates there are (a 2-D sequence has a third axis of zeros)
+        guess = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred,
+                               (yk, rvar, steps, q, sc2, tau, tau_c), par, order,
+                               float(params["max_reject"]), var, b0)  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
@@ -496,6 +497,7 @@ def _robust_bodies(
         centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
     setup = _Setup(topo, params)
+    setup.pi[kernels().I_NDIMS] = n_dims
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
     est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
@@ -599,7 +601,7 @@ def _robust_chunk(
                                inferred, out, b0)  # fmt: skip
         guard.largest_steps(ys, missing, g_state[1])  # offline: the whole recording's limit
     else:
-        state = k.new_state(B, J, int(params["lookback"]))
+        state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
         k.online_frames(ys, missing, rinf, guesses, times, steps, *setup.args(), state,
                         *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         if params["bones"]:  # the lengths learnt by the end of the recording
@@ -648,7 +650,8 @@ class RobustStepper:
         k = kernels()
         B, J = missing.shape
         if self._state is None:
-            self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]))
+            self._state = k.new_state(B, J, int(self.setup.pi[k.I_LOOKBACK]),
+                                      bool(self.setup.pi[k.I_SHARED]))  # fmt: skip
             self._scratch = k.new_work(B, J)
             self._guard = step_guard().new_state(B, J, ys.shape[-1])
             self._time = 0.0
@@ -659,6 +662,7 @@ class RobustStepper:
         self.std = np.empty((B, J))
         # one read-only frame for both kernels: the types of the batch call, so nothing
         # compiles twice
+        self.setup.pi[k.I_NDIMS] = n_dims
         y1 = readonly(np.ascontiguousarray(ys, dtype=float)[None])
         m1 = np.ascontiguousarray(missing, dtype=bool)[None]
         inferred = _inferred(None if states is None else np.asarray(states)[None], m1.shape)

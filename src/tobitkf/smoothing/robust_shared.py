@@ -1,5 +1,9 @@
 """Errors that samples share, in the offline robust smoother's standard deviation.
 
+(Online, ``robust_online`` adds the carried samples' the causal way, from the frames
+so far: ``shared_frame`` and the indicator filter in
+:mod:`tobitkf.smoothing._robust_kernels`, docs/robust.md.)
+
 Two kinds of samples the smoother uses are not independent measurements of the joint:
 
 * a joint the sensor only **guessed** (Kinect's ``INFERRED``: an occluded hand or foot):
