@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import tobitkf as tk
 from conftest import data_file
+from test_robust_shared import _occluded_joints
 from tobitkf.evaluation.benchmark import run_benchmark
 from tobitkf.evaluation.corruption import SUSTAINED
 from tobitkf.evaluation.metrics import in_sd_ball
@@ -23,7 +26,7 @@ from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import _robust_kernels as rk
 from tobitkf.smoothing.robust import RobustStepper
-from tobitkf.smoothing.robust_shared import MIN_PAIRS
+from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS, guess_error_variance
 from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR
 
 PARENTS, ORDER = np.array([-1, 0, 1]), np.array([0, 1, 2])
@@ -46,8 +49,8 @@ def _run_frames(ys: np.ndarray, final: np.ndarray, n_dims: int = 3) -> np.ndarra
     """:func:`shared_frame` over the frames; the per-axis variance of each carried sample
     (joints not accepted are carried), 0 elsewhere."""
     T, J = final.shape
-    st = rk.new_state(1, J, 0, shared=True)
-    sf, o_ring, o_ok, s_sum, s_cnt, o_stat = st[3], st[17], st[18], st[19], st[20], st[21]
+    state = rk.new_state(1, J, 0, shared=True)
+    sf, o_ring, o_ok, s_sum, s_cnt, o_stat = (state[i] for i in (3, 17, 18, 19, 20, 21))
     out = np.zeros((T, J))
     sig2 = np.empty(J)
     for t in range(T):
@@ -115,18 +118,111 @@ def test_carried_error_beyond_the_lags_or_the_pairs_is_the_variance_so_far():
     np.testing.assert_allclose(sig2[n:, 1], want, rtol=1e-9)
 
 
+def _guess_sd_so_far(ys: np.ndarray, final: np.ndarray, inferred: np.ndarray) -> np.ndarray:
+    """:func:`guess_frame` over the frames of one body (the filter's part of the state,
+    the previous frame's acceptance and tracking state, written as the filter does):
+    the guesses' error sd at each frame."""
+    T, J = final.shape
+    state = rk.new_state(1, J, 0, shared=True)
+    sf, sb, g_stat = state[3][0], state[4][0], state[22][0]
+    out = np.empty(T)
+    for t in range(T):
+        out[t] = rk.guess_frame(ys[t], ys[t - 1] if t else ys[0], t > 0, final[t], inferred[t],
+                                MIN_CHANGES, 3, sf, sb, g_stat)  # fmt: skip
+        sb[:, rk.B_PREV_FINAL] = final[t]
+        sb[:, rk.B_PREV_INF] = inferred[t]
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), p_inf=st.floats(0.05, 0.5), p_acc=st.floats(0.5, 1))
+def test_guess_error_so_far_is_the_offline_estimate_of_the_frames_so_far(seed, p_inf, p_acc):
+    # causal: at every frame, the offline estimate (robust_shared) of the recording up to
+    # it; 0 where that has too few changes
+    rng = np.random.default_rng(seed)
+    T, J = 50, 4
+    ys = np.cumsum(rng.normal(scale=0.02, size=(T, J, 3)), axis=0)
+    inferred = rng.random((T, J)) < p_inf
+    final = rng.random((T, J)) < p_acc
+    ys[rng.random((T, J)) < 0.05] = np.nan  # missing samples: no step to or from them
+    online = _guess_sd_so_far(ys, final, inferred)
+    for t in range(T):
+        s2, n = guess_error_variance(ys[None, : t + 1].swapaxes(0, 1), final[: t + 1, None],
+                                     inferred[: t + 1, None])  # fmt: skip
+        want = np.sqrt(s2[0]) if n[0] >= MIN_CHANGES and np.isfinite(s2[0]) else 0.0
+        assert online[t] == pytest.approx(want, rel=1e-9, abs=1e-15)
+
+
+def test_inferred_samples_are_covered_by_the_online_sd_monte_carlo():
+    # 12 joints x 9 occlusions x 3 seeds = 324 shared errors of 3 cm: the 95 % ball's
+    # coverage of the inferred samples (standard error about 1.2 points)
+    hits, old_hits, n = 0, 0, 0
+    for seed in range(3):
+        seq, truth, inf = _occluded_joints(seed, 0.03)
+        out = tk.smooth(seq, method="robust_online", noise_sd=0.005)
+        old = tk.smooth(seq, method="robust_online", noise_sd=0.005, shared_errors=False)
+        np.testing.assert_array_equal(old.positions, out.positions)  # the estimate stays
+        err2 = np.sum((out.positions - truth) ** 2, axis=-1)
+        ok = inf & np.isfinite(err2)
+        hits += np.sum(err2[ok] <= 7.8147 * out.std[ok] ** 2)
+        old_hits += np.sum(err2[ok] <= 7.8147 * old.std[ok] ** 2)
+        n += ok.sum()
+    assert 0.90 < hits / n < 0.99
+    assert old_hits / n < 0.6
+
+
+def test_added_variance_of_the_guesses_is_the_square_of_the_weighted_sd():
+    # as for the carried samples: moving a guess by delta moves the estimate at t by
+    # delta w(t, i); the variance added at t is (sum_i w(t, i) s_i)^2 with s_i the
+    # guesses' sd from the frames up to i (the offline estimate of that prefix)
+    seq, _, _ = _occluded_joints(0, 0.03)
+    seq = seq.replace(positions=seq.positions[:330], tracking_state=seq.tracking_state[:330])
+    base = tk.smooth(seq, method="robust_online", noise_sd=0.005)
+    plain = tk.smooth(seq, method="robust_online", noise_sd=0.005, shared_errors=False)
+    rej = base.metadata["diagnostics"]["rejected"]
+    final = ~rej & np.isfinite(seq.positions[..., 0])
+    inf = seq.tracking_state == 1
+    j = 0
+    guesses = np.flatnonzero(inf[:, j] & final[:, j])
+    assert guesses.size > 60
+    s = np.array([np.sqrt(guess_error_variance(seq.positions[None, : i + 1].swapaxes(0, 1),
+                                               final[: i + 1, None], inf[: i + 1, None])[0][0])
+                  for i in guesses])  # fmt: skip
+    s = np.nan_to_num(s)  # too few changes yet: nothing
+    delta = 1e-5
+    w = np.zeros((seq.n_frames, guesses.size))
+    for k, i in enumerate(guesses):
+        pos = seq.positions.copy()
+        pos[i, j, 0] += delta
+        moved = tk.smooth(seq.replace(positions=pos), method="robust_online", noise_sd=0.005)
+        w[:, k] = (moved.positions[:, j, 0] - base.positions[:, j, 0]) / delta
+    added = base.std[:, j] ** 2 - plain.std[:, j] ** 2
+    np.testing.assert_allclose(added, (w @ s) ** 2, rtol=1e-4, atol=1e-12)
+    assert np.all(added[:40] == 0) and np.all(added[45:70] > 0)
+
+
 def _failing_elbow(shift_root_at: int | None = None, delta: float = 0.0) -> SkeletonSequence:
-    """A root and an elbow turning about it, 30 fps; the elbow fails (1 m off) for 40
-    frames and for 10 more soon after, carried with the root. ``shift_root_at``: the
-    root moved by ``delta`` in that frame only (every gate still accepts it)."""
+    """A root and an elbow turning about it, 30 fps; the elbow fails (1 m off, INFERRED)
+    for 40 frames and for 10 more soon after, carried with the root. A third, still
+    joint has four accepted INFERRED episodes 3 cm off before that, so the body's guesses
+    have an error (which the carried guesses must not get). ``shift_root_at``: the root
+    moved by ``delta`` in that frame only (every gate still accepts it)."""
     T = 170
-    ys = _turning_arm(T, 0.25, 0.05, 0.1)[:, :2] + np.array([0.0, 1.0, 2.5])
-    ys[90:130, 1] += np.array([0.0, 1.0, 0.0])
-    ys[140:150, 1] += np.array([0.0, 1.0, 0.0])  # again, soon after the filter recovered
+    ys = np.zeros((T, 3, 3))
+    ys[:, :2] = _turning_arm(T, 0.25, 0.05, 0.1)[:, :2]
+    ys[:, 2] = [0.5, 0.0, 0.0]
+    ys += np.array([0.0, 1.0, 2.5])
+    states = np.full((T, 3), 2, dtype=np.int8)
+    for a in (10, 25, 40, 55):
+        ys[a : a + 5, 2, 0] += 0.03
+        states[a : a + 5, 2] = 1
+    for a, b in ((90, 130), (140, 150)):  # the second soon after the filter recovered
+        ys[a:b, 1] += np.array([0.0, 1.0, 0.0])
+        states[a:b, 1] = 1
     if shift_root_at is not None:
         ys[shift_root_at, 0] += delta
-    topo = Topology("arm", ("root", "elbow"), (-1, 0))
-    return SkeletonSequence(positions=ys, topology=topo, fps=30.0)
+    topo = Topology("arm", ("root", "elbow", "other"), (-1, 0, -1))
+    return SkeletonSequence(positions=ys, topology=topo, fps=30.0, tracking_state=states)
 
 
 def test_added_variance_is_the_square_of_the_weighted_shared_sd():
@@ -134,8 +230,10 @@ def test_added_variance_is_the_square_of_the_weighted_shared_sd():
     # by delta in frame i moves the carried sample of frame i, and the elbow's estimate
     # at t by delta w(t, i). So the variance added at t must be (sum_i w(t, i) sd_i)^2,
     # sd_i the carried sample's own (from the frames before it, closed form as above)
-    base = tk.smooth(_failing_elbow(), method="robust_online")
-    plain = tk.smooth(_failing_elbow(), method="robust_online", shared_errors=False)
+    # (the failed guesses are not put back at their bone's length: they stay rejected)
+    base = tk.smooth(_failing_elbow(), method="robust_online", inferred_bones=False)
+    plain = tk.smooth(_failing_elbow(), method="robust_online", inferred_bones=False,
+                      shared_errors=False)  # fmt: skip
     np.testing.assert_array_equal(base.positions, plain.positions)  # the estimate stays
     rej = base.metadata["diagnostics"]["rejected"][:, 1]
     carried = np.flatnonzero(rej)
@@ -143,7 +241,8 @@ def test_added_variance_is_the_square_of_the_weighted_shared_sd():
     delta = 1e-4
     w = np.zeros((base.positions.shape[0], carried.size))
     for k, i in enumerate(carried):
-        moved = tk.smooth(_failing_elbow(i, delta), method="robust_online")
+        moved = tk.smooth(_failing_elbow(i, delta), method="robust_online",
+                          inferred_bones=False)  # fmt: skip
         np.testing.assert_array_equal(moved.metadata["diagnostics"]["rejected"],
                                       base.metadata["diagnostics"]["rejected"])  # fmt: skip
         w[:, k] = (moved.positions[:, 1, 0] - base.positions[:, 1, 0]) / delta
@@ -157,6 +256,8 @@ def test_added_variance_is_the_square_of_the_weighted_shared_sd():
     added = base.std[:, 1] ** 2 - plain.std[:, 1] ** 2
     np.testing.assert_allclose(added, (w @ sd) ** 2, rtol=1e-5, atol=1e-12)
     assert np.all(added[:90] == 0) and np.all(added[95:130] > 0)
+    other = base.std[:, 2] ** 2 - plain.std[:, 2] ** 2  # the accepted guesses' error
+    assert np.all(other[:10] == 0) and other[60] > 1e-5
 
 
 @pytest.mark.parametrize("n_dims", [3, 2])

@@ -55,13 +55,17 @@ S_L_CUR = 2  # online bone length (median of the window)
 S_REJ_BEGIN = 3  # start of the current rejection stretch (confirmation)
 S_CONF_BEGIN = 4  # start of the current confirmation
 S_OFF_FRAME = 5  # frame of the offset a carried joint carries (online shared errors)
-N_SF = 6
+S_TRK_SUM = 6  # online guesses' error: sum of the squared steps between tracked samples
+S_TRK_N = 7  # and their number
+N_SF = 8
 # bool state per body and joint (sb[..., k])
 B_PREV_ACC = 0  # accepted by the gate in the previous frame
 B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
 B_STARTED = 2  # the joint's filter has started
 B_PREV_OK = 3  # the filter was updated with an accepted sample in the previous frame
-N_SB = 4
+B_PREV_INF = 4  # the previous frame's sample was INFERRED (online guesses' error)
+B_HAS_GUESS = 5  # an INFERRED sample of the joint was accepted so far
+N_SB = 6
 # parameters (pf[k])
 P_MARGIN = 0
 P_TOL_ABS = 1
@@ -85,7 +89,8 @@ I_TWO_PASS = 3
 I_SHARED = 4  # online: the carried samples' shared error in the variance
 I_MIN_PAIRS = 5  # pairs a lag of the online structure function needs
 I_NDIMS = 6  # coordinates of the sequence (2: the third axis is zeros)
-N_PI = 7
+I_MIN_CHANGES = 7  # steps at a change of tracking state the online guesses' error needs
+N_PI = 8
 #: lags (frames) of the online structure function of a joint's offset from its parent;
 #: a carried sample reads the smallest one at least its own lag, beyond the last one the
 #: stationary limit (:func:`shared_frame`)
@@ -506,19 +511,23 @@ def new_state(B: int, J: int, lookback: int, shared: bool = False) -> tuple:
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
-    # online shared errors: the indicator filter (and its lookback history), the ring of
-    # past offsets from the parent (and whether known), the structure function's sums and
-    # pair counts per lag, the offsets' count, mean and sum of squared deviations
+    # online shared errors: the indicator filters of the carried samples' and of the
+    # guesses' error (and their lookback history), the ring of past offsets from the
+    # parent (and whether known), the structure function's sums and pair counts per lag,
+    # the offsets' count, mean and sum of squared deviations; per body, the sum of the
+    # squared steps at a change of tracking state and their number
     R = SF_RING if shared else 0
-    xc = np.zeros((B, J, 2))
-    xc_h = np.zeros((K, B, J, 2))
+    xc = np.zeros((B, J, 2, 2))
+    xc_h = np.zeros((K, B, J, 2, 2))
     o_ring = np.zeros((B, J, R, 3))
     o_ok = np.zeros((B, J, R), dtype=np.bool_)
     s_sum = np.zeros((B, J, SF_LAGS.size))
     s_cnt = np.zeros((B, J, SF_LAGS.size), dtype=np.int64)
     o_stat = np.zeros((B, J, 5))  # n, mean (3), sum of squared deviations
+    g_stat = np.zeros((B, 2))
+    sf[..., S_TRK_SUM] = sf[..., S_TRK_N] = 0.0
     return (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-            clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat)  # fmt: skip
+            clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat, g_stat)  # fmt: skip
 
 
 def new_work(B: int, J: int) -> tuple:
@@ -1025,11 +1034,63 @@ def shared_frame(
 
 
 @_jit
+def guess_frame(
+    y: np.ndarray,  # (J, 3) this frame of the body (guesses at their bones' lengths)
+    yprev: np.ndarray,  # (J, 3) the previous frame's
+    has_prev: bool,
+    final: np.ndarray,  # (J,) accepted
+    inferred: np.ndarray,  # (J,) INFERRED samples
+    min_changes: int,
+    n_dims: int,
+    sf: np.ndarray,  # state (J, N_SF): S_TRK_SUM, S_TRK_N
+    sb: np.ndarray,  # state (J, N_SB): B_PREV_FINAL, B_PREV_INF, B_HAS_GUESS (read
+    # before the filter writes this frame's)
+    g_stat: np.ndarray,  # state (2,): the body's sum of squared steps at a change, count
+) -> float:
+    """Online shared error of the guesses: the causal form of
+    :func:`tobitkf.smoothing.robust_shared.guess_error_variance`. This frame's steps
+    whose two samples were accepted join the body's statistics (at a change between
+    tracked and inferred, or between two tracked samples); returns the per-axis standard
+    deviation of a guess's error from the frames so far, ``sqrt((mean |step|² at a
+    change − mean |step|² between tracked samples of the joints with guesses) /
+    n_dims)``, 0 before ``min_changes`` changes."""
+    J = y.shape[0]
+    for j in range(J):
+        ok = final[j] and _finite3(y[j, 0], y[j, 1], y[j, 2])
+        if ok and inferred[j]:
+            sb[j, B_HAS_GUESS] = True
+        if not (ok and has_prev and sb[j, B_PREV_FINAL]):
+            continue
+        if not _finite3(yprev[j, 0], yprev[j, 1], yprev[j, 2]):
+            continue
+        d0, d1, d2 = y[j, 0] - yprev[j, 0], y[j, 1] - yprev[j, 1], y[j, 2] - yprev[j, 2]
+        d = d0 * d0 + d1 * d1 + d2 * d2
+        if inferred[j] != sb[j, B_PREV_INF]:
+            g_stat[0] += d
+            g_stat[1] += 1.0
+        elif not inferred[j]:
+            sf[j, S_TRK_SUM] += d
+            sf[j, S_TRK_N] += 1.0
+    if g_stat[1] < min_changes:
+        return 0.0
+    st = 0.0
+    nt = 0.0
+    for j in range(J):
+        if sb[j, B_HAS_GUESS]:
+            st += sf[j, S_TRK_SUM]
+            nt += sf[j, S_TRK_N]
+    if nt == 0.0:
+        return 0.0
+    return math.sqrt(max(g_stat[0] / g_stat[1] - st / nt, 0.0) / n_dims)
+
+
+@_jit
 def online_frames(
     ys: np.ndarray,  # (n, B, J, 3) the next n frames, NaN = missing
     missing_n: np.ndarray,  # (n, B, J)
     rinf_n: np.ndarray,  # (n, B, J) variance multiplier of INFERRED samples (else 1)
-    inferred_n: np.ndarray,  # (n, B, J) the guesses put back at their bone's length
+    project_n: np.ndarray,  # (n, B, J) the guesses put back at their bone's length
+    inferred_n: np.ndarray,  # (n, B, J) the INFERRED samples
     times: np.ndarray,  # (n,) time of each frame
     steps: np.ndarray,  # (n,) time step of the filter before each frame
     parents: np.ndarray,
@@ -1050,7 +1111,7 @@ def online_frames(
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
     batch runner passes a whole recording, the live stepper one frame per call."""
     (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-     clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat) = st  # fmt: skip
+     clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat, g_stat) = st  # fmt: skip
     B, J = ys.shape[1], ys.shape[2]
     for f in range(ys.shape[0]):
         y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
@@ -1081,7 +1142,7 @@ def online_frames(
             lengths = scratch1[2]
             for j in range(J):
                 lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
-            project_frame(y[b], inferred_n[f, b], parents, order, lengths, yb, scratch[3])
+            project_frame(y[b], project_n[f, b], parents, order, lengths, yb, scratch[3])
             gate_frame(yb, yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
                        no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
                        h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
@@ -1102,6 +1163,11 @@ def online_frames(
                 shared_frame(yb, final, radius, parents, order, tidx, pi[I_MIN_PAIRS],
                              pi[I_NDIMS], sf[b], o_ring[b], o_ok[b], s_sum[b], s_cnt[b],
                              o_stat[b], sig2)  # fmt: skip
+            guess_sd = 0.0
+            if pi[I_SHARED] != 0:
+                guess_sd = guess_frame(yb, yprev[b], has_prev, final, inferred_n[f, b],
+                                       pi[I_MIN_CHANGES], pi[I_NDIMS], sf[b], sb[b],
+                                       g_stat[b])  # fmt: skip
             # the causal OU filter, joint by joint (x[b, j, axis], P[b, j] shared by the axes)
             for j in range(J):
                 a = final[j]
@@ -1129,7 +1195,9 @@ def online_frames(
                             x[b, j, i, 1] = xs_h[s0, b, j, i, 1]
                         p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
                             Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
-                        xc[b, j, 0], xc[b, j, 1] = xc_h[s0, b, j, 0], xc_h[s0, b, j, 1]
+                        for g in range(2):
+                            xc[b, j, g, 0], xc[b, j, g, 1] = xc_h[s0, b, j, g, 0], \
+                                xc_h[s0, b, j, g, 1]  # fmt: skip
                         for kk in range(tidx - lookback, tidx):
                             c = kk % K
                             for i in range(3):
@@ -1137,8 +1205,11 @@ def online_frames(
                                     x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
                                     x[b, j, i, 1] * coef_h[c, 1],
                                 )
-                            xc[b, j, 0], xc[b, j, 1] = (xc[b, j, 0] + xc[b, j, 1] * coef_h[c, 0],
-                                                        xc[b, j, 1] * coef_h[c, 1])  # fmt: skip
+                            for g in range(2):
+                                xc[b, j, g, 0], xc[b, j, g, 1] = (
+                                    xc[b, j, g, 0] + xc[b, j, g, 1] * coef_h[c, 0],
+                                    xc[b, j, g, 1] * coef_h[c, 1],
+                                )
                             p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
                 if has_prev and started:
                     for i in range(3):
@@ -1146,8 +1217,11 @@ def online_frames(
                             x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
                             x[b, j, i, 1] * coef_h[slot, 1],
                         )
-                    xc[b, j, 0], xc[b, j, 1] = (xc[b, j, 0] + xc[b, j, 1] * coef_h[slot, 0],
-                                                xc[b, j, 1] * coef_h[slot, 1])  # fmt: skip
+                    for g in range(2):
+                        xc[b, j, g, 0], xc[b, j, g, 1] = (
+                            xc[b, j, g, 0] + xc[b, j, g, 1] * coef_h[slot, 0],
+                            xc[b, j, g, 1] * coef_h[slot, 1],
+                        )
                     p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
                 if a and not started:  # the filter starts at the sample itself
                     for i in range(3):
@@ -1160,22 +1234,30 @@ def online_frames(
                         e = (yb[j, i] if a else pseudo[j, i]) - x[b, j, i, 0]
                         x[b, j, i, 0] += k0 * e
                         x[b, j, i, 1] += k1 * e
-                    # the indicator filter: the same gains on the carried samples' shared
-                    # error sd (0 at accepted samples) give the estimate's share of it
-                    e = (math.sqrt(sig2[j]) if carried and shared else 0.0) - xc[b, j, 0]
-                    xc[b, j, 0] += k0 * e
-                    xc[b, j, 1] += k1 * e
+                    # the indicator filters: the same gains on the shared errors' sd (the
+                    # carried samples', the guesses'; 0 at other samples) give the
+                    # estimate's share of each
+                    e = (math.sqrt(sig2[j]) if carried and shared else 0.0) - xc[b, j, 0, 0]
+                    xc[b, j, 0, 0] += k0 * e
+                    xc[b, j, 0, 1] += k1 * e
+                    e = (guess_sd if a and inferred_n[f, b, j] else 0.0) - xc[b, j, 1, 0]
+                    xc[b, j, 1, 0] += k0 * e
+                    xc[b, j, 1, 1] += k1 * e
                 P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
                 for i in range(3):
                     xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
-                xc_h[slot, b, j, 0], xc_h[slot, b, j, 1] = xc[b, j, 0], xc[b, j, 1]
+                for g in range(2):
+                    xc_h[slot, b, j, g, 0], xc_h[slot, b, j, g, 1] = xc[b, j, g, 0], \
+                        xc[b, j, g, 1]  # fmt: skip
                 Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
                 Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
                 ok_h[slot, b, j] = a
                 sb[b, j, B_PREV_OK] = a
                 sb[b, j, B_PREV_FINAL] = a
+                sb[b, j, B_PREV_INF] = inferred_n[f, b, j]
                 started = sb[b, j, B_STARTED]
-                var[b0 + b, j] = p00 + xc[b, j, 0] ** 2 if started else np.nan
+                var[b0 + b, j] = p00 + xc[b, j, 0, 0] ** 2 + xc[b, j, 1, 0] ** 2 if started \
+                    else np.nan  # fmt: skip
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
                     out[b0 + b, j, i] = x[b, j, i, 0] if started else yb[j, i]

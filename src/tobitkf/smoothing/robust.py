@@ -56,9 +56,10 @@ child first moves with its inferred parent's correction). Offline the length is 
 recording's median, online the median learnt so far (none yet: left as guessed); 3-D
 only, since a bone seen in projection has no one length. ``inferred_bones=False`` turns
 this off. The guesses of one occlusion share one error, which averaging does not
-remove: offline, its size is estimated from the recording and added to the standard
-deviation of the samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`,
-``shared_errors=True``; the estimate is unchanged).
+remove: its size is estimated from the recording (online from the frames so far) and
+added to the standard deviation of the samples that rest on them
+(:mod:`tobitkf.smoothing.robust_shared`, ``shared_errors=True``; the estimate is
+unchanged).
 
 Carrying
 --------
@@ -75,8 +76,8 @@ stretch share one error, the joint's turn about its parent since its offset was 
 offline, its size at each sample is taken from how far the joint's offset moved over as
 many frames in the rest of the recording, and added to the standard deviation of the
 samples that rest on them (:mod:`tobitkf.smoothing.robust_shared`); online, from the
-frames so far (``shared_frame`` in the kernels, with one more scalar filter per joint
-on the same gains for the weight).
+frames so far (``shared_frame`` and ``guess_frame`` in the kernels, with two more scalar
+filters per joint on the same gains for the weights).
 
 Smoothing
 ---------
@@ -140,7 +141,7 @@ from tobitkf.smoothing.params import (
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
 from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
 from tobitkf.smoothing.robust_scale import recording_gates
-from tobitkf.smoothing.robust_shared import MIN_PAIRS
+from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     INFERRED_CODE,
@@ -190,7 +191,7 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
-    # the errors that the INFERRED guesses of one occlusion (offline) and the carried
+    # the errors that the INFERRED guesses of one occlusion and the carried
     # samples of one stretch share, taken from the recording (online: the frames so far),
     # are added to the sd of the samples resting on them (robust_shared.py); the
     # estimate is unchanged
@@ -224,7 +225,7 @@ MIN_CONFIDENCE_WEIGHT = 0.01
 
 
 #: robust_online keeps the given noise (a causal fit is open work, docs/robust.md); its
-#: shared errors are those of the carried samples, from the frames so far
+#: shared errors come from the frames so far
 ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
 ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
 
@@ -281,6 +282,7 @@ class _Setup:
         self.pi[k.I_TWO_PASS] = bool(params["two_pass"])
         self.pi[k.I_SHARED] = bool(params["shared_errors"])
         self.pi[k.I_MIN_PAIRS] = MIN_PAIRS
+        self.pi[k.I_MIN_CHANGES] = MIN_CHANGES
         self.pi[k.I_NDIMS] = 3  # the sequence's coordinates (set by the runner)
         self.resolved = {
             "v_max": self.vmax.tolist(),
@@ -602,8 +604,8 @@ def _robust_chunk(
         guard.largest_steps(ys, missing, g_state[1])  # offline: the whole recording's limit
     else:
         state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
-        k.online_frames(ys, missing, rinf, guesses, times, steps, *setup.args(), state,
-                        *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
+        k.online_frames(ys, missing, rinf, guesses, inferred, times, steps, *setup.args(),
+                        state, *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
         if params["bones"]:  # the lengths learnt by the end of the recording
             L = state[3][..., k.S_L_CUR].copy()
     # no output step larger than the input's largest (so far online)
@@ -668,7 +670,7 @@ class RobustStepper:
         inferred = _inferred(None if states is None else np.asarray(states)[None], m1.shape)
         k.online_frames(
             y1, m1, _inferred_scale(inferred, m1, self.factor),
-            _guesses(inferred, self.inferred_bones, n_dims), np.array([self._time]),
+            _guesses(inferred, self.inferred_bones, n_dims), inferred, np.array([self._time]),
             np.array([float(dt)]), *self.setup.args(), self._state, *self._scratch, out,
             self.rejected[None], self.std[None], 0,
         )  # fmt: skip

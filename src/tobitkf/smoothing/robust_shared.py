@@ -1,7 +1,7 @@
 """Errors that samples share, in the offline robust smoother's standard deviation.
 
-(Online, ``robust_online`` adds the carried samples' the causal way, from the frames
-so far: ``shared_frame`` and the indicator filter in
+(Online, ``robust_online`` adds both the causal way, from the frames so far:
+``shared_frame``, ``guess_frame`` and the indicator filters in
 :mod:`tobitkf.smoothing._robust_kernels`, docs/robust.md.)
 
 Two kinds of samples the smoother uses are not independent measurements of the joint:
