@@ -24,11 +24,13 @@ from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import _noise_kernels as nk
 from tobitkf.smoothing.robust_shared import (
+    MAX_LAG_FRAMES,
     MIN_CHANGES,
     MIN_PAIRS,
     add_shared_errors,
     carried_error_sd,
     guess_error_variance,
+    max_lag_frames,
 )
 
 INFERRED = 1  # TrackingState.INFERRED
@@ -195,6 +197,16 @@ def test_carried_error_beyond_the_data_is_the_stationary_limit():
     sd = carried_error_sd(ys, few, c, PARENTS, ORDER, max_lag=50)
     o = ys[[10, 10 + MIN_PAIRS], 0, 1]
     np.testing.assert_allclose(sd[11:20, 0, 1], np.sqrt(2 * o.var(axis=0, ddof=1).sum() / 3))
+
+
+def test_longest_lag_is_max_reject_in_frames_within_bounds():
+    # 2 s at 30 fps: 60 frames; a fraction of a frame rounds up; bounded both ways
+    assert max_lag_frames(2.0, np.full(100, 1 / 30)) == 60
+    assert max_lag_frames(2.01, np.full(100, 1 / 30)) == 61
+    assert max_lag_frames(1e-6, np.full(100, 1 / 30)) == 1
+    assert max_lag_frames(np.inf, np.full(100, 1 / 30)) == MAX_LAG_FRAMES
+    assert max_lag_frames(60.0, np.full(100, 1 / 120)) == MAX_LAG_FRAMES  # 7,200 frames
+    assert max_lag_frames(2.0, np.zeros(5)) == MAX_LAG_FRAMES  # no step to measure by
 
 
 def _occluded_joints(seed: int, sd_guess: float):

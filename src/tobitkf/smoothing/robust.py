@@ -149,7 +149,6 @@ from tobitkf.smoothing.timebase import (
     frame_steps,
     frame_times,
     readonly,
-    typical_step,
 )
 
 __all__ = ["ROBUST_DEFAULTS", "ROBUST_VALIDATORS", "robust_smooth"]
@@ -428,12 +427,8 @@ def _shared_errors(
         sds.append(np.where(used, np.sqrt(guess[0])[None, :, None], np.nan))
     carried = ~acc & np.isfinite(yk[..., 0])
     if carried.any():
-        # the offset's structure function up to max_reject (the longest believable
-        # failure), beyond it the stationary limit
-        dt = typical_step(steps)
-        lags = max_reject / dt if dt > 0 else np.inf
-        max_lag = int(min(np.ceil(lags), rs.MAX_LAG_FRAMES))
-        sds.append(rs.carried_error_sd(ys, acc, carried, par, order, max(1, max_lag)))
+        max_lag = rs.max_lag_frames(max_reject, steps)
+        sds.append(rs.carried_error_sd(ys, acc, carried, par, order, max_lag))
     if sds:
         rs.add_shared_errors(fit_kernels().smooth_run, *smoother, sds, var, b0)
     return guess

@@ -52,11 +52,14 @@ stationary limit ``2 Var(o)``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from tobitkf.smoothing.timebase import typical_step
 
 __all__ = [
     "MAX_LAG_FRAMES",
@@ -66,6 +69,7 @@ __all__ = [
     "add_shared_errors",
     "carried_error_sd",
     "guess_error_variance",
+    "max_lag_frames",
 ]
 
 Array = NDArray[np.float64]
@@ -117,6 +121,15 @@ def _kernels() -> Any:
     from tobitkf.smoothing import _shared_kernels
 
     return _shared_kernels
+
+
+def max_lag_frames(max_seconds: float, steps: Array) -> int:
+    """The longest lag of the structure function read from the data, in frames: the
+    longest believable failure ``max_seconds`` (``max_reject``) at the recording's typical
+    step, at least 1 and at most :data:`MAX_LAG_FRAMES`; beyond it the stationary limit."""
+    dt = typical_step(steps)
+    lags = max_seconds / dt if dt > 0 else math.inf
+    return max(1, math.ceil(min(lags, MAX_LAG_FRAMES)))
 
 
 def carried_error_sd(
