@@ -50,14 +50,14 @@ def _run_frames(ys: np.ndarray, final: np.ndarray, n_dims: int = 3) -> np.ndarra
     (joints not accepted are carried), 0 elsewhere."""
     T, J = final.shape
     state = rk.new_state(1, J, 0, shared=True)
-    sf, o_ring, o_ok, s_sum, s_cnt, o_stat = (state[i] for i in (3, 17, 18, 19, 20, 21))
+    sf, o_ring, s_acc = state[3], state[15], state[16]
     out = np.zeros((T, J))
     sig2 = np.empty(J)
     for t in range(T):
         radius = np.where(final[t], np.nan, 1.0)
         radius[0] = np.nan  # the root has no parent: never carried
         rk.shared_frame(ys[t], final[t], radius, PARENTS, ORDER, t, MIN_PAIRS, n_dims, sf[0],
-                        o_ring[0], o_ok[0], s_sum[0], s_cnt[0], o_stat[0], sig2)  # fmt: skip
+                        o_ring[0], s_acc[0], sig2)  # fmt: skip
         out[t] = sig2
     return out
 
@@ -124,7 +124,7 @@ def _guess_sd_so_far(ys: np.ndarray, final: np.ndarray, inferred: np.ndarray) ->
     the guesses' error sd at each frame."""
     T, J = final.shape
     state = rk.new_state(1, J, 0, shared=True)
-    sf, sb, g_stat = state[3][0], state[4][0], state[22][0]
+    sf, sb, g_stat = state[3][0], state[4][0], state[17][0]
     out = np.empty(T)
     for t in range(T):
         out[t] = rk.guess_frame(ys[t], ys[t - 1] if t else ys[0], t > 0, final[t], inferred[t],

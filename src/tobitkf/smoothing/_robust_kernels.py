@@ -57,7 +57,15 @@ S_CONF_BEGIN = 4  # start of the current confirmation
 S_OFF_FRAME = 5  # frame of the offset a carried joint carries (online shared errors)
 S_TRK_SUM = 6  # online guesses' error: sum of the squared steps between tracked samples
 S_TRK_N = 7  # and their number
-N_SF = 8
+S_O_N = 8  # online carried samples' error: the offsets from the parent seen so far,
+S_O_SUM = 9  # their sum (3: 9, 10, 11)
+S_O_SS = 12  # and the sum of their squared lengths
+N_SF = 13
+# rows of the online filter's state x[b, j, row] (level, velocity): the three axes, then
+# the indicator filters of the shared errors (docs/robust.md)
+X_CARRIED = 3  # the carried samples' shared error sd
+X_GUESS = 4  # the guesses'
+N_X = 5
 # bool state per body and joint (sb[..., k])
 B_PREV_ACC = 0  # accepted by the gate in the previous frame
 B_PREV_FINAL = 1  # accepted after confirmation and chain in the previous frame
@@ -86,7 +94,7 @@ I_BONES = 0
 I_CARRY = 1
 I_LOOKBACK = 2
 I_TWO_PASS = 3
-I_SHARED = 4  # online: the carried samples' shared error in the variance
+I_SHARED = 4  # online: the shared errors (carried samples, guesses) in the variance
 I_MIN_PAIRS = 5  # pairs a lag of the online structure function needs
 I_NDIMS = 6  # coordinates of the sequence (2: the third axis is zeros)
 I_MIN_CHANGES = 7  # steps at a change of tracking state the online guesses' error needs
@@ -504,30 +512,25 @@ def new_state(B: int, J: int, lookback: int, shared: bool = False) -> tuple:
     h_val[..., W_LO], h_val[..., W_HI] = -np.inf, np.inf  # empty windows (_window_reset)
     h_mult = np.zeros((B, J, BONE_BAND), dtype=np.int64)
     h_cnt = np.zeros((B, J, N_W), dtype=np.int64)
-    x = np.zeros((B, J, 3, 2))
+    x = np.zeros((B, J, N_X, 2))
     P = np.zeros((B, J, 2, 2))
-    xs_h = np.zeros((K, B, J, 3, 2))
+    xs_h = np.zeros((K, B, J, N_X, 2))
     Ps_h = np.zeros((K, B, J, 4))  # p00, p01, p10, p11
     ok_h = np.zeros((K, B, J), dtype=np.bool_)
     coef_h = np.zeros((K, 5))
     clock = np.zeros(2)  # frames seen, time of the last frame
-    # online shared errors: the indicator filters of the carried samples' and of the
-    # guesses' error (and their lookback history), the ring of past offsets from the
-    # parent (and whether known), the structure function's sums and pair counts per lag,
-    # the offsets' count, mean and sum of squared deviations; per body, the sum of the
-    # squared steps at a change of tracking state and their number
+    # online shared errors (few arrays: each is typed at every live call): the ring of
+    # past offsets from the parent (NaN = not known), the structure function's sums and
+    # pair counts per lag; per body, the sum of the squared steps at a change of tracking
+    # state and their number (the indicator filters are rows of x, the running sums in sf)
     R = SF_RING if shared else 0
-    xc = np.zeros((B, J, 2, 2))
-    xc_h = np.zeros((K, B, J, 2, 2))
-    o_ring = np.zeros((B, J, R, 3))
-    o_ok = np.zeros((B, J, R), dtype=np.bool_)
-    s_sum = np.zeros((B, J, SF_LAGS.size))
-    s_cnt = np.zeros((B, J, SF_LAGS.size), dtype=np.int64)
-    o_stat = np.zeros((B, J, 5))  # n, mean (3), sum of squared deviations
+    o_ring = np.full((B, R, J, 3), np.nan)
+    s_acc = np.zeros((B, 2, SF_LAGS.size, J))
     g_stat = np.zeros((B, 2))
-    sf[..., S_TRK_SUM] = sf[..., S_TRK_N] = 0.0
+    for k in (S_TRK_SUM, S_TRK_N, S_O_N, S_O_SUM, S_O_SUM + 1, S_O_SUM + 2, S_O_SS):
+        sf[..., k] = 0.0
     return (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-            clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat, g_stat)  # fmt: skip
+            clock, o_ring, s_acc, g_stat)  # fmt: skip
 
 
 def new_work(B: int, J: int) -> tuple:
@@ -972,12 +975,9 @@ def shared_frame(
     tidx: int,  # this frame's index in the stream
     min_pairs: int,
     n_dims: int,  # coordinates (2: the third axis is zeros)
-    sf: np.ndarray,  # state (J, N_SF): S_OFF_FRAME
-    o_ring: np.ndarray,  # state (J, SF_RING, 3) the offsets of the last frames
-    o_ok: np.ndarray,  # state (J, SF_RING) whether known
-    s_sum: np.ndarray,  # state (J, n_lags)
-    s_cnt: np.ndarray,  # state (J, n_lags)
-    o_stat: np.ndarray,  # state (J, 5): count, mean (3), sum of squared deviations
+    sf: np.ndarray,  # state (J, N_SF): S_OFF_FRAME, S_O_N, S_O_SUM .. + 2, S_O_SS
+    o_ring: np.ndarray,  # state (SF_RING, J, 3) the offsets of the last frames, NaN unknown
+    s_acc: np.ndarray,  # state (2, n_lags, J): sums of the squared differences, pairs
     sig2: np.ndarray,  # out (J,) per-axis variance of each carried sample's error, else 0
 ) -> None:
     """Online shared errors of the carried samples: the causal form of
@@ -987,50 +987,60 @@ def shared_frame(
     its parent over the frames so far, read at the smallest of :data:`SF_LAGS` at least
     ``Δ``; a lag with fewer than ``min_pairs`` pairs, or beyond the last, takes the
     stationary limit ``2 Var(o)`` of the offsets so far. Then this frame's offsets join
-    the statistics."""
+    the statistics. (The ring is slot-major, the sums lag-major: each lag's pairs of all
+    joints are one contiguous pass.)"""
     J = parents.shape[0]
-    R = o_ring.shape[1]
+    R = o_ring.shape[0]
     n_lags = SF_LAGS.shape[0]
     slot = tidx % R
-    for k in range(J):
+    sums, cnts = s_acc[0], s_acc[1]
+    for k in range(J):  # the carried samples, from the root outwards (a parent first)
         j = order[k]
         p = parents[j]
         sig2[j] = 0.0
-        if p < 0:
+        if p < 0 or not math.isfinite(radius[j]):  # radius: carried joints only
             continue
-        if math.isfinite(radius[j]) and not final[j]:  # carried
-            lag = tidx - sf[j, S_OFF_FRAME]
-            n = o_stat[j, 0]
-            v = 2.0 * o_stat[j, 4] / max(n - 1.0, 1.0)
-            for m in range(n_lags):
-                if SF_LAGS[m] >= lag:
-                    if s_cnt[j, m] >= min_pairs:
-                        v = s_sum[j, m] / s_cnt[j, m]
-                    break
-            sig2[j] = v / n_dims + sig2[p]
-        ok = final[j] and final[p] and _finite3(y[j, 0], y[j, 1], y[j, 2]) and _finite3(
-            y[p, 0], y[p, 1], y[p, 2])  # fmt: skip
-        o_ok[j, slot] = ok
+        lag = tidx - sf[j, S_OFF_FRAME]
+        n = sf[j, S_O_N]  # 2 Var(o): the sample variance summed over the axes
+        c0, c1, c2 = sf[j, S_O_SUM], sf[j, S_O_SUM + 1], sf[j, S_O_SUM + 2]
+        ss = sf[j, S_O_SS] - (c0 * c0 + c1 * c1 + c2 * c2) / max(n, 1.0)
+        v = 2.0 * max(ss, 0.0) / max(n - 1.0, 1.0)
+        for m in range(n_lags):
+            if SF_LAGS[m] >= lag:
+                if cnts[m, j] >= min_pairs:
+                    v = sums[m, j] / cnts[m, j]
+                break
+        sig2[j] = v / n_dims + sig2[p]
+    ring = o_ring[slot]  # this frame's offsets (the slot of tidx - R)
+    for j in range(J):
+        p = parents[j]
+        ok = (p >= 0 and final[j] and final[p] and _finite3(y[j, 0], y[j, 1], y[j, 2])
+              and _finite3(y[p, 0], y[p, 1], y[p, 2]))  # fmt: skip
         if not ok:
+            ring[j, 0] = ring[j, 1] = ring[j, 2] = math.nan
             continue
         o0, o1, o2 = y[j, 0] - y[p, 0], y[j, 1] - y[p, 1], y[j, 2] - y[p, 2]
-        for m in range(n_lags):
-            lg = SF_LAGS[m]
-            if lg > tidx:
-                break
-            s2 = (tidx - lg) % R
-            if o_ok[j, s2]:
-                d0, d1, d2 = o0 - o_ring[j, s2, 0], o1 - o_ring[j, s2, 1], o2 - o_ring[j, s2, 2]
-                s_sum[j, m] += d0 * d0 + d1 * d1 + d2 * d2
-                s_cnt[j, m] += 1
-        n = o_stat[j, 0] + 1.0  # Welford: the running mean and squared deviations
-        o_stat[j, 0] = n
-        for a, v in ((0, o0), (1, o1), (2, o2)):
-            d = v - o_stat[j, 1 + a]
-            o_stat[j, 1 + a] += d / n
-            o_stat[j, 4] += d * (v - o_stat[j, 1 + a])
-        o_ring[j, slot, 0], o_ring[j, slot, 1], o_ring[j, slot, 2] = o0, o1, o2
+        ring[j, 0], ring[j, 1], ring[j, 2] = o0, o1, o2
         sf[j, S_OFF_FRAME] = tidx
+        sf[j, S_O_N] += 1.0  # the running sums (offsets are bounded: no cancellation)
+        sf[j, S_O_SUM] += o0
+        sf[j, S_O_SUM + 1] += o1
+        sf[j, S_O_SUM + 2] += o2
+        sf[j, S_O_SS] += o0 * o0 + o1 * o1 + o2 * o2
+    for m in range(n_lags):  # the pairs this frame closes, a lag at a time
+        lg = SF_LAGS[m]
+        if lg > tidx:
+            break
+        s2 = slot - lg  # (tidx - lg) % R without a division: lg < R
+        if s2 < 0:
+            s2 += R
+        past = o_ring[s2]
+        for j in range(J):
+            d0 = ring[j, 0] - past[j, 0]  # NaN unless both known
+            if d0 == d0:
+                d1, d2 = ring[j, 1] - past[j, 1], ring[j, 2] - past[j, 2]
+                sums[m, j] += d0 * d0 + d1 * d1 + d2 * d2
+                cnts[m, j] += 1.0
 
 
 @_jit
@@ -1111,7 +1121,7 @@ def online_frames(
     filter with roll-back at rejection onsets. Everything it remembers is in ``st``: the
     batch runner passes a whole recording, the live stepper one frame per call."""
     (last, yprev, off, sf, sb, h_val, h_mult, h_cnt, x, P, xs_h, Ps_h, ok_h, coef_h,
-     clock, xc, xc_h, o_ring, o_ok, s_sum, s_cnt, o_stat, g_stat) = st  # fmt: skip
+     clock, o_ring, s_acc, g_stat) = st  # fmt: skip
     B, J = ys.shape[1], ys.shape[2]
     for f in range(ys.shape[0]):
         y, missing, rinf = ys[f], missing_n[f], rinf_n[f]
@@ -1128,7 +1138,7 @@ def online_frames(
         min_run = pf[P_MIN_RUN]
         use_bones = pi[I_BONES] != 0
         carry = pi[I_CARRY] != 0
-        shared = carry and pi[I_SHARED] != 0 and o_ring.shape[2] > 0
+        shared = carry and pi[I_SHARED] != 0 and o_ring.shape[1] > 0
         sig2 = scratch1[3]
         anchor = scratch[0]
         pseudo = scratch[1]
@@ -1161,8 +1171,7 @@ def online_frames(
                 carry_frame(yb, final, parents, order, off[b], anchor, pseudo, radius)
             if shared:
                 shared_frame(yb, final, radius, parents, order, tidx, pi[I_MIN_PAIRS],
-                             pi[I_NDIMS], sf[b], o_ring[b], o_ok[b], s_sum[b], s_cnt[b],
-                             o_stat[b], sig2)  # fmt: skip
+                             pi[I_NDIMS], sf[b], o_ring[b], s_acc[b], sig2)  # fmt: skip
             guess_sd = 0.0
             if pi[I_SHARED] != 0:
                 guess_sd = guess_frame(yb, yprev[b], has_prev, final, inferred_n[f, b],
@@ -1190,37 +1199,24 @@ def online_frames(
                 ):
                     s0 = (tidx - lookback - 1) % K
                     if ok_h[s0, b, j]:
-                        for i in range(3):
+                        for i in range(N_X):  # the axes and the indicator filters
                             x[b, j, i, 0] = xs_h[s0, b, j, i, 0]
                             x[b, j, i, 1] = xs_h[s0, b, j, i, 1]
                         p00, p01, p10, p11 = Ps_h[s0, b, j, 0], Ps_h[s0, b, j, 1], \
                             Ps_h[s0, b, j, 2], Ps_h[s0, b, j, 3]  # fmt: skip
-                        for g in range(2):
-                            xc[b, j, g, 0], xc[b, j, g, 1] = xc_h[s0, b, j, g, 0], \
-                                xc_h[s0, b, j, g, 1]  # fmt: skip
                         for kk in range(tidx - lookback, tidx):
                             c = kk % K
-                            for i in range(3):
+                            for i in range(N_X):
                                 x[b, j, i, 0], x[b, j, i, 1] = (
                                     x[b, j, i, 0] + x[b, j, i, 1] * coef_h[c, 0],
                                     x[b, j, i, 1] * coef_h[c, 1],
                                 )
-                            for g in range(2):
-                                xc[b, j, g, 0], xc[b, j, g, 1] = (
-                                    xc[b, j, g, 0] + xc[b, j, g, 1] * coef_h[c, 0],
-                                    xc[b, j, g, 1] * coef_h[c, 1],
-                                )
                             p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, c, q)
                 if has_prev and started:
-                    for i in range(3):
+                    for i in range(N_X):
                         x[b, j, i, 0], x[b, j, i, 1] = (
                             x[b, j, i, 0] + x[b, j, i, 1] * coef_h[slot, 0],
                             x[b, j, i, 1] * coef_h[slot, 1],
-                        )
-                    for g in range(2):
-                        xc[b, j, g, 0], xc[b, j, g, 1] = (
-                            xc[b, j, g, 0] + xc[b, j, g, 1] * coef_h[slot, 0],
-                            xc[b, j, g, 1] * coef_h[slot, 1],
                         )
                     p00, p01, p10, p11 = _predict_P(p00, p01, p10, p11, coef_h, slot, q)
                 if a and not started:  # the filter starts at the sample itself
@@ -1237,18 +1233,15 @@ def online_frames(
                     # the indicator filters: the same gains on the shared errors' sd (the
                     # carried samples', the guesses'; 0 at other samples) give the
                     # estimate's share of each
-                    e = (math.sqrt(sig2[j]) if carried and shared else 0.0) - xc[b, j, 0, 0]
-                    xc[b, j, 0, 0] += k0 * e
-                    xc[b, j, 0, 1] += k1 * e
-                    e = (guess_sd if a and inferred_n[f, b, j] else 0.0) - xc[b, j, 1, 0]
-                    xc[b, j, 1, 0] += k0 * e
-                    xc[b, j, 1, 1] += k1 * e
+                    e = (math.sqrt(sig2[j]) if carried and shared else 0.0) - x[b, j, X_CARRIED, 0]
+                    x[b, j, X_CARRIED, 0] += k0 * e
+                    x[b, j, X_CARRIED, 1] += k1 * e
+                    e = (guess_sd if a and inferred_n[f, b, j] else 0.0) - x[b, j, X_GUESS, 0]
+                    x[b, j, X_GUESS, 0] += k0 * e
+                    x[b, j, X_GUESS, 1] += k1 * e
                 P[b, j, 0, 0], P[b, j, 0, 1], P[b, j, 1, 0], P[b, j, 1, 1] = p00, p01, p10, p11
-                for i in range(3):
+                for i in range(N_X):
                     xs_h[slot, b, j, i, 0], xs_h[slot, b, j, i, 1] = x[b, j, i, 0], x[b, j, i, 1]
-                for g in range(2):
-                    xc_h[slot, b, j, g, 0], xc_h[slot, b, j, g, 1] = xc[b, j, g, 0], \
-                        xc[b, j, g, 1]  # fmt: skip
                 Ps_h[slot, b, j, 0], Ps_h[slot, b, j, 1] = p00, p01
                 Ps_h[slot, b, j, 2], Ps_h[slot, b, j, 3] = p10, p11
                 ok_h[slot, b, j] = a
@@ -1256,8 +1249,8 @@ def online_frames(
                 sb[b, j, B_PREV_FINAL] = a
                 sb[b, j, B_PREV_INF] = inferred_n[f, b, j]
                 started = sb[b, j, B_STARTED]
-                var[b0 + b, j] = p00 + xc[b, j, 0, 0] ** 2 + xc[b, j, 1, 0] ** 2 if started \
-                    else np.nan  # fmt: skip
+                var[b0 + b, j] = (p00 + x[b, j, X_CARRIED, 0] ** 2 + x[b, j, X_GUESS, 0] ** 2
+                                  if started else np.nan)  # fmt: skip
                 for i in range(3):
                     # nothing accepted yet: the measurement as it is (NaN when missing)
                     out[b0 + b, j, i] = x[b, j, i, 0] if started else yb[j, i]

@@ -250,7 +250,7 @@ def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
 class _Setup:
     """What the kernels take for one topology and parameter set (per joint and global)."""
 
-    def __init__(self, topo: Topology, params: dict[str, Any]) -> None:
+    def __init__(self, topo: Topology, params: dict[str, Any], n_dims: int = 3) -> None:
         k = kernels()
         J = topo.n_joints
         self.vmax = region_values(topo, params["v_max"], "v_max")
@@ -282,7 +282,7 @@ class _Setup:
         self.pi[k.I_SHARED] = bool(params["shared_errors"])
         self.pi[k.I_MIN_PAIRS] = MIN_PAIRS
         self.pi[k.I_MIN_CHANGES] = MIN_CHANGES
-        self.pi[k.I_NDIMS] = 3  # the sequence's coordinates (set by the runner)
+        self.pi[k.I_NDIMS] = n_dims  # the sequence's coordinates (a live stream: per frame)
         self.resolved = {
             "v_max": self.vmax.tolist(),
             "speed_sd": self.spd.tolist(),
@@ -493,8 +493,7 @@ def _robust_bodies(
         derived = recording_gates(ys, steps, topo.parents, n_dims)
         centre = derived.pop("bone_centre", None)
         params = {**params, **derived}
-    setup = _Setup(topo, params)
-    setup.pi[kernels().I_NDIMS] = n_dims
+    setup = _Setup(topo, params, n_dims)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
     est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
