@@ -1,11 +1,13 @@
-"""Shared errors of the carried samples in robust_online's sd (the causal form).
+"""Shared errors of the carried samples and of the guesses in robust_online's sd (the
+causal form of robust_shared.py).
 
 The structure function read so far is checked against a joint turning about its parent
-at a known rate (closed form, as offline); the added variance against the filter's own
-response to a shift of the carried samples (linear filter, value-independent gains: an
-exact identity); live against batch on a real recording; and end to end on the built-in
-benchmark, whose sustained failures' 95 % ball coverage must come out near 95 % (and far
-below without).
+at a known rate (closed form, as offline); the guesses' error so far against the offline
+estimator of the frames so far (hypothesis); the added variance against the filter's own
+response to a shift of each carried sample and of each guess (linear filter,
+value-independent gains: an exact identity); live against batch on a real recording;
+and end to end by Monte Carlo (guesses with a known shared error) and on the built-in
+benchmark, whose 95 % ball coverage must come out near 95 % (and far below without).
 """
 
 from __future__ import annotations
