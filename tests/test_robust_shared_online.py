@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 import tobitkf as tk
 from conftest import data_file
-from test_robust_shared import _occluded_joints
+from test_robust_shared import ORDER, PARENTS, _occluded_joints, _turning_arm
 from tobitkf.evaluation.benchmark import run_benchmark
 from tobitkf.evaluation.corruption import SUSTAINED
 from tobitkf.evaluation.metrics import in_sd_ball
@@ -31,20 +31,10 @@ from tobitkf.smoothing.robust import RobustStepper
 from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS, guess_error_variance
 from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR
 
-PARENTS, ORDER = np.array([-1, 0, 1]), np.array([0, 1, 2])
 
-
-def _turning_arm(T: int, r: float, omega: float, h: float) -> np.ndarray:
-    """A still root, an elbow on a circle of radius ``r`` about it (``omega`` rad per
-    frame) and a hand on a circle of radius ``h`` about the elbow in another plane,
-    twice as fast; (T, 3, 3)."""
-    t = np.arange(T)
-    ys = np.zeros((T, 3, 3))
-    ys[:, 1, 0], ys[:, 1, 1] = r * np.cos(omega * t), r * np.sin(omega * t)
-    ys[:, 2, 0] = ys[:, 1, 0] + h * np.cos(2 * omega * t)
-    ys[:, 2, 1] = ys[:, 1, 1]
-    ys[:, 2, 2] = h * np.sin(2 * omega * t)
-    return ys
+def _arm(T: int, r: float, omega: float, h: float) -> np.ndarray:
+    """The offline tests' turning arm (root, elbow, hand) as one body's frames (T, 3, 3)."""
+    return _turning_arm(T, r, omega, h)[:, 0]
 
 
 def _run_frames(ys: np.ndarray, final: np.ndarray, n_dims: int = 3) -> np.ndarray:
@@ -74,7 +64,7 @@ def test_carried_error_is_the_turn_so_far_at_the_tabulated_lag():
     # the hand's offset from the elbow turns at 2 omega; a carried hand adds its carried
     # elbow's variance
     r, om, h = 0.25, 0.05, 0.1
-    ys = _turning_arm(180, r, om, h)
+    ys = _arm(180, r, om, h)
     final = np.ones((180, 3), dtype=bool)
     final[100:130, 1:] = False
     final[150:170, 1:] = False  # again: the frames of the first failure gave no pairs
@@ -97,7 +87,7 @@ def test_carried_error_is_the_turn_so_far_at_the_tabulated_lag():
 
 def test_carried_error_beyond_the_lags_or_the_pairs_is_the_variance_so_far():
     r, om = 0.25, 2 * np.pi / 40
-    ys = _turning_arm(200, r, om, 0.1)
+    ys = _arm(200, r, om, 0.1)
     final = np.ones((200, 3), dtype=bool)
     final[100:180, 1] = False  # lags 1 .. 80: beyond the last tabulated one, 2 Var(o)
     sig2 = _run_frames(ys, final)
@@ -211,7 +201,7 @@ def _failing_elbow(shift_root_at: int | None = None, delta: float = 0.0) -> Skel
     moved by ``delta`` in that frame only (every gate still accepts it)."""
     T = 170
     ys = np.zeros((T, 3, 3))
-    ys[:, :2] = _turning_arm(T, 0.25, 0.05, 0.1)[:, :2]
+    ys[:, :2] = _arm(T, 0.25, 0.05, 0.1)[:, :2]
     ys[:, 2] = [0.5, 0.0, 0.0]
     ys += np.array([0.0, 1.0, 2.5])
     states = np.full((T, 3), 2, dtype=np.int8)

@@ -104,7 +104,7 @@ N_PI = 8
 #: stationary limit (:func:`shared_frame`)
 SF_LAGS = np.array([1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64], dtype=np.int64)
 #: the ring of past offsets per joint: the longest lag + 1 frames
-SF_RING = 65
+SF_RING = int(SF_LAGS[-1]) + 1
 
 
 # ------------------------------------------------------------------------------ small

@@ -728,12 +728,12 @@ def robust_smooth(
         fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
         uses the values as given (online always).
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
-    shared_errors : offline only: True (default) adds the errors that the INFERRED
-        guesses of one occlusion and the carried samples of one stretch share, estimated
-        from the recording, to the standard deviation of the samples resting on them
-        (:mod:`tobitkf.smoothing.robust_shared`; the estimate is unchanged;
-        ``diagnostics["guess_error_sd"]``); False keeps each sample's own error as if
-        independent (online always).
+    shared_errors : True (default) adds the errors that the INFERRED guesses of one
+        occlusion and the carried samples of one stretch share, estimated from the
+        recording (online from the frames so far), to the standard deviation of the
+        samples resting on them (:mod:`tobitkf.smoothing.robust_shared`; the estimate is
+        unchanged; offline ``diagnostics["guess_error_sd"]``); False keeps each sample's
+        own error as if independent.
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``
