@@ -195,7 +195,8 @@ def test_smoother_without_coloured_error_is_the_generic_kalman_core():
     q = np.ascontiguousarray(np.broadcast_to(qj, (T, B, J)))
     # written as a chunk (bodies 1..B) of larger outputs: the other bodies stay untouched
     v3, three = np.full((T, B + 2, J), -7.0), np.full((T, B + 2, J, 3), -7.0)
-    nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1)
+    nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1,
+                  None)  # fmt: skip
     assert (three[:, [0, B + 1]] == -7.0).all() and (v3[:, [0, B + 1]] == -7.0).all()
     A, Q = _ou_matrices(steps, TAU)
     for b in range(B):
@@ -231,7 +232,7 @@ def test_smoother_equals_a_brute_force_rts_smoother():
     sc2, tau_c = 2e-4, 0.07
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
     nk.smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c), est,
-                  var, 0)  # fmt: skip
+                  var, 0, None)  # fmt: skip
     for i in range(3):
         want, wvar = _brute_smooth(y[:, 0, 0, i], rvar[:, 0, 0], steps, q[:, 0, 0], sc2, TAU,
                                    tau_c)  # fmt: skip
@@ -253,7 +254,7 @@ def test_smoother_in_several_blocks_equals_the_brute_force_smoother_per_joint():
     sc2 = rng.choice([0.0, 2e-4], size=(B, J))
     tau_c = rng.choice([0.05, 0.3], size=(B, J))
     var, est = np.empty((T, B, J)), np.empty((T, B, J, 3))
-    nk.smooth_run(y, rvar, steps, q, sc2, TAU, tau_c, est, var, 0)
+    nk.smooth_run(y, rvar, steps, q, sc2, TAU, tau_c, est, var, 0, None)
     assert np.isnan(est[:, 1, 2]).all() and np.isnan(var[:, 1, 2]).all()
     for b in range(B):
         for j in range(J):
@@ -278,7 +279,8 @@ def test_smoother_of_a_constant_position_is_the_weighted_mean():
     y[[0, 1, 7, 8, 20]] = np.nan
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
     nk.smooth_run(y, np.full((T, 1, 1), r), np.full(T, 1 / 30), np.zeros((T, 1, 1)),
-                  np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0)  # fmt: skip
+                  np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0,
+                  None)  # fmt: skip
     seen = y[np.isfinite(y[:, 0, 0, 0]), 0, 0]
     n = len(seen)
     want = (seen.sum(axis=0) + seen[0]) / (n + 1)

@@ -27,10 +27,10 @@ from tobitkf.smoothing.robust_shared import (
     MAX_LAG_FRAMES,
     MIN_CHANGES,
     MIN_PAIRS,
-    add_shared_errors,
     carried_error_sd,
     guess_error_variance,
     max_lag_frames,
+    shared_signal,
 )
 
 INFERRED = 1  # TrackingState.INFERRED
@@ -100,40 +100,48 @@ def test_variance_moves_with_the_coordinates(seed, shift, scale):
 
 
 def test_added_variance_is_the_square_of_the_weighted_shared_sd():
-    # the smoother is linear: shifting each sample i by delta sd_i moves its estimate by
-    # delta sum w_i sd_i; that sum squared is added, nothing where no sample shares one
+    # the smoother is linear: shifting each sample i of a kind by delta sd_i moves its
+    # estimate by delta sum w_i sd_i; the squares of the two kinds' sums are added (two
+    # independent errors), nothing where no sample shares one, the estimate unchanged.
+    # Two blocks of SIMD lanes; one column has both kinds, near enough to overlap
     rng = np.random.default_rng(3)
-    T, B, J = 80, 2, 3
+    T, B, J = 80, 2, nk.L // 2 + 4
     yk = np.cumsum(rng.normal(scale=0.01, size=(T, B, J, 3)), axis=0)
     yk[rng.random((T, B, J)) < 0.1] = np.nan
-    sd = np.full((T, B, J), np.nan)
-    sd[20:45, 0, 1] = rng.uniform(0.01, 0.03, size=25)
-    sd[50:60, 1, 2] = 0.02
-    sd[~np.isfinite(yk[..., 0])] = np.nan
+    guess, carried = np.full((T, B, J), np.nan), np.full((T, B, J), np.nan)
+    guess[20:45, 0, 1] = rng.uniform(0.01, 0.03, size=25)
+    carried[46:60, 0, 1] = rng.uniform(0.02, 0.05, size=14)
+    carried[50:60, 1, J - 2] = 0.02
+    present = np.isfinite(yk[..., 0])
+    guess[~present], carried[~present] = np.nan, np.nan
     rvar = np.full((T, B, J), 1e-4)
     steps = np.full(T, 1 / 30)
     q = np.full((T, B, J), 2.0)
     sc2, tau_c = np.full((B, J), 1e-5), np.full((B, J), 0.05)
 
-    def smooth(y):
+    def smooth(y, shared=None):
         est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
-        nk.smooth_run(np.ascontiguousarray(y), rvar, steps, q, sc2, 0.15, tau_c, est, var, 0)
+        nk.smooth_run(np.ascontiguousarray(y), rvar, steps, q, sc2, 0.15, tau_c, est, var, 0,
+                      shared)  # fmt: skip
         return est, var
 
     delta = 0.5
     e0, v0 = smooth(yk)
-    e1, _ = smooth(yk + delta * np.nan_to_num(sd)[..., None])
-    wsd = (e1 - e0)[..., 0] / delta
-    var = v0.copy()
-    add_shared_errors(nk.smooth_run, yk, rvar, steps, q, sc2, 0.15, tau_c, [sd], var, 0)
-    np.testing.assert_allclose(var - v0, wsd**2, rtol=1e-6, atol=1e-12)
+    w_g = (smooth(yk + delta * np.nan_to_num(guess)[..., None])[0] - e0)[..., 0] / delta
+    w_c = (smooth(yk + delta * np.nan_to_num(carried)[..., None])[0] - e0)[..., 0] / delta
+    e, var = smooth(yk, shared_signal(guess, carried, (T, B, J)))
+    assert np.array_equal(e, e0, equal_nan=True)  # the estimate is not changed
+    np.testing.assert_allclose(var - v0, w_g**2 + w_c**2, rtol=1e-6, atol=1e-12)
     assert np.array_equal(var[:, 0, 0], v0[:, 0, 0])  # no shared error: untouched
+    # between the two stretches both kinds weigh: added apart, not as one error
+    both = (np.abs(w_g[:, 0, 1]) > 1e-4) & (np.abs(w_c[:, 0, 1]) > 1e-4)
+    assert both.sum() >= 3
     # inside a long stretch the shared samples decide: an average of their own sds
-    assert np.all((wsd[30:35, 0, 1] > 0.009) & (wsd[30:35, 0, 1] < 0.031))
-    var2 = v0.copy()  # none at all: nothing added
-    add_shared_errors(nk.smooth_run, yk, rvar, steps, q, sc2, 0.15, tau_c,
-                      [np.full((T, B, J), np.nan)], var2, 0)  # fmt: skip
-    assert np.array_equal(var2, v0)
+    assert np.all((w_g[30:35, 0, 1] > 0.009) & (w_g[30:35, 0, 1] < 0.031))
+    # none at all: nothing added
+    none = shared_signal(np.full((T, B, J), np.nan), None, (T, B, J))
+    assert np.array_equal(smooth(yk, none)[1], v0, equal_nan=True)
+    assert shared_signal(None, None, (T, B, J)) is None
 
 
 def _turning_arm(T: int = 200, r: float = 0.25, omega: float = 0.05, h: float = 0.1):

@@ -42,8 +42,11 @@ _inline = njit(inline="always", error_model="numpy")  # inlined into the SIMD lo
 #: so the compiler proves the rows apart without run-time checks.
 L = 32
 _P00, _P01, _P02, _P11, _P12, _P22 = (k * L for k in range(9, 15))  # covariance rows
-_NZ, _NU = 15, 6  # rows of a block's state and of its inputs (smooth_run)
-_UR, _UQ, _UPHI = 3 * L, 4 * L, 5 * L  # smooth_run's input rows after the samples
+#: rows of a block's state (smooth_run): without, and with the two shared-error axes
+_NZ0, _NZ = 15, 21
+_S0, _S1 = 15 * L, 18 * L  # the shared-error axes' (x, v, c) rows, after the covariance
+_NU = 8  # rows of a block's inputs: the samples' three axes, then
+_UR, _UQ, _UPHI, _US0, _US1 = 3 * L, 4 * L, 5 * L, 6 * L, 7 * L
 
 
 @_jit
@@ -180,6 +183,7 @@ def smooth_run(
     est: np.ndarray,  # out (T, B0, J, 3): the estimate of x
     var: np.ndarray,  # out (T, B0, J): its smoothed variance
     b0: int,  # body b is written at b0 + b (a chunk of the bodies of est and var)
+    shared: np.ndarray | None,  # (T, B, J) the samples' shared errors (below), or None
 ) -> None:
     """Kalman filter + RTS smoother of the three-state model per joint: the estimate of
     ``x`` and its variance (NaN for a joint without samples). The filter starts at frame
@@ -194,7 +198,16 @@ def smooth_run(
     Each column's arithmetic is that of its own recursion, operation for operation: the
     blocks change the memory order, not the numbers. The RTS pass recomputes each
     prediction from the stored filtered moments with the forward pass's expressions
-    (same values) instead of storing it. Every array is C-contiguous."""
+    (same values) instead of storing it. Every array is C-contiguous.
+
+    ``shared``: errors that samples share (:mod:`tobitkf.smoothing.robust_shared`), two
+    kinds, independent of each other: ``s > 0`` at a sample whose error of standard
+    deviation ``s`` it shares with the other samples of the first kind (the guesses),
+    ``s < 0`` likewise of the second kind with ``-s`` (the carried samples), 0 at a
+    sample that shares none (its value where there is no sample is not read). Two more
+    axes of the filter, updated with the same gains on ``s`` (0 at the other kind's
+    samples), give ``Σ w_i s_i`` of each kind, the weights ``w_i`` being those the
+    estimate puts on the samples; the squares of the two are added to ``var``."""
     T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
     N = B * J
     # columns n = b J + j (the arrays are C-contiguous)
@@ -203,8 +216,14 @@ def smooth_run(
     # The block's columns are the SIMD lanes, each quantity a row of L lanes. Rows of a
     # state: (x, v, c) of axis i at 3i..3i+2, then the covariance p00, p01, p02, p11,
     # p12, p22 (_P..). Rows of an input: the samples of the three axes, their variance
-    # (_UR), q (_UQ) and exp(-dt / tau_c) (_UPHI) of the step before the frame.
-    Z = np.empty((T, _NZ * L))  # filtered states
+    # (_UR), q (_UQ) and exp(-dt / tau_c) (_UPHI) of the step before the frame. With
+    # shared errors, their two axes' (x, v, c) after the covariance (_S0, _S1) and their
+    # inputs after the others (_US0, _US1).
+    # with and without shared errors are two compilations: ``shared is not None`` is
+    # decided when compiling (numba prunes the branches on an argument's None), so the
+    # SIMD loops without them carry no test
+    nz = _NZ0 if shared is None else _NZ  # rows in use (the shared-error axes come last)
+    Z = np.empty((T, nz * L))  # filtered states
     U = np.empty((T, _NU * L))  # inputs
     cur = np.empty(_NZ * L)  # the state being filtered, then smoothed
     first = np.empty(L, dtype=np.int64)
@@ -241,12 +260,15 @@ def smooth_run(
                 U[t, w], U[t, L + w], U[t, 2 * L + w] = y0, y2[t, 3 * n + 1], y2[t, 3 * n + 2]
                 U[t, _UR + w], U[t, _UQ + w] = r2[t, n], q2[t, n]
                 U[t, _UPHI + w] = phis[t, cu[w]]
+                if shared is not None:  # the kinds apart: each its own axis
+                    sv = shared[t, n // J, n % J]
+                    U[t, _US0 + w], U[t, _US1 + w] = max(sv, 0.0), max(-sv, 0.0)
                 if first[w] < 0 and math.isfinite(y0):
                     first[w] = t
         for w in range(w_n):  # frame 0 starts at the column's first sample
             fw, sj = first[w], cs[w]
             if fw < 0:  # no sample: NaN throughout, written as such below
-                for k in range(_NZ):
+                for k in range(nz):
                     cur[k * L + w] = math.nan
                 continue
             v0 = U[fw, _UQ + w] * tau / 2 if math.isfinite(tau) else 1.0
@@ -256,21 +278,24 @@ def smooth_run(
                 cur[(3 * i + 2) * L + w] = 0.0
             cur[_P00 + w], cur[_P01 + w], cur[_P02 + w] = U[fw, _UR + w] + sj, 0.0, -sj
             cur[_P11 + w], cur[_P12 + w], cur[_P22 + w] = v0, 0.0, sj
+            if shared is not None:
+                for r, i in ((_S0, _US0), (_S1, _US1)):
+                    cur[r + w], cur[r + L + w], cur[r + 2 * L + w] = U[fw, i + w], 0.0, 0.0
         for t in range(T):
             if t > 0:
                 _predict_block(cur, U[t], ou[t, 0], ou[t, 1], ou[t, 2], ou[t, 3], ou[t, 4],
-                               cs, w_n)  # fmt: skip
-            _update_block(cur, U[t], w_n)
-            for k in range(_NZ * L):
+                               cs, w_n, shared)  # fmt: skip
+            _update_block(cur, U[t], w_n, shared)
+            for k in range(nz * L):
                 Z[t, k] = cur[k]
         # RTS: G = P_t Aᵀ (P⁻_{t+1})⁻¹, x^s_t = x_t + G (x^s_{t+1} - x⁻_{t+1}),
         # S_t = P_t + G (S_{t+1} - P⁻_{t+1}) Gᵀ; cur holds the smoothed state of the frame
         # after (the last frame's is its filtered one)
-        _write_block(cur, e2[T - 1], v2[T - 1], b0 * J + n0, w_n)
+        _write_block(cur, e2[T - 1], v2[T - 1], b0 * J + n0, w_n, shared)
         for t in range(T - 2, -1, -1):
             o = ou[t + 1]
-            _rts_block(cur, Z[t], U[t + 1], o[0], o[1], o[2], o[3], o[4], cs, w_n)
-            _write_block(cur, e2[t], v2[t], b0 * J + n0, w_n)
+            _rts_block(cur, Z[t], U[t + 1], o[0], o[1], o[2], o[3], o[4], cs, w_n, shared)
+            _write_block(cur, e2[t], v2[t], b0 * J + n0, w_n, shared)
         for w in range(w_n):
             if first[w] < 0:  # no sample: no estimate
                 n = b0 * J + n0 + w
@@ -291,6 +316,7 @@ def _predict_block(
     o4: float,
     sc2: np.ndarray,  # (L,)
     w_n: int,
+    ind: np.ndarray | None,  # the shared-error axes too (not None: compiled apart)
 ) -> None:
     """The prediction step of :func:`smooth_run`'s block, in place (a SIMD loop)."""
     for w in range(w_n):
@@ -302,10 +328,13 @@ def _predict_block(
         _predict_axis(z, w, a, rr, ph)  # the axes, unrolled (the SIMD loop is w's)
         _predict_axis(z, 3 * L + w, a, rr, ph)
         _predict_axis(z, 6 * L + w, a, rr, ph)
+        if ind is not None:  # decided when compiling
+            _predict_axis(z, _S0 + w, a, rr, ph)
+            _predict_axis(z, _S1 + w, a, rr, ph)
 
 
 @_simd
-def _update_block(z: np.ndarray, u: np.ndarray, w_n: int) -> None:
+def _update_block(z: np.ndarray, u: np.ndarray, w_n: int, ind: np.ndarray | None) -> None:
     """The measurement update of :func:`smooth_run`'s block, in place; a column without
     a sample keeps its prediction (selected, not branched: a SIMD loop)."""
     for w in range(w_n):
@@ -317,9 +346,12 @@ def _update_block(z: np.ndarray, u: np.ndarray, w_n: int) -> None:
         h2 = p02 + p22
         iS = 1.0 / (h0 + h2 + u[_UR + w])
         k0, k1, k2 = h0 * iS, h1 * iS, h2 * iS
-        _update_axis(z, u, w, 0, k0, k1, k2, m)  # the axes, unrolled (SIMD over w)
-        _update_axis(z, u, w, 1, k0, k1, k2, m)
-        _update_axis(z, u, w, 2, k0, k1, k2, m)
+        _update_axis(z, u, w, 0, 0, k0, k1, k2, m)  # the axes, unrolled (SIMD over w)
+        _update_axis(z, u, w, 3 * L, L, k0, k1, k2, m)
+        _update_axis(z, u, w, 6 * L, 2 * L, k0, k1, k2, m)
+        if ind is not None:
+            _update_axis(z, u, w, _S0, _US0, k0, k1, k2, m)
+            _update_axis(z, u, w, _S1, _US1, k0, k1, k2, m)
         z[_P00 + w] = p00 - k0 * h0 if m else p00
         z[_P01 + w] = p01 - k0 * h1 if m else p01
         z[_P02 + w] = p02 - k0 * h2 if m else p02
@@ -340,6 +372,7 @@ def _rts_block(
     o4: float,
     sc2: np.ndarray,  # (L,)
     w_n: int,
+    ind: np.ndarray | None,  # the shared-error axes too (not None: compiled apart)
 ) -> None:
     """One RTS step of :func:`smooth_run`'s block, in place (a SIMD loop over columns).
 
@@ -407,6 +440,9 @@ def _rts_block(
         _rts_axis(s, f, w, a, rr, ph, g)  # the axes, unrolled (the SIMD loop is w's)
         _rts_axis(s, f, 3 * L + w, a, rr, ph, g)
         _rts_axis(s, f, 6 * L + w, a, rr, ph, g)
+        if ind is not None:
+            _rts_axis(s, f, _S0 + w, a, rr, ph, g)
+            _rts_axis(s, f, _S1 + w, a, rr, ph, g)
 
 
 @_inline
@@ -431,12 +467,13 @@ def _predict_axis(z: np.ndarray, k: int, a: float, rr: float, ph: float) -> None
 
 
 @_inline
-def _update_axis(z: np.ndarray, u: np.ndarray, w: int, i: int, k0: float, k1: float,
-                 k2: float, m: bool) -> None:  # fmt: skip
-    """(x, v, c) of axis ``i`` of lane ``w`` updated with its sample (kept without)."""
-    r = 3 * i * L + w
+def _update_axis(z: np.ndarray, u: np.ndarray, w: int, zr: int, ur: int, k0: float,
+                 k1: float, k2: float, m: bool) -> None:  # fmt: skip
+    """(x, v, c) of an axis (state rows from ``zr``, its sample's row ``ur``) of lane
+    ``w`` updated with its sample (kept without)."""
+    r = zr + w
     x, v, c = z[r], z[r + L], z[r + 2 * L]
-    e = u[i * L + w] - x - c
+    e = u[ur + w] - x - c
     z[r] = x + k0 * e if m else x
     z[r + L] = v + k1 * e if m else v
     z[r + 2 * L] = c + k2 * e if m else c
@@ -463,11 +500,15 @@ def _write_block(
     var: np.ndarray,  # out (B0 * J,)
     n0: int,  # the block's first column in them
     w_n: int,
+    ind: np.ndarray | None,  # with the shared errors' variance (not None)
 ) -> None:
     """The block's smoothed positions and variances of one frame into the outputs."""
     for w in range(w_n):
         n = n0 + w
         var[n] = s[_P00 + w]
+        if ind is not None:
+            g, c = s[_S0 + w], s[_S1 + w]
+            var[n] = s[_P00 + w] + (g * g + c * c)
         est[3 * n] = s[w]
         est[3 * n + 1] = s[3 * L + w]
         est[3 * n + 2] = s[6 * L + w]

@@ -1,6 +1,7 @@
-"""Compiled kernel of :mod:`tobitkf.smoothing.robust_shared` (numba, ``cache=True``):
+"""Compiled kernels of :mod:`tobitkf.smoothing.robust_shared` (numba, ``cache=True``):
 the carried samples' error from the structure function of each joint's offset from its
-parent. Imported lazily (numba on first use)."""
+parent, and the sums the guesses' error is estimated from. Imported lazily (numba on
+first use)."""
 
 from __future__ import annotations
 
@@ -98,3 +99,40 @@ def carried_sd(
                         v += sd[t, b, p] ** 2
                     sd[t, b, j] = math.sqrt(v)
     return sd
+
+
+@_jit
+def guess_sums(
+    ys: np.ndarray,  # (T, B, J, D)
+    acc: np.ndarray,  # (T, B, J) accepted
+    inferred: np.ndarray,  # (T, B, J)
+) -> np.ndarray:
+    """Per body ``(B, 4)``: the sum of the squared steps at a change of tracking state and
+    their number, then the same of the steps between tracked samples of the joints with
+    guesses (:func:`tobitkf.smoothing.robust_shared.guess_error_variance`); a step counts
+    where both its samples were accepted and are finite."""
+    T, B, J, D = ys.shape
+    out = np.zeros((B, 4))
+    has = np.zeros((B, J), dtype=np.bool_)  # the joints with an accepted guess
+    for t in range(T):
+        for b in range(B):
+            for j in range(J):
+                if inferred[t, b, j] and acc[t, b, j] and math.isfinite(ys[t, b, j, 0]):
+                    has[b, j] = True
+    for t in range(1, T):
+        for b in range(B):
+            for j in range(J):
+                if not (acc[t, b, j] and acc[t - 1, b, j]):
+                    continue
+                if not (math.isfinite(ys[t, b, j, 0]) and math.isfinite(ys[t - 1, b, j, 0])):
+                    continue
+                change = inferred[t, b, j] != inferred[t - 1, b, j]
+                if not (change or (has[b, j] and not inferred[t, b, j])):
+                    continue
+                d2 = 0.0
+                for a in range(D):
+                    d2 += (ys[t, b, j, a] - ys[t - 1, b, j, a]) ** 2
+                k = 0 if change else 2
+                out[b, k] += d2
+                out[b, k + 1] += 1.0
+    return out

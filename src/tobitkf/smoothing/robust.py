@@ -390,13 +390,12 @@ def _offline(
         # occlusion, so the physical typical speed is the floor there
         q = np.ascontiguousarray(np.where(acc, q, np.maximum(q, pj[:, k.J_Q])))
         sc2, tau_c = f["error_sd"] ** 2, f["error_tau"]
-    fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0)
-    guess = None
+    guess, shared = None, None
     if params["shared_errors"]:  # what the guesses and the carried samples share, in the sd
         # the coordinates there are (a 2-D sequence has a third axis of zeros)
-        guess = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred,
-                               (yk, rvar, steps, q, sc2, tau, tau_c), par, order,
-                               float(params["max_reject"]), var, b0)  # fmt: skip
+        guess, shared = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred, yk,
+                                       steps, par, order, float(params["max_reject"]))  # fmt: skip
+    fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0, shared)
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):
@@ -409,29 +408,26 @@ def _offline(
 
 
 def _shared_errors(
-    ys: Array, acc: NDArray[np.bool_], inferred: NDArray[np.bool_], smoother: tuple[Any, ...],
-    par: NDArray[np.int64], order: NDArray[np.int64], max_reject: float, var: Array, b0: int,
-) -> tuple[Array, NDArray[np.int64]] | None:  # fmt: skip
-    """Add to ``var`` the errors the guesses and the carried samples share
-    (:mod:`.robust_shared`); ``smoother`` = the smoother's inputs ``(yk, rvar, steps, q,
-    sc2, tau, tau_c)``. Returns the guesses' per-axis error variance and the steps it
-    rests on, per body (None without guesses)."""
+    ys: Array, acc: NDArray[np.bool_], inferred: NDArray[np.bool_], yk: Array, steps: Array,
+    par: NDArray[np.int64], order: NDArray[np.int64], max_reject: float,
+) -> tuple[tuple[Array, NDArray[np.int64]] | None, Array | None]:  # fmt: skip
+    """The errors the guesses and the carried samples share (:mod:`.robust_shared`):
+    the guesses' per-axis error variance and the steps it rests on, per body (None
+    without guesses), and the smoother's ``shared`` input, ``(T, B, J)`` (None when no
+    sample shares an error); ``yk`` the samples the smoother gets."""
     from tobitkf.smoothing import robust_shared as rs
 
-    yk, steps = smoother[0], smoother[2]
     guess = None
-    sds = []
+    guess_sd = carried_sd = None
     used = inferred & acc
     if used.any():
         guess = rs.guess_error_variance(ys, acc, inferred)
-        sds.append(np.where(used, np.sqrt(guess[0])[None, :, None], np.nan))
+        guess_sd = np.where(used, np.sqrt(guess[0])[None, :, None], np.nan)
     carried = ~acc & np.isfinite(yk[..., 0])
     if carried.any():
         max_lag = rs.max_lag_frames(max_reject, steps)
-        sds.append(rs.carried_error_sd(ys, acc, carried, par, order, max_lag))
-    if sds:
-        rs.add_shared_errors(fit_kernels().smooth_run, *smoother, sds, var, b0)
-    return guess
+        carried_sd = rs.carried_error_sd(ys, acc, carried, par, order, max_lag)
+    return guess, rs.shared_signal(guess_sd, carried_sd, acc.shape)
 
 
 def fit_kernels() -> Any:

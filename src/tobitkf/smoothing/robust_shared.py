@@ -25,7 +25,8 @@ sample (the standard deviation of its error) and 0 at every other sample, it giv
 each frame ``Σ w_i σ_i``, the weights being those its estimate puts on the samples: 0 far
 from them, the samples' own σ in the middle of a long stretch. The samples of a stretch
 share one error, so the per-axis variance added is ``(Σ w_i σ_i)²``; guesses and carried
-samples are added as two independent errors.
+samples are added as two independent errors. The two signals are two more axes of the
+smoother's own run (:func:`shared_signal` gives its input), which share its gains.
 
 **How far off the guesses are, from the recording.** Where a joint's state changes
 between tracked and inferred, the step between the two samples carries the guess's
@@ -53,7 +54,6 @@ stationary limit ``2 Var(o)``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -66,10 +66,10 @@ __all__ = [
     "MAX_STARTS",
     "MIN_CHANGES",
     "MIN_PAIRS",
-    "add_shared_errors",
     "carried_error_sd",
     "guess_error_variance",
     "max_lag_frames",
+    "shared_signal",
 ]
 
 Array = NDArray[np.float64]
@@ -93,31 +93,18 @@ def guess_error_variance(
     number of steps at a change of state it rests on: ``ys (T, B, J, D)`` the samples
     the smoother saw, ``acc (T, B, J)`` accepted by the gates, ``inferred (T, B, J)``.
     NaN where fewer than :data:`MIN_CHANGES` steps."""
-    D = ys.shape[-1]
-    ok = acc & np.isfinite(ys[..., 0])
-    both = ok[1:] & ok[:-1]
-    d2 = np.sum(np.diff(ys, axis=0) ** 2, axis=-1)
-    d2 = np.where(both, d2, 0.0)
-    change = both & (inferred[1:] != inferred[:-1])
-    # the tracked steps of the joints with guesses (their motion, not the other joints')
-    tracked = both & ~inferred[1:] & ~inferred[:-1] & (inferred & ok).any(axis=0)[None]
-    n_c = change.sum(axis=(0, 2))
-    n_t = tracked.sum(axis=(0, 2))
-    mc = _body_sums(d2 * change) / np.maximum(n_c, 1)
-    mt = _body_sums(d2 * tracked) / np.maximum(n_t, 1)
-    s2 = np.maximum(mc - mt, 0.0) / D
+    sums = _kernels().guess_sums(np.ascontiguousarray(ys, dtype=float),
+                                 np.ascontiguousarray(acc, dtype=bool),
+                                 np.ascontiguousarray(inferred, dtype=bool))  # fmt: skip
+    n_c, n_t = sums[:, 1].astype(np.int64), sums[:, 3].astype(np.int64)
+    mc = sums[:, 0] / np.maximum(n_c, 1)
+    mt = sums[:, 2] / np.maximum(n_t, 1)
+    s2 = np.maximum(mc - mt, 0.0) / ys.shape[-1]
     return np.where((n_c >= MIN_CHANGES) & (n_t > 0), s2, np.nan), n_c
 
 
-def _body_sums(x: Array) -> Array:
-    """Per body, the sum of ``x (T, B, ...)``, each body's in the same order whatever the
-    other bodies (a chunk of bodies gives the bits of the whole batch)."""
-    B = x.shape[1]
-    return np.ascontiguousarray(np.moveaxis(x, 1, 0)).reshape(B, -1).sum(axis=1)
-
-
 def _kernels() -> Any:
-    """The compiled carried-sample kernel (imports numba on first use)."""
+    """The compiled kernels (imports numba on first use)."""
     from tobitkf.smoothing import _shared_kernels
 
     return _shared_kernels
@@ -152,47 +139,18 @@ def carried_error_sd(
     )  # fmt: skip
 
 
-def add_shared_errors(
-    smooth: Any,
-    yk: Array,
-    rvar: Array,
-    steps: Array,
-    q: Array,
-    sc2: Array,
-    tau: float,
-    tau_c: Array,
-    sds: Sequence[Array],
-    var: Array,
-    b0: int,
-) -> None:
-    """Add ``Σ_k (Σ_i w_i σ_ki)²`` to ``var (T, B0, J)`` (bodies from ``b0``): ``smooth``
-    the smoother (``smooth_run`` of the noise kernels), ``yk`` .. ``tau_c`` its inputs,
-    ``sds`` up to three ``(T, B, J)`` arrays, each the ``σ_i`` of the samples that share
-    one kind of error (NaN elsewhere: they count as 0 where ``yk`` has a sample), the
-    kinds independent of each other. One smoother run: the kinds are its three axes,
-    which share the gains. Columns without such a sample are untouched."""
-    if not 1 <= len(sds) <= 3:
-        raise ValueError(f"one to three kinds of shared error, got {len(sds)}")
-    cols = np.isfinite(sds[0]).any(axis=0)
-    for sd in sds[1:]:
-        cols |= np.isfinite(sd).any(axis=0)
-    if not cols.any():
-        return
-    bb, jj = np.nonzero(cols)
-    T, K, (B, J) = yk.shape[0], bb.size, cols.shape
-    n = bb * J + jj  # flat columns: one gather per array
-    present = np.isfinite(yk.reshape(T, B * J, -1)[:, n, 0])
-    sig = np.zeros((T, 1, K, 3))
-    for k, sd in enumerate(sds):
-        sig[:, 0, :, k] = np.nan_to_num(sd.reshape(T, B * J)[:, n], nan=0.0)
-    sig[:, 0][~present] = np.nan  # no sample: the smoother predicts
-    w = np.empty((T, 1, K, 3))
-    wv = np.empty((T, 1, K))
-
-    def gather(a: Array) -> Array:  # (T, B, J) -> (T, 1, K), C-contiguous
-        return np.ascontiguousarray(a.reshape(T, B * J)[:, n].reshape(T, 1, K))
-
-    smooth(sig, gather(rvar), steps, gather(q), np.reshape(sc2, B * J)[n].reshape(1, K), tau,
-           np.reshape(tau_c, B * J)[n].reshape(1, K), w, wv, 0)  # fmt: skip
-    wk = w[:, 0, :, : len(sds)]
-    var[:, b0 + bb, jj] += np.einsum("tkc,tkc->tk", wk, wk)
+def shared_signal(guess_sd: Array | None, carried_sd: Array | None,
+                  shape: tuple[int, ...]) -> Array | None:  # fmt: skip
+    """The smoother's ``shared`` input (``smooth_run`` of the noise kernels): the guesses'
+    ``σ_i`` positive, the carried samples' negative, 0 elsewhere (the two kinds are never
+    at one sample: a guess was accepted, a carried sample was not); ``guess_sd`` and
+    ``carried_sd`` ``(T, B, J)`` NaN except at their samples, or None. None when both
+    are None: nothing to add."""
+    if guess_sd is None and carried_sd is None:
+        return None
+    out = np.zeros(shape)
+    if guess_sd is not None:
+        np.copyto(out, guess_sd, where=np.isfinite(guess_sd))
+    if carried_sd is not None:
+        np.copyto(out, -carried_sd, where=np.isfinite(carried_sd))
+    return out
