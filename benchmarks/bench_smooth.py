@@ -15,8 +15,9 @@ package's Kalman core, ``tk.kalman_filter`` (3-D random walk per joint, A = H = 
 same positions, all joints of all recordings as one batch), measured in the same run.
 The first call of each method is not timed (it loads, or compiles, the robust kernels).
 Live: the per-frame latency of the live default (``robust_online``) and of ``atkf``
-through ``LiveSmoother`` for one body, six bodies in one array and six bodies keyed by id,
-next to a minimal numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
+through ``LiveSmoother`` for one body, six bodies in one array, and one and six bodies
+keyed by id (the keyed stream's own one-body cost beside the array's), next to a minimal
+numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
 method) over a folder of small recordings, start-up included, with 1 and 2 processes, and
 over the KIMORE folder (best of 3 runs).
 ``--markdown`` ends with the README's table (``make bench``).
@@ -207,7 +208,7 @@ def live_latency(
     n: int, methods: tuple[str, ...] = ("robust_online", "atkf"), rounds: int = LIVE_ROUNDS
 ) -> dict:
     """Per-frame latency (us) of live methods (the live default first): one body, six in
-    an array, six keyed by id. Each is streamed ``rounds`` times, the rounds of all of
+    an array, one and six keyed by id. Each is streamed ``rounds`` times, the rounds of all of
     them taking turns, and the round with the lowest median is kept: a burst of the
     shared machine's noise then spoils one round, not one configuration."""
     if n < 2:
@@ -217,11 +218,13 @@ def live_latency(
     one = seqs[0].positions
     six = np.stack([s.positions for s in seqs], axis=1)  # (n, 6, J, 3)
     keyed = [{b: six[k, b] for b in range(6)} for k in range(n)]
+    one_keyed = [{0: frame} for frame in one]
     runs: dict[str, list] = {"minimal numpy KF update, 1 body": []}
     for _ in range(rounds):
         runs["minimal numpy KF update, 1 body"].append(minimal_kf_latency(n))
         for method in methods:
             for label, frames in (("1 body", list(one)), ("6 bodies in one array", list(six)),
+                                  ("1 body keyed by id", one_keyed),
                                   ("6 bodies keyed by id", keyed)):  # fmt: skip
                 live = tk.LiveSmoother(topo, method, fps=30.0)
                 lat = _latencies(live, frames, None)
@@ -311,10 +314,11 @@ def print_markdown(
             print(f"| {name} | {np.median(lat):.0f} | {np.percentile(lat, 99):.0f} |")
         names = list(live)
         ratios = []
-        for k in range(1, len(names), 3):  # per method: 1 body, 6 in an array, 6 keyed
-            one, arr, keyed = (np.median(live[names[k + i]]) for i in range(3))
+        for k in range(1, len(names), 4):  # per method: 1 body, 6 in an array, 1 and 6 keyed
+            one, arr, one_keyed, keyed = (np.median(live[names[k + i]]) for i in range(4))
             method = names[k].split("(")[1].split(")")[0]
-            ratios.append(f"{method} {arr / one:.1f}× in one array, {keyed / one:.1f}× keyed by id")
+            ratios.append(f"{method} {arr / one:.1f}× in one array, {keyed / one:.1f}× keyed by "
+                          f"id ({keyed / one_keyed:.1f}× one body keyed by id)")  # fmt: skip
         print()
         print("Median per frame, six bodies / one body: " + "; ".join(ratios) + ".")
     if files:
