@@ -45,7 +45,9 @@ _P00, _P01, _P02, _P11, _P12, _P22 = (k * L for k in range(9, 15))  # covariance
 #: rows of a block's state (smooth_run): without, and with the two shared-error axes
 _NZ0, _NZ = 15, 21
 _S0, _S1 = 15 * L, 18 * L  # the shared-error axes' (x, v, c) rows, after the covariance
-_NU = 8  # rows of a block's inputs: the samples' three axes, then
+#: rows of a block's inputs: the samples' three axes, then their variance, q, phi and
+#: the two shared-error signals (read only with shared errors)
+_NU = 8
 _UR, _UQ, _UPHI, _US0, _US1 = 3 * L, 4 * L, 5 * L, 6 * L, 7 * L
 
 
@@ -505,10 +507,11 @@ def _write_block(
     """The block's smoothed positions and variances of one frame into the outputs."""
     for w in range(w_n):
         n = n0 + w
-        var[n] = s[_P00 + w]
+        v = s[_P00 + w]
         if ind is not None:
             g, c = s[_S0 + w], s[_S1 + w]
-            var[n] = s[_P00 + w] + (g * g + c * c)
+            v = v + (g * g + c * c)
+        var[n] = v
         est[3 * n] = s[w]
         est[3 * n + 1] = s[3 * L + w]
         est[3 * n + 2] = s[6 * L + w]

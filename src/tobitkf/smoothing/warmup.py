@@ -18,7 +18,9 @@ sees why the first run is slow. :func:`warmup` does it for many methods, in para
 processes (``make install`` runs ``tobitkf warmup``).
 
 The kernels' types do not depend on the recording (every array reaches them as C-ordered
-float64, bool or int), so warming on the small recording covers real files.
+float64, bool or int), so warming on the small recording covers real files; a kernel
+compiled apart for data where nothing fails (the robust smoother without shared errors)
+is warmed on a still, clean recording too.
 """
 
 from __future__ import annotations
