@@ -102,7 +102,7 @@ def main() -> None:
     )  # fmt: skip
     args = ap.parse_args()
     if args.live_only:
-        show_live(live_latency(args.live_frames), LIVE_ROUNDS)
+        show_live(live_latency(args.live_frames), args.live_frames, LIVE_ROUNDS)
         return
     # the live latency is taken a round at a time at points spread over the run (the
     # start, after each data set, after the large batch): a quiet spell of the shared
@@ -147,7 +147,7 @@ def main() -> None:
         table += big_batch(args.big, args.repeats, names)
         live_rounds.append(live_latency(args.live_frames, rounds=1))
     live = best_rounds(live_rounds)
-    show_live(live, len(live_rounds))
+    show_live(live, args.live_frames, len(live_rounds))
     files = files_per_second(args.files) if args.files > 0 else {}
     kimore = kimore_command()
     if args.markdown:
@@ -250,10 +250,10 @@ def best_rounds(rounds: list[dict]) -> dict:
     return out
 
 
-def show_live(live: dict, rounds: int) -> None:
+def show_live(live: dict, n: int, rounds: int) -> None:
+    """Print the live latencies of :func:`live_latency` (``n`` frames streamed)."""
     if not live:
         return
-    n = len(next(iter(live.values()))) + 1
     print(f"\nlive, 25 joints, {n} frames, best of {rounds} rounds (us per frame):")
     for name, lat in live.items():
         print(f"  {name:55s} median {np.median(lat):7.1f}  p99 {np.percentile(lat, 99):7.1f}")
