@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -89,6 +91,26 @@ def test_recording_noise_estimate():
     g = recording_gates(y[:, None], np.full(4000, 1 / 30), TOPO.parents, 2)
     np.testing.assert_allclose(g["noise_sd"], 2.0, rtol=0.05)
     assert np.all(g["v_max"] > 0) and g["margin"] > 0 and np.isfinite(g["bone_tol_rel"])
+
+
+@pytest.mark.parametrize("method", ["robust", "robust_online"])
+def test_noise_free_pixels_get_a_finite_sd(method):
+    """A track with no noise at all (constant velocity, exact pixels): the fit finds next
+    to no noise, and the smoother's variance, a rounding error away from zero, gives an
+    sd of about zero, not NaN and a numpy warning (found by hand, 2-D and pixels)."""
+    t = np.arange(50.0)
+    x = np.stack(
+        [np.tile(640 + 0.5 * t[:, None], (1, 4)), np.tile(144 + np.arange(4) * 13.0, (50, 1))],
+        -1,
+    )
+    seq = SkeletonSequence(positions=x, topology=Topology.from_names(list("abcd")), fps=30,
+                           units="px")  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = tk.smooth(seq, method=method)
+    assert np.isfinite(out.std).all()
+    assert np.all(out.std >= 0) and out.std.max() < 1e-3  # px: the track has no noise
+    np.testing.assert_allclose(out.positions, x, atol=1e-6)
 
 
 def test_pixel_glitches_removed_clean_samples_kept():

@@ -17,6 +17,15 @@ frame share one stepper (one array of bodies, one kernel call per frame: the ste
 treat bodies independently), so six people cost about what one array of six does; a
 dropped body's slot is stepped with an empty frame until its whole group is gone.
 
+Units. The physical parameters are in metres: a stream in ``"cm"`` or ``"mm"`` (say
+so with ``units``) is converted to metres for the method and back, as :func:`smooth`
+does. A stream of pixels (a 2-D stream, unless ``units`` says otherwise) or of unknown
+units has no physical scale; the robust methods' gates (speed bound, margins, noise,
+bone tolerance) are then measured on a sample recording of the same set-up
+(``gates_from``, as :func:`smooth` measures them on the recording itself), or all of
+them are given in the stream's units. Without either, the first frame is refused: gates
+in metres on pixels would reject every motion.
+
 Example
 -------
 >>> live = LiveSmoother("kinect_v2", method="atkf", fps=30)        # doctest: +SKIP
@@ -34,7 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.skeleton.sequence import TrackingState
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import (
     DEFAULT_LIVE_METHOD,
@@ -43,13 +52,15 @@ from tobitkf.smoothing.api import (
     method_names,
     run_method,
 )
-from tobitkf.smoothing.keypoints import drop_third_axis, pad_third_axis
+from tobitkf.smoothing.keypoints import drop_third_axis, length_scale, pad_third_axis
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
+from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     TRACKED_CODE,
+    frame_steps,
     measurements,
 )
 
@@ -147,8 +158,7 @@ class LiveSmoother:
 
     Frames are ``(J, 3)`` (or ``(B, J, 3)``), or ``(J, 2)`` image keypoints (the first
     frame fixes it). Live, nothing of the recording is known in advance: the methods'
-    parameters apply as given, in metres for 3-D tracks; for pixels give them in pixels
-    (``robust_online``: ``v_max``, ``margin``, ``noise_sd``, ... and ``bones``).
+    parameters apply as given, in metres (module docstring, "Units").
 
     Parameters
     ----------
@@ -167,6 +177,16 @@ class LiveSmoother:
     max_missing : float
         Seconds a body keyed by id is predicted after its last frame before it is dropped
         (default 1).
+    units : str, optional
+        ``"m"``, ``"cm"``, ``"mm"`` (converted to metres for the method and back) or
+        ``"px"``; None: metres for a 3-D stream, pixels for a 2-D one.
+    gates_from : SkeletonSequence or ndarray, optional
+        A recording of the same set-up (same camera or tracker, same units as the stream;
+        an array ``(T, J, D)`` or ``(T, B, J, D)`` at ``fps``, NaN where missing): the
+        robust methods' gates are measured on it as :func:`smooth` measures them on a
+        recording in pixels (``robust_scale.recording_gates``); parameters given here
+        override them. Needed, unless those parameters are all given, for a stream in
+        pixels or unknown units.
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
@@ -180,12 +200,18 @@ class LiveSmoother:
         up_axis: int | None = None,
         inferred_noise_factor: float | None = None,
         max_missing: float = 1.0,
+        units: str | None = None,
+        gates_from: Any = None,
         **params: Any,
     ) -> None:
         self.spec = get_method(method)
         if "offline" in params:
             raise ValueError("offline smoothing needs the whole recording: it cannot run live")
         self.params = check_params(method, params)
+        if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
+            raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
+        self.units = units
+        self._given = frozenset(params)
         if not self.spec.is_causal(self.params):
             raise ValueError(
                 f"method {method!r} cannot run live (it looks ahead in time); causal "
@@ -213,7 +239,84 @@ class LiveSmoother:
         if not ok:
             raise ValueError(f"max_missing must be a number of seconds >= 0, got {max_missing!r}")
         self.max_missing = float(max_missing)
+        self._gates_dims: int | None = None  # the coordinates of the gates' sample
+        self._scale = 1.0  # metres per unit of the stream (set at its first frame)
+        if gates_from is not None:
+            self._measure_gates(gates_from)
         self.reset()
+
+    @property
+    def _gated(self) -> bool:
+        """Whether the method has the robust family's gates (metric parameters)."""
+        return "gates" in self.spec.defaults
+
+    def _measure_gates(self, sample: Any) -> None:
+        """The robust gates measured on ``sample`` (``gates_from``), under the given ones."""
+        if not self._gated:
+            raise ValueError(f"gates_from: method {self.method!r} has no gates to measure")
+        if isinstance(sample, SkeletonSequence):
+            if sample.units != self.units and self.units is not None:
+                raise ValueError(
+                    f"gates_from: the sample is in {sample.units!r}, the stream in {self.units!r}"
+                )
+            pos, states, steps = sample.positions, sample.tracking_state, frame_steps(sample)[0]
+        else:
+            try:
+                pos = np.asarray(sample, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError("gates_from: expected a SkeletonSequence or an array") from None
+            states, steps = None, np.full(len(pos), 1.0 / self.fps)
+        if pos.ndim == 3:
+            pos = pos[:, None]
+            states = None if states is None else np.asarray(states)[:, None]
+        J = self.topology.n_joints
+        if pos.ndim != 4 or pos.shape[2] != J or pos.shape[3] not in (2, 3) or len(pos) < 3:
+            raise ValueError(
+                f"gates_from: expected at least 3 frames of shape (J, D) or (B, J, D) with "
+                f"J = {J} and D = 2 or 3, found {pos.shape}"
+            )
+        if np.isinf(pos).any():
+            raise ValueError(f"gates_from: {_INFINITE}")
+        dims = pos.shape[-1]
+        scale = length_scale(self._stream_units(dims))
+        if scale is not None and scale != 1.0:
+            pos = pos * scale
+        ys, _ = measurements(pad_third_axis(pos), states)
+        gates = recording_gates(ys, steps, self.topology.parents, dims)
+        measured = {k: gates[k] for k in GATE_PARAMS if k not in self._given}
+        self.params = check_params(self.method, {**self.params, **measured})
+        self._gates_dims = dims
+
+    def _stream_units(self, dims: int) -> str:
+        """The stream's units: as given, else metres in 3-D and pixels in 2-D."""
+        return self.units if self.units is not None else ("m" if dims == 3 else "px")
+
+    def _check_gates(self, dims: int) -> None:
+        """At the first frame: the robust gates can apply to a stream of ``dims``."""
+        if self._gates_dims is not None:
+            scale = length_scale(self._stream_units(dims))
+            self._scale = 1.0 if scale is None else scale
+            if dims != self._gates_dims:
+                raise ValueError(
+                    f"positions: {dims} coordinates, but the gates were measured on a "
+                    f"sample with {self._gates_dims}"
+                )
+            return
+        units = self._stream_units(dims)
+        scale = length_scale(units)
+        self._scale = 1.0 if scale is None else scale
+        if not self._gated or scale is not None:
+            return
+        if self.params.get("gates") == "physical":  # the user's word: in the stream's units
+            return
+        missing = [k for k in GATE_PARAMS if k not in self._given]
+        if missing:
+            raise ValueError(
+                f"a stream in {units} has no physical scale, and {self.method!r}'s gates are "
+                f"in metres: pass gates_from=<a recording of the same set-up> to measure "
+                f"them (as smooth() does), or give {', '.join(missing)} in the stream's "
+                f"units (or units='m' if it is in metres)"
+            )
 
     def reset(self) -> None:
         """Forget the stream; the next frame starts new tracks."""
@@ -332,6 +435,8 @@ class LiveSmoother:
         batch_pos = pos[None] if single else pos
         batch_states = None if states is None else (states[None] if single else states)
         dims = batch_pos.shape[-1]
+        if self._scale != 1.0:  # centimetres or millimetres: the method works in metres
+            batch_pos = batch_pos * self._scale
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
         kw: dict[str, Any] = {}
@@ -341,6 +446,8 @@ class LiveSmoother:
             kw["n_dims"] = dims
         out = stepper.step(ys, missing, batch_states, dt, **kw)
         out = drop_third_axis(np.asarray(out), dims)
+        if self._scale != 1.0:
+            out = out / self._scale
         return out[0] if single else out
 
     def _update_bodies(
@@ -429,6 +536,8 @@ class LiveSmoother:
             D = arr.shape[-1]
             if (arr.ndim == 3 and arr.shape[1] == J and D == getattr(self, "_dims", D)
                     and D in (2, 3) and not np.isinf(arr).any()):  # fmt: skip
+                if getattr(self, "_dims", None) is None:
+                    self._check_gates(D)
                 self._dims = D
                 return bodies, arr, None
         checked = []
@@ -467,6 +576,8 @@ class LiveSmoother:
         dims = getattr(self, "_dims", None)
         if dims is not None and shape[-1] != dims:
             raise ValueError(f"positions: this stream has {dims} coordinates, found {shape[-1]}")
+        if dims is None:
+            self._check_gates(shape[-1])
         self._dims = shape[-1]
         if shape[-2] != self.topology.n_joints:
             raise ValueError(

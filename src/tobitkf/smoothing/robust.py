@@ -520,7 +520,9 @@ def _robust_bodies(
             for name, a in f[0].items():
                 fits[0][name][b] = a
             fits[1].extend(f[1])
-    std = np.sqrt(var, out=var)
+    # a variance a hair below zero is rounding (a track with almost no noise, whose fit
+    # finds next to none): its sd is 0, not NaN
+    std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
     diags = [
         {
             "rejected_fraction": rejected[:, b].sum(axis=0) / T,
@@ -665,7 +667,7 @@ class RobustStepper:
             self.rejected[None], self.std[None], 0,
         )  # fmt: skip
         step_guard().guard_frames(y1, m1, out, self.std[None], 0, *self._guard)
-        np.sqrt(self.std, out=self.std)
+        np.sqrt(np.maximum(self.std, 0.0, out=self.std), out=self.std)
         return out[0]
 
 

@@ -24,8 +24,9 @@ bodies of one call pooled, joint by joint; see docs/robust.md, "Keypoints in any
   (plus ``bone_tol_abs``), and any shorter one is (``bone_centre``, ``bone_tol_rel = 1``).
 
 These statistics read the whole recording, so ``robust_online`` with them is causal in
-its estimates but not in its parameters; live smoothing needs ``gates="physical"`` and
-values in the data's units.
+its estimates but not in its parameters. A live stream (``LiveSmoother``) has them
+measured on a sample recording of the same set-up (``gates_from``), or is given all of
+:data:`GATE_PARAMS` in its own units.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from numpy.typing import NDArray
 __all__ = [
     "BONE_MAX_FACTOR",
     "BONE_TOL_SPREAD",
+    "GATE_PARAMS",
     "MARGIN_SDS",
     "MEDIAN_WINDOW",
     "V_MAX_FACTOR",
@@ -63,6 +65,8 @@ BONE_MAX_FACTOR = 1.1
 MEDIAN_WINDOW = 5
 #: consistency factor of the median absolute deviation for a normal distribution
 _MAD = 1.4826
+#: the parameters :func:`recording_gates` gives (besides the 2-D ``bone_centre``)
+GATE_PARAMS = ("noise_sd", "speed_sd", "v_max", "margin", "bone_tol_abs", "bone_tol_rel")
 
 
 @contextmanager
