@@ -90,6 +90,9 @@ def test_plan_auto_format_keeps_ntu(tmp_path):
         ("centered=false", ("centered", False)),
         ("jitter-radius=0.05", ("jitter_radius", 0.05)),
         ("up_axis=None", ("up_axis", None)),
+        ("v_max=hands:6", ("v_max", {"hands": 6.0})),
+        ("v_max=hands:6, arms:4.5", ("v_max", {"hands": 6.0, "arms": 4.5})),
+        ("preset=a:b", ("preset", "a:b")),  # text with a colon stays text
     ],
 )
 def test_parse_param(text, expected):

@@ -79,6 +79,21 @@ def test_smooth_never_overwrites_and_rejects_unknown_parameters(tmp_path):
         assert res.exit_code != 0 and "method 'sgf' does not have" in res.output
 
 
+def test_smooth_takes_a_value_per_body_region(tmp_path):
+    """``-p v_max=hands:6`` changes the hands' bound only, recorded in the provenance."""
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    res = _run("smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path / "o"), "-p",
+               "v_max=hands:6")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    side = json.loads((tmp_path / "o" / "a.robust.json").read_text())
+    used = np.asarray(side["provenance"]["params"]["v_max"])
+    groups = get_topology("kinect_v2").joint_groups()
+    assert np.all(used[groups["hands"]] == 6.0) and np.all(used[groups["legs"]] == 10.0)
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path / "p"),
+                                   "-p", "v_max=1,2,3"])  # fmt: skip
+    assert res.exit_code == 1 and "got 3 values" in res.output and "one per joint" in res.output
+
+
 def test_smooth_json_summary_and_parallel_jobs(tmp_path):
     for i in range(3):
         save([_recording(seed=i)], tmp_path / f"r{i}.csv", format="csv")

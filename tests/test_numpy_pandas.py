@@ -72,16 +72,42 @@ def test_array_keywords_refused_for_sequences():
         tk.smooth(_walk().tolist())
 
 
+def test_array_with_timestamps_equals_the_sequence():
+    a = _walk(D=3)
+    ts = np.cumsum(np.random.default_rng(5).uniform(0.02, 0.05, len(a)))
+    seq = SkeletonSequence(a, Topology.from_names([f"k{j}" for j in range(3)]), timestamps=ts,
+                           units=None)  # fmt: skip
+    np.testing.assert_array_equal(tk.smooth(a, timestamps=ts), tk.smooth(seq).positions)
+    assert not np.array_equal(tk.smooth(a, timestamps=ts), tk.smooth(a))
+    with pytest.raises(ValueError, match="timestamps"):
+        tk.smooth(a, timestamps=ts[:-1])
+
+
+def test_containers_passed_by_habit_name_the_way_in():
+    xr = pytest.importorskip("xarray")
+    with pytest.raises(TypeError, match=r"tobitkf\.from_dataframe\(df\)"):
+        tk.smooth(pd.DataFrame({"a_x": [1.0], "a_y": [2.0]}))
+    with pytest.raises(TypeError, match=r"tobitkf\.from_movement\(ds\)"):
+        tk.smooth(xr.Dataset({"position": (("time",), [1.0])}))
+    with pytest.raises(TypeError, match=r"np\.asarray"):
+        tk.smooth(_walk().tolist(), fps=30)
+
+
 # ------------------------------------------------------------------------------ pandas
-def _assert_same(a: SkeletonSequence, b: SkeletonSequence) -> None:
+def _assert_same_samples(a: SkeletonSequence, b: SkeletonSequence) -> None:
+    """The per-sample arrays and the body id (what a table holds without its sidecar)."""
     np.testing.assert_array_equal(a.positions, b.positions)
     for name in ("confidence", "tracking_state", "std", "sample_state", "timestamps"):
         x, y = getattr(a, name), getattr(b, name)
         assert (x is None) == (y is None), name
         if x is not None:
             np.testing.assert_array_equal(x, y, err_msg=name)
-    assert (a.fps, a.units, a.body_id, a.joint_names) == (b.fps, b.units, b.body_id,
-                                                          b.joint_names)  # fmt: skip
+    assert (a.body_id, a.joint_names) == (b.body_id, b.joint_names)
+
+
+def _assert_same(a: SkeletonSequence, b: SkeletonSequence) -> None:
+    _assert_same_samples(a, b)
+    assert (a.fps, a.units) == (b.fps, b.units)
     assert a.topology.parents == b.topology.parents
 
 
@@ -162,6 +188,29 @@ def test_dataframe_round_trip_property(T, J, D, layout, seed):
     if np.isnan(conf).all():
         s = s.replace(confidence=None)
     _assert_same(s, r)
+
+
+def test_read_csv_of_a_tobitkf_csv_is_a_dataframe_from_dataframe_reads(tmp_path):
+    """``pandas.read_csv`` of tobitkf's own CSV (the flat layout) gives, through
+    ``from_dataframe``, the samples ``tk.load`` reads from the file (another reader)."""
+    rng = np.random.default_rng(6)
+    conf = rng.uniform(0, 1, (25, 3))
+    ts = np.cumsum(rng.uniform(0.02, 0.05, 25))
+    a = SkeletonSequence(_walk(T=25), TOPO, timestamps=ts, confidence=conf, units="px",
+                         body_id=3)  # fmt: skip
+    b = a.replace(positions=_walk(T=25, seed=7), body_id=8)
+    k = tk.SkeletonSequence(_walk(T=30, J=25, D=3) / 100, "kinect_v2", fps=30.0,
+                            tracking_state=rng.integers(0, 3, (30, 25)))  # fmt: skip
+    for seqs, name in [([a, b], "two.csv"), ([tk.smooth(k)], "smoothed.csv")]:
+        path = tmp_path / name
+        tk.save(seqs, path)
+        via_pandas = tk.from_dataframe(pd.read_csv(path))
+        from_file = tk.load(path)
+        assert len(via_pandas) == len(from_file) == len(seqs)
+        for x, y in zip(via_pandas, from_file, strict=True):
+            _assert_same_samples(x, y)
+    with pytest.raises(ValueError, match="flat columns"):
+        tk.from_dataframe(pd.DataFrame({"a_x": [1.0], "a_q": [2.0]}))
 
 
 # ------------------------------------------------------------------------------ CSV

@@ -218,8 +218,18 @@ def test_irregular_timestamps_and_validation():
         robust_smooth(seq, tau=0.0)
     with pytest.raises(ValueError):
         robust_smooth(seq, margin=-1)
-    with pytest.raises(ValueError):
-        robust_smooth(seq, v_max={"hands": 8.0})  # missing regions
+    with pytest.raises(ValueError, match="unknown"):
+        robust_smooth(seq, v_max={"handz": 8.0})  # a region that is not one
+    # a mapping names the regions it changes; the others keep their defaults
+    some = robust_smooth(seq, v_max={"hands": 8.0, "legs": 6.0})
+    every = robust_smooth(seq, v_max={"hands": 8.0, "arms": 5.0, "torso": 3.0, "legs": 6.0})
+    np.testing.assert_array_equal(some.positions, every.positions)
+    used = some.metadata["diagnostics"]["params"]["v_max"]
+    legs = seq.topology.joint_groups()["legs"]
+    assert np.all(np.asarray(used)[legs] == 6.0)
+    assert np.array_equal(used, every.metadata["diagnostics"]["params"]["v_max"])
+    with pytest.raises(ValueError, match=r"one per joint \(25 for topology 'kinect_v2'\); got 3"):
+        robust_smooth(seq, v_max=(6.0, 5.0, 4.0))
     with pytest.raises(TypeError):
         robust_smooth(truth)
     # checked as smooth() checks them, not coerced (bool("no") is True, int(1.5) is 1)

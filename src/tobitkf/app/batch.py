@@ -12,6 +12,7 @@ from __future__ import annotations
 import errno
 import fnmatch
 import os
+import re
 import tempfile
 import time
 import warnings
@@ -530,8 +531,9 @@ def _run_all(
 def parse_param(text: str) -> tuple[str, Any]:
     """Parse ``key=value`` from the command line.
 
-    Values become int, float, a tuple of floats (comma-separated), a bool
-    (``true``/``false``) or stay a string.
+    Values become int, float, a tuple of floats (comma-separated), a mapping of names to
+    numbers (``hands:6,arms:4``: per body region; the regions not named keep their
+    defaults), a bool (``true``/``false``) or stay a string.
     """
     if "=" not in text:
         raise ValueError(f"parameter {text!r} is not of the form key=value")
@@ -558,4 +560,13 @@ def parse_param(text: str) -> tuple[str, Any]:
             return key, tuple(float(v) for v in raw.split(","))
         except ValueError:
             pass
+    items = [item.partition(":") for item in raw.split(",")]
+    if all(sep and _NAME.fullmatch(name.strip()) for name, sep, _ in items):
+        try:
+            return key, {name.strip(): float(value) for name, _, value in items}
+        except ValueError:
+            pass  # text with a colon: the method's check says what it expects
     return key, raw
+
+
+_NAME = re.compile(r"[A-Za-z_]\w*")

@@ -15,6 +15,12 @@ columns ``(individual, keypoint, coord)`` with coord ``x``, ``y``, ``z``, ``conf
 ``tracking_state``, ``std``, ``sample_state`` — the layout of a DeepLabCut table, whose
 ``scorer`` level and ``likelihood`` coordinate :func:`from_dataframe` reads too.
 
+Flat layout (what ``pandas.read_csv`` gives of tobitkf's own CSV, and of many pose
+tools' exports): one row per frame, an optional ``time`` (or ``timestamp``) column, an
+optional ``body`` column (rows grouped by its value), and columns ``<keypoint>_x``,
+``<keypoint>_y`` [``_z``] with optionally ``<keypoint>_confidence`` (or ``_likelihood``),
+``_state`` (tracking state), ``_sd`` and ``_sample`` (sample state).
+
 ``DataFrame.attrs`` carries ``fps``, ``units``, ``topology`` (name), ``parents`` and
 ``up_axis``, so a round trip through :func:`from_dataframe` gives back the sequences;
 without them, units are metres for 3-D and unknown for 2-D and the keypoints have no
@@ -144,8 +150,9 @@ def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
     if kp_col is None or "x" not in df.columns or "y" not in df.columns:
         raise ValueError(
             "expected a long table with columns keypoint (or bodypart, joint), x, y[, z] "
-            "and optionally frame, time, individual, confidence; or wide MultiIndex "
-            f"columns; got columns {list(df.columns)}"
+            "and optionally frame, time, individual, confidence; or flat columns "
+            "<keypoint>_x, <keypoint>_y[, _z] (tobitkf's CSV); or wide MultiIndex "
+            f"columns; got columns {list(df.columns)[:8]}"
         )
     ind_col = _pick(df.columns, "individual")
     conf_col = _pick(df.columns, "confidence")
@@ -181,13 +188,60 @@ def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
     return out
 
 
+#: the flat layout's column suffixes and the roles they give
+_FLAT = {"x": "x", "y": "y", "z": "z", "confidence": "confidence", "likelihood": "confidence",
+         "state": "tracking_state", "sd": "std", "sample": "sample_state"}  # fmt: skip
+
+
+def _flat_columns(columns: Sequence[Any]) -> dict[Any, tuple[str, str] | None] | None:
+    """Column -> ``(keypoint, role)`` (None for the time, body and index columns) when
+    ``columns`` are the flat layout (module docstring) with at least one ``<k>_x``; else
+    None."""
+    out: dict[Any, tuple[str, str] | None] = {}
+    for c in columns:
+        name = str(c)
+        low = name.lower()
+        if low in ("time", "timestamp", "body", "body_id") or low.startswith("unnamed:"):
+            out[c] = None
+            continue
+        base, sep, suffix = name.rpartition("_")
+        if not sep or not base or suffix.lower() not in _FLAT:
+            return None
+        out[c] = (base, _FLAT[suffix.lower()])
+    return out if any(v is not None and v[1] == "x" for v in out.values()) else None
+
+
+def _from_flat(df: Any, attrs: dict[str, Any], layout: dict[Any, Any]) -> list[SkeletonSequence]:
+    pd = _pandas()
+    low = {str(c).lower(): c for c, v in layout.items() if v is None}
+    time_col = low.get("time", low.get("timestamp"))
+    body_col = low.get("body", low.get("body_id"))
+    keys = [c for c, v in layout.items() if v is not None]
+    wide = df[keys].copy()
+    wide.columns = pd.MultiIndex.from_tuples([layout[c] for c in keys])
+    if time_col is not None:
+        wide.index = pd.Index(df[time_col].to_numpy(dtype=float), name="time")
+    if body_col is None:
+        return _from_wide(wide, attrs)
+    ids = df[body_col].to_numpy()
+    out = []
+    for ident in pd.unique(ids):
+        (seq,) = _from_wide(wide[ids == ident], attrs)
+        out.append(seq.replace(body_id=ident.item() if hasattr(ident, "item") else ident))
+    return out
+
+
 def from_dataframe(df: Any) -> list[SkeletonSequence]:
-    """Sequences (one per individual) from a long or wide DataFrame (module docstring);
-    ``ValueError`` naming what is missing otherwise."""
+    """Sequences (one per individual) from a long, wide or flat DataFrame (module
+    docstring); ``ValueError`` naming what is missing otherwise."""
     pd = _pandas()
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"expected a pandas DataFrame, got {type(df).__name__}")
     attrs = dict(df.attrs)
     if isinstance(df.columns, pd.MultiIndex):
         return _from_wide(df, attrs)
+    if _pick(df.columns, "keypoint") is None:
+        layout = _flat_columns(list(df.columns))
+        if layout is not None:
+            return _from_flat(df, attrs, layout)
     return _from_long(df, attrs)

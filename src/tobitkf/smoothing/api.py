@@ -142,6 +142,32 @@ def check_params(method: str, params: Mapping[str, Any]) -> dict[str, Any]:
     return full
 
 
+def _refuse_other_containers(sequence: Any) -> None:
+    """A ``TypeError`` that names the way in for the containers people pass by habit."""
+    module = type(sequence).__module__.split(".")[0]
+    if module == "pandas":
+        raise TypeError(
+            f"smooth takes a SkeletonSequence or a NumPy array, not a pandas "
+            f"{type(sequence).__name__}: convert it with tobitkf.from_dataframe(df)"
+        )
+    if module == "xarray":
+        raise TypeError(
+            f"smooth takes a SkeletonSequence or a NumPy array, not an xarray "
+            f"{type(sequence).__name__}: convert a movement dataset with "
+            "tobitkf.from_movement(ds)"
+        )
+    if (
+        isinstance(sequence, (list, tuple))
+        and sequence
+        and not any(isinstance(s, SkeletonSequence) for s in sequence)
+    ):
+        raise TypeError(
+            f"smooth takes a SkeletonSequence, a list of them or a NumPy array, got a "
+            f"{type(sequence).__name__} of {type(sequence[0]).__name__}: for keypoint "
+            "coordinates pass np.asarray(...) of shape (T, J, D)"
+        )
+
+
 def _check_untangle(value: Any) -> Any:
     if value == "auto" or isinstance(value, bool):
         return value
@@ -208,6 +234,7 @@ def smooth(
     confidence: Any = None,
     units: str | None = None,
     topology: Any = None,
+    timestamps: Any = None,
     **params: Any,
 ) -> Any:
     """Smooth every joint of a skeleton sequence (or a list of them, one per body), or
@@ -225,10 +252,11 @@ def smooth(
         number of frames, time base and topology go to the method together, stacked on
         a body axis. An array ``(T, J, D)`` (frames, keypoints, coordinates, D = 2 or 3)
         or ``(T, D)`` (one point), NaN where missing, gives an array of the same shape,
-        like :func:`scipy.signal.savgol_filter`; ``fps``, ``confidence``, ``units`` and
-        ``topology`` describe it (:func:`tobitkf.smoothing.arrays.sequence_from_array`:
-        by default 30 fps, no confidence, unknown units, keypoints without bones) and
-        are refused for sequences, which carry their own.
+        like :func:`scipy.signal.savgol_filter`; ``fps``, ``timestamps``, ``confidence``,
+        ``units`` and ``topology`` describe it
+        (:func:`tobitkf.smoothing.arrays.sequence_from_array`: by default 30 fps, no
+        confidence, unknown units, keypoints without bones) and are refused for
+        sequences, which carry their own.
     method : str
         A registered method (``tobitkf methods``; default :data:`DEFAULT_METHOD`,
         ``"robust"``).
@@ -267,11 +295,13 @@ def smooth(
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
     opts = (offline, up_axis, factor, min_conf, untangle)
-    described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology}
+    described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology,
+                 "timestamps": timestamps}  # fmt: skip
     if isinstance(sequence, np.ndarray):
         seq, single = sequence_from_array(sequence, **described)
         est = _smooth_group([seq], spec, full, *opts)[0].positions
         return est[:, 0] if single else est
+    _refuse_other_containers(sequence)
     given = [k for k, v in described.items() if v is not None]
     if given:
         raise TypeError(

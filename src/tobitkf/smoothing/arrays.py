@@ -26,6 +26,7 @@ def sequence_from_array(
     confidence: Any = None,
     units: str | None = None,
     topology: Topology | str | None = None,
+    timestamps: Any = None,
 ) -> tuple[SkeletonSequence, bool]:
     """The sequence of an array, and whether the array was a single point ``(T, D)``.
 
@@ -39,6 +40,8 @@ def sequence_from_array(
         ``units="m"`` for the physical gates of 3-D tracks in metres)
     topology : a :class:`Topology` or built-in name with J joints (bones for the bone
         gate); None: J keypoints without bones (gated by speed and confidence alone)
+    timestamps : (T,) seconds, increasing (irregular frames); None: the frames are
+        ``1 / fps`` apart
     """
     if not isinstance(array, np.ndarray):
         raise TypeError(f"expected a NumPy array, got {type(array).__name__}")
@@ -72,6 +75,6 @@ def sequence_from_array(
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.number))):
         raise TypeError(f"fps must be a number, got {fps!r}")
     return (
-        SkeletonSequence(pos, topo, fps=fps, confidence=conf, units=units),
+        SkeletonSequence(pos, topo, fps=fps, confidence=conf, units=units, timestamps=timestamps),
         single,
     )

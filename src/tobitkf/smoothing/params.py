@@ -164,6 +164,14 @@ def optional(check: Validator) -> Validator:
     return lambda name, value: None if value is None else check(name, value)
 
 
+def over_default(value: Any, default: Any) -> Any:
+    """``value`` for a parameter whose default is ``default``: a mapping given for a
+    mapping default (a value per body region) overrides only the keys it names."""
+    if isinstance(value, Mapping) and isinstance(default, Mapping):
+        return {**default, **value}
+    return value
+
+
 def region_value(name: str, value: Any) -> Any:
     """A positive number (inf allowed), one for every body region, or per-joint values.
 
@@ -174,10 +182,10 @@ def region_value(name: str, value: Any) -> Any:
         missing = [g for g in BODY_REGIONS if g not in value]
         extra = sorted(set(value) - set(BODY_REGIONS))
         if missing or extra:
-            raise ValueError(
-                f"{name} needs one value per body region {BODY_REGIONS}; "
-                f"missing {missing}, unknown {extra}"
+            what = ", ".join(
+                [f"missing {missing}"] * bool(missing) + [f"unknown {extra}"] * bool(extra)
             )
+            raise ValueError(f"{name} takes a value per body region {BODY_REGIONS}; {what}")
         return {g: positive_or_inf(f"{name}[{g}]", value[g]) for g in BODY_REGIONS}
     if np.ndim(value) > 0:
         arr = np.asarray(value, dtype=float)

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tobitkf.skeleton.topology import Topology
-from tobitkf.smoothing.params import Validator
+from tobitkf.smoothing.params import Validator, over_default
 
 __all__ = [
     "LiveStepper",
@@ -191,7 +191,9 @@ class MethodSpec:
     def validate(
         self, params: Mapping[str, Any], also_valid: tuple[str, ...] = ()
     ) -> dict[str, Any]:
-        """The complete parameter set: defaults overridden by ``params``, each validated.
+        """The complete parameter set: defaults overridden by ``params``, each validated
+        (a mapping given for a mapping default, such as a per-region value, overrides the
+        keys it names).
 
         Unknown names raise ``ValueError`` listing the valid ones (and ``also_valid``,
         names the caller accepts beside the method's own; they are not returned).
@@ -207,6 +209,7 @@ class MethodSpec:
         params = {k: v for k, v in params.items() if k not in also_valid}
         out = dict(self.defaults)
         for name, value in params.items():
+            value = over_default(value, self.defaults[name])
             check = self.validators.get(name)
             out[name] = value if check is None else check(name, value)
         if self.check is not None:

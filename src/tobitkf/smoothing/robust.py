@@ -135,6 +135,7 @@ from tobitkf.smoothing.params import (
     nonneg_float,
     nonneg_or_inf,
     one_of,
+    over_default,
     positive_or_inf,
     region_value,
 )
@@ -762,7 +763,7 @@ def robust_smooth(
         )
     full = dict(ROBUST_DEFAULTS if offline else ONLINE_DEFAULTS)
     checks = ROBUST_VALIDATORS if offline else ONLINE_VALIDATORS
-    full.update({k: checks[k](k, v) for k, v in params.items()})
+    full.update({k: checks[k](k, over_default(v, full[k])) for k, v in params.items()})
     T, J = sequence.n_frames, sequence.n_joints
     if T == 0:
         return sequence.replace(metadata={**sequence.metadata, "diagnostics": {}})

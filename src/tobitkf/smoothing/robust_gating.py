@@ -73,7 +73,13 @@ def region_values(topology: Any, values: Any, name: str) -> Array:
                     raise ValueError(f"{name}: no value for body region {g!r}")
                 out[idx] = float(values[g])
         return out
-    arr = np.broadcast_to(np.asarray(values, dtype=float), (J,)).copy()
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim > 0 and arr.shape != (J,):
+        raise ValueError(
+            f"{name}: one number, one per body region, or one per joint ({J} for topology "
+            f"{topology.name!r}); got {arr.size} values"
+        )
+    arr = np.broadcast_to(arr, (J,)).copy()
     if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise ValueError(f"{name} must be positive, got {values!r}")
     return arr
