@@ -94,6 +94,45 @@ def test_smooth_takes_a_value_per_body_region(tmp_path):
     assert res.exit_code == 1 and "got 3 values" in res.output and "one per joint" in res.output
 
 
+def _no_rate(tmp_path):
+    """A recording whose file states no frame rate (a generic CSV without a time column
+    or sidecar), with three samples below the confidence threshold."""
+    seq = _recording().replace(fps=None)
+    conf = np.ones(seq.positions.shape[:2])
+    conf[10, :3] = 0.05
+    path = tmp_path / "norate.csv"
+    save([seq.replace(confidence=conf)], path, format="csv", sidecar=False)
+    return path
+
+
+def test_smooth_says_when_it_assumes_a_frame_rate_and_takes_fps(tmp_path):
+    path = _no_rate(tmp_path)
+    res = _run("smooth", str(path), "-o", str(tmp_path / "a"), "--json")
+    (row,) = json.loads(res.output)
+    assert any("no frame rate" in w and "--fps" in w for w in row["warnings"])
+    assert json.loads((tmp_path / "a" / "norate.robust.json").read_text())["fps"] is None
+    # the samples below the confidence threshold count as missing, as the method saw them
+    assert row["missing_percent"] == pytest.approx(100 * 3 / (60 * 25))
+    res = _run("smooth", str(path), "-o", str(tmp_path / "a"), "--fps", "60", "--json")
+    (row,) = json.loads(res.output)
+    assert not row["warnings"] and not row["extra"].get("skipped")  # another rate: redone
+    assert json.loads((tmp_path / "a" / "norate.robust.json").read_text())["fps"] == 60.0
+    # info says the rate is unknown instead of a duration in frames
+    info = json.loads(_run("info", str(path), "--json").output)["sequences"][0]
+    assert info["fps"] is None and info["duration_s"] is None
+    assert "no frame rate in the file" in _run("info", str(path)).output
+
+
+def test_offline_for_a_method_offline_by_itself_says_so(tmp_path):
+    save([_recording()], tmp_path / "a.csv", format="csv")
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "--offline"])
+    assert res.exit_code != 0 and "'robust' is offline already" in res.output
+    # an earlier output passed over names the file a re-run with another method would write
+    _run("smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path))
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path), "-o", str(tmp_path / "k"), "-m", "kf"])
+    assert "a.robust.kf.csv" in res.output
+
+
 def test_smooth_json_summary_and_parallel_jobs(tmp_path):
     for i in range(3):
         save([_recording(seed=i)], tmp_path / f"r{i}.csv", format="csv")

@@ -37,6 +37,8 @@ class Job:
     output_format: str
     input_format: str = "auto"
     source_label: str | None = None
+    #: frame rate (Hz) for an input that states none (no rate, no timestamps)
+    input_fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -249,6 +251,7 @@ def plan_jobs(
     detect: Callable[[Path], str] | None = None,
     input_format: str = "auto",
     overwrite: bool = False,
+    input_fps: float | None = None,
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
@@ -306,7 +309,7 @@ def plan_jobs(
             refused.append(FileSummary(str(src), None, False, reason))
             continue
         taken.update({f.resolve(): src for f in files})
-        jobs.append(Job(src, out, fmt, input_format))
+        jobs.append(Job(src, out, fmt, input_format, input_fps=input_fps))
     return jobs, refused
 
 
@@ -353,6 +356,26 @@ def _percent(values: Iterable[np.ndarray]) -> float:
     return 100.0 * float(np.nanmean(np.concatenate(arrays)))
 
 
+def _with_rate(sequences: list[Any], fps: float | None) -> tuple[list[Any], tuple[str, ...]]:
+    """The sequences with ``fps`` where they state no rate (nor timestamps), and what was
+    assumed (a warning for the summary) where none was given either."""
+    bare = [s.fps is None and s.timestamps is None for s in sequences]
+    if not any(bare):
+        return sequences, ()
+    if fps is not None:
+        return [s.replace(fps=fps) if b else s for s, b in zip(sequences, bare, strict=True)], ()
+    return sequences, ("the file states no frame rate: smoothed as 30 fps (give --fps)",)
+
+
+def _not_measured(smoothed: Any, raw: Any) -> np.ndarray:
+    """Samples without a measurement the method used: NaN or not tracked in the input,
+    or below the confidence threshold (the output's sample states 2, 3 and 4)."""
+    states = getattr(smoothed, "sample_state", None)
+    if states is not None:
+        return np.isin(states, (2, 3, 4))
+    return np.isnan(raw.positions).any(axis=-1)
+
+
 def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False) -> FileSummary:
     """Read, smooth and write one file; any failure becomes a summary with its reason."""
     from tobitkf.io import detect_format, load
@@ -367,10 +390,11 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
+        sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
-        said = tuple(dict.fromkeys(str(w.message) for w in caught))
+        said = tuple(dict.fromkeys([*rate, *(str(w.message) for w in caught)]))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
             s.metadata["provenance"]["source"] = {
                 "path": job.source_label or str(job.source),
@@ -386,7 +410,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
             seconds=time.perf_counter() - start,
         )
     diags = [s.metadata.get("diagnostics", {}) for s in smoothed]
-    missing = [np.isnan(s.positions).any(axis=-1) for s in sequences]
+    missing = [_not_measured(s, raw) for s, raw in zip(smoothed, sequences, strict=True)]
     return FileSummary(
         source=str(job.source),
         output=str(job.output),

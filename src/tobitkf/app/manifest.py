@@ -77,17 +77,22 @@ def run_settings(
     offline: bool = False,
     output_format: str = "auto",
     input_format: str = "auto",
+    input_fps: float | None = None,
 ) -> dict[str, Any]:
     """What an output depends on besides its input: method, complete parameters
     (defaults filled in and validated, ``offline`` and the formats included) and the
-    tobitkf version, as stored in the manifest."""
+    tobitkf version, as stored in the manifest. ``offline`` is whether the output used
+    later frames (``--offline``, or a method that is offline by itself), as the output's
+    provenance says; ``input_fps`` the rate given to inputs that state none."""
     from tobitkf.core.version import __version__
-    from tobitkf.smoothing.api import COMMON_KEYWORDS, check_params
+    from tobitkf.smoothing.api import COMMON_KEYWORDS, check_params, get_method
 
     full = check_params(method, params)
     full.update({k: params[k] for k in COMMON_KEYWORDS if k in params})
-    full["offline"] = bool(offline)
+    full["offline"] = bool(offline) or not get_method(method).is_causal(full)
     full["input_format"] = input_format
+    if input_fps is not None:
+        full["input_fps"] = float(input_fps)
     full["output_format"] = output_format
     return {"method": method, "params": _plain(full), "tobitkf_version": __version__}
 

@@ -52,6 +52,7 @@ class RemoteJob:
     output_format: str
     input_format: str = "auto"
     size: int | None = None
+    input_fps: float | None = None
 
     def side_outputs(self) -> list[str]:
         """URLs of the output's side files (the CSV's JSON sidecar)."""
@@ -76,7 +77,8 @@ class RemoteJob:
                 why = f"cannot read it: {type(exc).__name__}: {exc}"
                 return FileSummary(self.source, None, False, why, extra=extra)
             out_local = Path(tmp) / "out" / self.output.rsplit("/", 1)[1]
-            job = Job(local, out_local, self.output_format, self.input_format, self.source)
+            job = Job(local, out_local, self.output_format, self.input_format, self.source,
+                      self.input_fps)  # fmt: skip
             summary = run_task(job, method, params, offline, expect)
             error = summary.error.replace(str(local), self.source) if summary.error else None
             ok = summary.ok
@@ -132,6 +134,7 @@ def plan_remote(
     pattern: str = "*",
     output_format: str = "auto",
     input_format: str = "auto",
+    input_fps: float | None = None,
 ) -> tuple[list[RemoteJob], list[FileSummary]]:
     """Jobs for inputs named by URLs or paths (folders listed recursively) with outputs
     under ``out_url`` (a URL or a path), keeping the relative layout; the output format
@@ -178,7 +181,8 @@ def plan_remote(
                 continue
             taken[out] = source
             size = listing[path].get("size")
-            jobs.append(RemoteJob(source, out_fs.unstrip_protocol(out), fmt, input_format, size))
+            jobs.append(RemoteJob(source, out_fs.unstrip_protocol(out), fmt, input_format, size,
+                                  input_fps))  # fmt: skip
     return jobs, refused
 
 

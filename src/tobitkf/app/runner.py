@@ -100,6 +100,7 @@ def plan_run(
     output_format: str = "auto",
     input_format: str = "auto",
     overwrite: bool = False,
+    fps: float | None = None,
 ) -> Plan:
     """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
     :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
@@ -116,6 +117,7 @@ def plan_run(
             pattern=pattern,
             output_format=output_format,
             input_format=input_format,
+            input_fps=fps,
         )
         return Plan(list(jobs), refused, Discovered([]))
     from tobitkf.io import detect_format
@@ -129,6 +131,7 @@ def plan_run(
         detect=detect_format,
         input_format=input_format,
         overwrite=overwrite,
+        input_fps=fps,
     )
     return Plan(list(jobs), refused, found)
 
@@ -184,6 +187,7 @@ def run_planned(
     on_done: Callable[[FileSummary], None] | None = None,
     warm_first: bool | None = None,
     on_compile: Callable[[], Any] | None = None,
+    fps: float | None = None,
 ) -> list[FileSummary]:
     """Run planned jobs with the output folder's manifest; summaries in job order, then
     the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
@@ -194,6 +198,8 @@ def run_planned(
     method's kernels into numba's cache in this process before the files, so that
     workers load them instead of each compiling them (:mod:`tobitkf.smoothing.warmup`);
     ``on_compile`` is called if that compiles anything (e.g. to say why it waits).
+    ``fps``: the frame rate the jobs give inputs that state none (recorded in the
+    manifest's settings, so that another rate redoes them).
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
@@ -205,6 +211,7 @@ def run_planned(
         offline=offline,
         output_format=output_format,
         input_format=input_format,
+        input_fps=fps,
     )
     with Manifest(outdir) as manifest:
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
@@ -268,6 +275,7 @@ def smooth_files(
     pattern: str = "*",
     overwrite: bool = False,
     on_done: Callable[[FileSummary], None] | None = None,
+    fps: float | None = None,
 ) -> list[FileSummary]:
     """Smooth every recording in ``inputs`` (files or folders, searched recursively) into
     ``out_dir``, as ``tobitkf smooth`` does, and return one summary per input.
@@ -285,6 +293,8 @@ def smooth_files(
     overwrite : redo inputs the manifest says are done, and replace files at the output
         names that are not tobitkf outputs.
     on_done : called with each file's summary as it finishes (e.g. a progress bar).
+    fps : frame rate (Hz) of inputs that state none (no rate, no timestamps); without it
+        they are smoothed as 30 fps, and their summaries say so.
 
     Returns
     -------
@@ -308,6 +318,7 @@ def smooth_files(
         output_format=output_format,
         input_format=input_format,
         overwrite=overwrite,
+        fps=fps,
     )
     refused = [
         *plan.refused,
@@ -326,4 +337,5 @@ def smooth_files(
         n_jobs=jobs,
         client=client,
         on_done=on_done,
+        fps=fps,
     )

@@ -23,7 +23,14 @@ def describe_sequence(seq: SkeletonSequence) -> dict[str, Any]:
         "frames": int(seq.n_frames),
         "joints": int(seq.n_joints),
         "fps": None if seq.fps is None else float(seq.fps),
-        "duration_s": float(times[-1] - times[0]) if times.size > 1 else 0.0,
+        # without a rate or timestamps the frames have no times (None: unknown)
+        "duration_s": (
+            None
+            if seq.fps is None and seq.timestamps is None
+            else float(times[-1] - times[0])
+            if times.size > 1
+            else 0.0
+        ),
         "missing_percent": 100.0 * float(missing.mean()) if missing.size else 0.0,
         "has_timestamps": seq.timestamps is not None,
     }

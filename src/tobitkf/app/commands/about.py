@@ -37,8 +37,8 @@ def info(path, input_format, as_json):
         label = f"body {k}" + ("" if body["body_id"] is None else f" (id {body['body_id']})")
         console.print(
             f"{escape(label)}: {body['frames']} frames, {body['joints']} joints "
-            f"({body['topology']}), rate {_fmt(body['fps'])} Hz, duration "
-            f"{_fmt(body['duration_s'])} s, missing {_fmt(body['missing_percent'])} %"
+            f"({body['topology']}), {_rate(body)}, missing "
+            f"{_fmt(body['missing_percent'])} %"
         )
         if body.get("dt_range"):
             lo, med, hi = body["dt_range"]
@@ -53,6 +53,13 @@ def info(path, input_format, as_json):
             rows,
             digits=3,
         )
+
+
+def _rate(body: dict) -> str:
+    if body["fps"] is None and not body["has_timestamps"]:
+        return "no frame rate in the file (tobitkf smooth takes 30 fps, or --fps)"
+    rate = "timestamps" if body["fps"] is None else f"rate {_fmt(body['fps'])} Hz"
+    return f"{rate}, duration {_fmt(body['duration_s'])} s"
 
 
 # --------------------------------------------------------------------------- methods

@@ -64,6 +64,13 @@ from tobitkf.core.jsonable import dumps
     "-F", "--input-format", help="Input format of every file read (-f is the output's)."
 )
 @click.option(
+    "--fps",
+    type=click.FloatRange(min=0, min_open=True),
+    help="Frame rate (Hz) of inputs that state none (pose-estimator tables, keypoint "
+    "JSON); files with their own rate or timestamps keep it. Without it such files are "
+    "smoothed as 30 fps, and the summary says so.",
+)
+@click.option(
     "--overwrite",
     is_flag=True,
     help="Replace files at the output names that are not earlier tobitkf outputs "
@@ -117,6 +124,7 @@ def smooth(
     method,
     output_format,
     input_format,
+    fps,
     overwrite,
     params,
     offline,
@@ -132,6 +140,7 @@ def smooth(
     over inputs done before with the same method and parameters (--overwrite redoes them).
     Inputs and OUTDIR may be fsspec URLs (s3://bucket/folder; docs/cluster.md).
     """
+    from tobitkf.app.batch import strip_extension
     from tobitkf.app.manifest import ManifestBusy
     from tobitkf.app.pool import Interrupted
     from tobitkf.app.runner import plan_run, run_planned
@@ -144,7 +153,10 @@ def smooth(
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
     if offline and not get_method(method).offline_ok:
-        _fail(f"--offline runs an RTS pass, which method {method!r} does not have")
+        try:  # the library's reason, naming the methods that have one
+            check_params(method, {"offline": True})
+        except ValueError as exc:
+            _fail(f"--offline: {exc}")
     _check_cluster_options(cluster, workers, jobs)
     if "://" not in outdir:
         _writable_folder(outdir, "the outputs")  # once, before any file is read
@@ -157,6 +169,7 @@ def smooth(
             output_format=output_format,
             input_format=input_format,
             overwrite=overwrite,
+            fps=fps,
         )
     except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
@@ -168,9 +181,11 @@ def smooth(
         if ours:
             names = ", ".join(p.name for p in ours[:3])
             more = f" and {len(ours) - 3} more" if len(ours) > 3 else ""
+            stem = strip_extension(ours[0].name)
+            again = f"{stem}.{method}{ours[0].name[len(stem) :]}"
             err_console.print(
                 f"passed over {len(ours)} file(s) that are tobitkf outputs of an earlier "
-                f"run (smoothing them again would write *.{method}.{method}.*): {names}{more}"
+                f"run (smoothing them again would write {again}): {names}{more}"
             )
     if passed_over and not as_json:
         names = ", ".join(p.name for p in passed_over[:3])
@@ -208,6 +223,7 @@ def smooth(
                     # local workers share this machine's kernel cache
                     warm_first=cluster is None or cluster == "local",
                     on_compile=None if as_json else _compiling_notice(method),
+                    fps=fps,
                 )
             except ManifestBusy as exc:
                 _fail(str(exc))
