@@ -133,6 +133,26 @@ def test_offline_for_a_method_offline_by_itself_says_so(tmp_path):
     assert "a.robust.kf.csv" in res.output
 
 
+def test_files_of_one_name_are_told_apart(tmp_path):
+    for sub in ("kinect", "vicon"):
+        (tmp_path / "in" / sub).mkdir(parents=True)
+        save([_recording()], tmp_path / "in" / sub / "m01.csv", format="csv")
+    res = CliRunner(env={"COLUMNS": "200"}).invoke(
+        app, ["smooth", str(tmp_path / "in"), "-o", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 0 and "kinect/m01.csv" in res.output and "vicon/m01.csv" in res.output
+    # named one by one, their outputs would collide: the second is refused, saying why
+    files = [str(tmp_path / "in" / sub / "m01.csv") for sub in ("kinect", "vicon")]
+    res = CliRunner().invoke(app, ["smooth", *files, "-o", str(tmp_path / "p")])
+    assert res.exit_code == 1 and "give the folder they share" in res.output
+
+
+def test_no_empty_table_when_every_file_fails(tmp_path):
+    (tmp_path / "bad.csv").write_text("time,Head_x\n0.0,abc\n")
+    res = CliRunner().invoke(app, ["smooth", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 1 and "FAILED" in res.output and "bodies" not in res.output
+
+
 def test_smooth_json_summary_and_parallel_jobs(tmp_path):
     for i in range(3):
         save([_recording(seed=i)], tmp_path / f"r{i}.csv", format="csv")

@@ -384,3 +384,40 @@ def test_a_narrow_terminal_gets_whole_words_not_squeezed_columns(monkeypatch):
     out = buf.getvalue()
     assert "file:" not in out and "x" * 40 not in out and "x" * 18 in out
     assert "% clipped/rejected" in out and max(len(line) for line in out.splitlines()) <= 70
+
+
+def _commands(group, prefix=()):
+    for name, cmd in sorted(group.commands.items()):
+        if isinstance(cmd, click.Group):
+            yield from _commands(cmd, (*prefix, name))
+        else:
+            yield (*prefix, name)
+
+
+@pytest.mark.parametrize("command", list(_commands(app)), ids=" ".join)
+def test_help_fits_a_narrow_terminal(command):
+    """Every command's help at 50 columns: no line wider (a choice list as click's
+    ``[a|b|c]`` metavar was one unbroken line of 200 characters), and the short help of
+    each subcommand is more than its first abbreviation ("Eq.")."""
+    res = CliRunner().invoke(app, [*command, "--help"], terminal_width=50)
+    assert res.exit_code == 0, res.output
+    wide = [line for line in res.output.splitlines() if len(line) > 50]
+    assert not wide, wide
+    if command == ("evaluate",):  # a list wraps between its names, not inside them
+        assert all(f"{name}," in res.output for name in ("atkf2016", "one_euro", "kf+rts"))
+    cmd = app
+    for part in command:
+        cmd = cmd.get_command(None, part)
+    assert len(cmd.get_short_help_str(limit=200)) > 12
+
+
+def test_columns_is_obeyed_when_piped():
+    """Piped output gets whole tables (160 columns) unless COLUMNS says otherwise."""
+    env = {**os.environ, "COLUMNS": "50"}
+    out = subprocess.run([sys.executable, "-m", "tobitkf", "methods"], env=env,
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert max(len(line) for line in out.splitlines()) <= 50
+    env.pop("COLUMNS")
+    out = subprocess.run([sys.executable, "-m", "tobitkf", "methods"], env=env,
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert max(len(line) for line in out.splitlines()) > 100

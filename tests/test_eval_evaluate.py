@@ -197,3 +197,17 @@ def test_pool_scores_ignores_a_recording_without_scored_samples(track) -> None:
         assert p["max_cm"] == pytest.approx(100 * a.scores[0].max)
         assert p["M"] == pytest.approx(a.scores[0].smoothness_M)
         assert p["rmse_cm"] == pytest.approx(100 * a.scores[0].rmse)
+
+
+def test_text_tables_give_whole_method_names(track) -> None:
+    """The terminal tables of evaluate and benchmark cut no name ("robust_o")."""
+    from tobitkf.evaluation.benchmark import run_benchmark
+
+    long = "a_rather_long_method_label"
+    tab = evaluate_methods(track, track.positions, ["raw", (long, _identity)])
+    lines = tab.to_text().splitlines()
+    assert any(line.lstrip().startswith(long + " ") for line in lines)
+    assert len({len(line) for line in lines[:3]}) == 1  # the columns still line up
+    bench = run_benchmark(0, ["raw", (long, _identity)], duration=2.0).to_text().splitlines()
+    assert any(line.lstrip().startswith(long + " ") for line in bench)
+    assert len({len(line) for line in bench[:3]}) == 1

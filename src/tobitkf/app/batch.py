@@ -295,7 +295,11 @@ def plan_jobs(
             if f.resolve() in inputs:
                 reason = f"output {f} would overwrite an input"
             elif f.resolve() in taken:
-                reason = f"output {f} is already the output of {taken[f.resolve()]}"
+                reason = (
+                    f"output {f} is already the output of {taken[f.resolve()]} (files of one "
+                    "name from different folders: give the folder they share, whose layout "
+                    "the outputs keep)"
+                )
             elif f.is_dir():
                 reason = f"output {f} is a folder"
             elif not overwrite and f.exists() and smoothing_output_method(out) is None:

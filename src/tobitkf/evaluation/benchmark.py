@@ -103,10 +103,11 @@ class BenchmarkTable:
     def to_text(self) -> str:
         labels = list(LABEL_NAMES.values())
         head = ["method", "rmse", *labels, "p95", "M e-3", "lag", "95% ball"]
-        lines = ["  ".join(f"{h:>10}" for h in head)]
+        w = max(10, *(len(r.method) for r in self.rows))  # whole names: robust_online
+        lines = ["  ".join([f"{head[0]:>{w}}", *(f"{h:>10}" for h in head[1:])])]
         for r in self.rows:
             cells = [r.rmse, *[r.rmse_by_label[k] for k in labels], r.p95]
-            txt = [f"{r.method[:10]:>10}"] + [
+            txt = [f"{r.method:>{w}}"] + [
                 f"{100 * c:10.2f}" if np.isfinite(c) else f"{'-':>10}" for c in cells
             ]
             txt.append(f"{r.smoothness_M * 1e3:10.3f}")

@@ -207,11 +207,12 @@ class EvaluationTable:
             "lag",
             "95% ball",
         ]
-        lines = ["  ".join(f"{c:>8}" for c in cols)]
+        w = max(8, *(len(s.method) for s in self.scores))  # whole names: robust_online
+        lines = ["  ".join([f"{cols[0]:>{w}}", *(f"{c:>8}" for c in cols[1:])])]
         for s in self.scores:
             g = s.rmse_groups
             cells = [
-                s.method[:8],
+                f"{s.method:>{w}}",
                 s.rmse * 100,
                 g.get("hands", np.nan) * 100,
                 g.get("arms", np.nan) * 100,
@@ -229,7 +230,7 @@ class EvaluationTable:
             ]
             lines.append("  ".join(_fmt(c) for c in cells))
         lines.append(
-            f"{'truth':>8}  M = {self.truth_M * 1e3:.3f} e-3 m²; samples per raw class: "
+            f"{'truth':>{w}}  M = {self.truth_M * 1e3:.3f} e-3 m²; samples per raw class: "
             + ", ".join(f"{k} {v}" for k, v in self.class_counts.items())
             + "; 95% ball: % of samples within the 95 % ball of the method's sd"
         )
@@ -237,7 +238,7 @@ class EvaluationTable:
             names = sorted({n for s in self.scores for n in s.angles})
             lines.append("")
             lines.append(
-                f"{'angles':>8}  " + "  ".join(f"{n + ' best/d/fixed':>26}" for n in names)
+                f"{'angles':>{w}}  " + "  ".join(f"{n + ' best/d/fixed':>26}" for n in names)
             )
             for s in self.scores:
                 cells = []
@@ -248,7 +249,7 @@ class EvaluationTable:
                         if a
                         else " " * 26
                     )
-                lines.append(f"{s.method[:8]:>8}  " + "  ".join(cells))
+                lines.append(f"{s.method:>{w}}  " + "  ".join(cells))
         return "\n".join(lines)
 
 

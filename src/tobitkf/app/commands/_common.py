@@ -16,8 +16,8 @@ from rich.table import Table
 from rich.text import Text
 
 console = Console()
-if not console.is_terminal:  # files and pipes get whole tables, not 80-column cuts
-    console = Console(width=160)
+if not console.is_terminal and not os.environ.get("COLUMNS"):
+    console = Console(width=160)  # files and pipes get whole tables, not 80-column cuts
 err_console = Console(stderr=True)
 
 
@@ -81,6 +81,20 @@ class _RegistryChoice(click.Choice):
         return (*self._extra, *self._load())
 
 
+class _ListsChoices(click.Option):
+    """An option whose help ends with its choices, read when the help is shown: a long
+    list wraps with the help text in a narrow terminal, where click's ``[a|b|c]`` metavar
+    would be one unbroken line (the option shows ``metavar`` instead)."""
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        base = self.help
+        self.help = f"{base or ''} One of: {', '.join(self.type.choices)}.".strip()
+        try:
+            return super().get_help_record(ctx)
+        finally:
+            self.help = base
+
+
 def _method_names() -> list[str]:
     from tobitkf.smoothing.api import method_names
 
@@ -108,6 +122,8 @@ def _input_format_option(
         default="auto",
         show_default=True,
         type=_RegistryChoice(_readable_formats, extra=("auto",)),
+        metavar="FORMAT",
+        cls=_ListsChoices,
         help=help + " Auto-detected by default.",
     )
 

@@ -63,8 +63,8 @@ def _method_list(text: str | None) -> list[str] | None:
 @click.option(
     "--methods",
     default=None,
-    help="Comma-separated methods (default: raw,kf,atkf,atkf2016,sgf,kf+rts,"
-    "one_euro,kinect and our robust methods). `<name>+rts` = offline smoother.",
+    help="Comma-separated methods (default: raw, kf, atkf, atkf2016, sgf, kf+rts, "
+    "one_euro, kinect and our robust methods). `<name>+rts` = offline smoother.",
 )
 @click.option(
     "--pairs",

@@ -156,7 +156,7 @@ def oscillator_cmd(runs, steps, seed, seeds, as_json, as_markdown, outdir, rando
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @click.option("--markdown", "as_markdown", is_flag=True, help="Print a Markdown table.")
 def likelihood_cmd(datasets, seed, limits, as_json, as_markdown):
-    """Eq. 26-29: does maximum likelihood recover q and r of a censored AR(1)?"""
+    """Equations 26-29: does maximum likelihood recover q and r of a censored AR(1)?"""
     from tobitkf.paper.likelihood import RecoveryConfig, likelihood_recovery
 
     try:

@@ -14,6 +14,7 @@ from tobitkf.app.commands._common import (
     _fail,
     _input_format_option,
     _InputPath,
+    _ListsChoices,
     _method_names,
     _parse_params,
     _print_table,
@@ -58,6 +59,8 @@ from tobitkf.core.jsonable import dumps
     default="auto",
     show_default=True,
     type=_RegistryChoice(_writable_formats, extra=("auto",)),
+    metavar="FORMAT",
+    cls=_ListsChoices,
     help="Output format; auto keeps NTU as NTU and writes CSV otherwise.",
 )
 @_input_format_option(
@@ -236,9 +239,10 @@ def smooth(
     if as_json:
         click.echo(dumps([r.__dict__ for r in results]))
     else:
+        ok = [r for r in results if r.ok]
         rows = [
             [
-                Path(r.source).name,
+                name,
                 r.bodies,
                 r.frames,
                 r.joints,
@@ -246,10 +250,9 @@ def smooth(
                 r.missing_percent,
                 r.seconds,
             ]
-            for r in results
-            if r.ok
+            for r, name in zip(ok, _shown_names([r.source for r in ok]), strict=True)
         ]
-        if rows or not skipped:
+        if rows:
             _print_table(
                 f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
                 [
@@ -269,7 +272,8 @@ def smooth(
                 "method and parameters (manifest in the output folder; --overwrite redoes them)"
             )
         if rows or skipped:
-            console.print(f"outputs in {Path(outdir).resolve()}")
+            where = outdir if "://" in outdir else Path(outdir).resolve()
+            console.print(f"outputs in {where}")
         for r in results:
             for w in r.warnings:
                 err_console.print(f"[yellow]warning[/yellow] {escape(r.source)}: {escape(w)}")
@@ -286,6 +290,21 @@ def smooth(
         sys.exit(1)
 
 
+def _shown_names(sources: list[str]) -> list[str]:
+    """The files' names, or, when two share a name, their paths below the folder they
+    all sit in (a Kinect and a Vicon m01_s01_e01_positions.txt.gz)."""
+    names = [Path(s).name for s in sources]
+    if len(set(names)) == len(names):
+        return names
+    import os
+
+    local = [s for s in sources if "://" not in s]
+    if len(local) != len(sources):
+        return sources
+    root = os.path.commonpath([os.path.dirname(os.path.abspath(s)) for s in local])
+    return [os.path.relpath(os.path.abspath(s), root) for s in local]
+
+
 def _compiling_notice(method: str):
     def notice():
         err_console.print(
@@ -299,7 +318,7 @@ def _compiling_notice(method: str):
 @app.command()
 @click.option(
     "-m", "--method", "names", multiple=True, type=_RegistryChoice(_method_names),
-    help="Only this method (repeatable); default: every registered method.",
+    metavar="NAME", help="Only this method (repeatable); default: every registered method.",
 )  # fmt: skip
 @click.option(
     "-j", "--jobs", default=2, show_default=True, type=click.IntRange(1),
