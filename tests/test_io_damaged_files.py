@@ -1,15 +1,18 @@
-"""Cut-short and damaged binary files: one line saying what is wrong.
+"""Cut-short and damaged binary or compressed files: one line saying what is wrong.
 
 A truncated HDF5 file (DeepLabCut, SLEAP, movement) is reported as such, without the
-HDF5 library's back trace.
+HDF5 library's back trace; a gzip file that cannot be decompressed is reported as such
+by format detection too, not as an unrecognised format.
 """
 
 from __future__ import annotations
 
+import gzip
+
 import numpy as np
 import pytest
 
-from tobitkf.io import ReadError, load, save
+from tobitkf.io import ReadError, detect_format, load, save
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -89,3 +92,35 @@ def test_hdf5_signature_with_garbage_is_a_corrupt_hdf5_file(tmp_path):
     path.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)
     with pytest.raises(ReadError, match=r"x\.analysis\.h5: truncated or corrupt HDF5 file \("):
         load(path)
+
+
+def _kinect_text(frames: int = 60) -> bytes:
+    """UI-PRMD Kinect layout: 66 comma-separated values per line (60 frames: 40 kB, less
+    than the 64 kB that format detection reads)."""
+    rng = np.random.default_rng(1)
+    rows = rng.uniform(-50, 50, (frames, 66))
+    return "".join(",".join(f"{v:.6f}" for v in r) + "\n" for r in rows).encode()
+
+
+def test_truncated_gzip_is_reported_by_format_detection(tmp_path):
+    path = tmp_path / "m01_s01_e01_positions.txt.gz"
+    # the reader needs the angles file beside the positions
+    (tmp_path / "m01_s01_e01_angles.txt.gz").write_bytes(gzip.compress(_kinect_text()))
+    packed = gzip.compress(_kinect_text())
+    path.write_bytes(packed)
+    assert detect_format(path) == "uiprmd_kinect"  # the whole file is recognised
+    path.write_bytes(packed[: len(packed) // 2])
+    for call in (detect_format, load):
+        with pytest.raises(ReadError, match="corrupt or truncated gzip data") as info:
+            call(path)
+        assert "unrecognised" not in str(info.value)
+    # the same words as the reader itself, given the format
+    with pytest.raises(ReadError, match="corrupt or truncated gzip data"):
+        load(path, format="uiprmd_kinect")
+
+
+def test_gzip_magic_then_garbage_is_reported_as_corrupt_gzip(tmp_path):
+    path = tmp_path / "walk.csv"
+    path.write_bytes(b"\x1f\x8b" + b"not deflate data at all" * 4)
+    with pytest.raises(ReadError, match=r"walk\.csv: corrupt or truncated gzip data \("):
+        detect_format(path)
