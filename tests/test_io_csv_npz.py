@@ -48,9 +48,63 @@ def test_handwritten_csv(tmp_path):
     assert (s.tracking_state[:, 1] == 2).all()  # no state column: tracked
 
 
+def test_csv_na_is_a_missing_value_like_an_empty_field(tmp_path):
+    """R's write.csv writes NA for a missing value; read as the empty field is."""
+    rows = ["0.1,0.2,2,5,6,7", "{m},{m},{m},5,{m},7", "0.3,0.4,2,{m},6,{m}"]
+    read = {}
+    for m in ("", "NA", "na", " NA ", "NaN", "nan"):
+        p = tmp_path / f"m{len(read)}.csv"
+        p.write_text("a_x,a_y,a_z,b_x,b_y,b_z\n" + "".join(r.format(m=m) + "\n" for r in rows))
+        assert detect_format(p) == "csv"
+        (read[m],) = load(p)
+    for m, seq in read.items():
+        np.testing.assert_array_equal(seq.positions, read[""].positions, err_msg=repr(m))
+    np.testing.assert_array_equal(read["NA"].positions[0], [[0.1, 0.2, 2], [5, 6, 7]])
+    assert np.isnan(read["NA"].positions[1, 0]).all() and read["NA"].positions[1, 1, 0] == 5
+    assert np.isnan(read["NA"].positions[1, 1, 1])
+    p.write_text("a_x,a_y,a_z\n1,NAN1,3\n")  # a word starting with NA is no number
+    with pytest.raises(ReadError, match="field 2") as e:
+        read_csv(p)
+    assert e.value.line == 2
+
+
+def test_csv_dot_joined_column_names_read_like_underscored_ones(tmp_path):
+    """R's data.frame names (a.x, a.y, a.z) are the documented layout with '.' for '_'."""
+    body = "0.1,0.2,2,0.9,5,6,7,2\n0.3,,2.5,0.8,NA,6,7,1\n"
+    under, dot = tmp_path / "under.csv", tmp_path / "dot.csv"
+    under.write_text("a_x,a_y,a_z,a_sd,b_X,b_Y,b_Z,b_state\n" + body)
+    dot.write_text("a.x,a.y,a.z,a.sd,b.X,b.Y,b.Z,b.state\n" + body)
+    assert detect_format(dot) == "csv"
+    (u,), (d,) = load(under), load(dot)
+    assert d.joint_names == ("a", "b")
+    _assert_same(u, d)
+    np.testing.assert_array_equal(d.std, u.std)
+    np.testing.assert_array_equal(d.tracking_state[:, 1], [2, 1])
+    np.testing.assert_array_equal(d.positions[0], [[0.1, 0.2, 2], [5, 6, 7]])
+    # round trip: written back with '_', read the same
+    save(d, tmp_path / "back.csv")
+    _assert_same(d, load(tmp_path / "back.csv")[0])
+
+
+def test_csv_dot_keeps_every_underscored_layout_as_it_was(tmp_path):
+    p = tmp_path / "names.csv"
+    # '_x' wins: a.b_x is the joint 'a.b'; p_q.x is the joint 'p_q'
+    p.write_text("a.b_x,a.b_y,a.b_z,p_q.x,p_q.y,p_q.z\n1,2,3,4,5,6\n")
+    (s,) = load(p)
+    assert s.joint_names == ("a.b", "p_q")
+    np.testing.assert_array_equal(s.positions[0], [[1, 2, 3], [4, 5, 6]])
+    p.write_text("u.x,u.y,u.confidence\n1,2,0.5\n")  # 2-D keypoint with a score
+    (s,) = load(p)
+    assert s.n_dims == 2 and s.confidence[0, 0] == 0.5
+
+
 @pytest.mark.parametrize(
     ("text", "line", "match"),
     [
+        ("a.x,a_y,a.z\n1,2,3\n", 1, r"expected columns \['a\.x', 'a\.y', 'a\.z'\]"),
+        ("a.x,a.y,a.w\n1,2,3\n", 1, "expected columns"),  # a third axis was meant
+        # NA is a missing value, so not a body id
+        ("body,a_x,a_y,a_z\n1,0,0,0\nNA,0,0,0\n", 3, "expected a body id, found an empty"),
         ("time,a_x,a_z\n", 1, "expected columns"),
         ("a_x,a_y,a_z,b_x,b_y\n", 1, "expected columns"),  # 3-D and 2-D joints mixed
         ("a_x,a_y,a_z\n1,2\n", 2, "expected 3 values"),

@@ -120,12 +120,11 @@ def test_c3d_point_selection():
     everything = _load(C3D, points="all").joint_names
     default = load(path)[0]
     outputs = [
-        n
-        for n in everything
-        if any(k in n for k in ("Angle", "Force", "Moment", "Power", "GRF", "CentreOfMass"))
+        n for n in everything if any(k in n for k in ("Angle", "Force", "Moment", "Power", "GRF"))
     ]
     assert set(default.joint_names) == set(everything) - set(outputs)
     assert len(outputs) > 50 and "LFHD" in default.joint_names and "PELO" in default.joint_names
+    assert {"CentreOfMass", "CentreOfMassFloor"} <= set(default.joint_names)
     markers = load(path, points="markers")[0]
     expected = set(
         "RFHD LBHD RBHD C7 T10 CLAV STRN RBAK LSHO LELB LWRA LWRB LFIN RSHO RELB RWRA RWRB "
@@ -145,6 +144,50 @@ def test_c3d_point_selection():
         load(path, units="furlong")
     in_cm = load(path, units="cm")[0]
     np.testing.assert_allclose(in_cm.positions, 10 * default.positions, equal_nan=True)
+
+
+def _point_groups(path) -> dict[str, list[str]]:
+    """The labels the file lists in POINT:ANGLES, FORCES, MOMENTS and POWERS (C3D's
+    non-position point types), read with the c3d library."""
+    import c3d
+
+    with open(path, "rb") as fh:
+        reader = c3d.Reader(fh)
+        return {
+            g: [lab.strip() for lab in reader.get(f"POINT:{g}").string_array]
+            for g in ("ANGLES", "FORCES", "MOMENTS", "POWERS")
+        }
+
+
+def test_c3d_centre_of_mass_is_kept_and_what_is_left_out_is_counted():
+    pytest.importorskip("c3d")
+    path = data_file(C3D)
+    groups = _point_groups(path)
+    typed = {lab for labels in groups.values() for lab in labels}
+    assert "CentreOfMass" not in typed  # C3D lists it as none of the non-position types
+    s = load(path)[0]
+    t = s.topology
+    # positions: the floor point is the centre of mass dropped onto the floor (z = 0)
+    com, floor = (
+        s.positions[:, t.index("CentreOfMass")],
+        s.positions[:, t.index("CentreOfMassFloor")],
+    )
+    np.testing.assert_array_equal(floor[:, :2], com[:, :2])
+    assert np.nanmax(np.abs(floor[:, 2])) == 0.0
+    assert 0.5 < np.nanmedian(com[:, 2]) < 1.2  # about pelvis height, in metres
+    # left out: exactly the typed entries, counted by kind in the reader's note
+    assert set(s.joint_names).isdisjoint(typed)
+    assert s.n_joints == 193 - len(typed)
+    (note,) = [w for w in s.metadata["reader_warnings"] if "left out" in w]
+    assert f"left out {len(typed)} of 193 POINT entries (" in note
+    for g, labels in groups.items():
+        assert f"{len(labels)} {g.lower()}" in note
+    # markers only: the centre-of-mass points are among what is left out
+    markers = load(path, points="markers")[0]
+    assert "CentreOfMass" not in markers.joint_names
+    (note,) = markers.metadata["reader_warnings"]
+    assert "2 centre-of-mass points" in note and f"left out {193 - 35} of 193" in note
+    assert load(path, points="all")[0].metadata["reader_warnings"] == []
 
 
 def test_c3d_garbage_and_truncation_are_read_errors(tmp_path):

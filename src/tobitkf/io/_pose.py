@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -18,6 +19,9 @@ from tobitkf.skeleton.topology import Topology
 __all__ = [
     "HDF5_MAGIC",
     "PoseArrays",
+    "check_hdf5_opens",
+    "hdf5_open_error",
+    "hdf5_reason",
     "is_hdf5",
     "pose_arrays",
     "require",
@@ -58,6 +62,39 @@ def is_hdf5(path: str | os.PathLike[str]) -> bool:
             return fh.read(8) == HDF5_MAGIC
     except OSError:
         return False
+
+
+_TRACE_END = "End of HDF5 error back trace"
+_H5PY_OPEN = re.compile(r"Unable to (?:synchronously )?open file \((.*)\)", re.S)
+
+
+def hdf5_reason(exc: BaseException) -> str:
+    """One line for an h5py or PyTables error: the innermost message of PyTables'
+    multi-line HDF5 back trace (the line above its end marker); h5py's "Unable to open
+    file (...)" reduced to what is in the parentheses."""
+    text = str(exc)
+    if _TRACE_END in text:
+        lines = [ln.strip() for ln in text.split(_TRACE_END, 1)[0].splitlines() if ln.strip()]
+        text = lines[-1] if lines else "HDF5 error"
+    text = " ".join(text.split())
+    match = _H5PY_OPEN.fullmatch(text)
+    return match.group(1) if match else text
+
+
+def hdf5_open_error(path: Any, exc: BaseException) -> ReadError:
+    """The ReadError for a file the HDF5 library cannot open."""
+    return ReadError(path, None, f"truncated or corrupt HDF5 file ({hdf5_reason(exc)})")
+
+
+def check_hdf5_opens(path: Any, what: str) -> None:
+    """Raise :func:`hdf5_open_error` when h5py cannot open ``path`` (``what``: for the
+    message naming the package to install)."""
+    h5py = require("h5py", what)
+    try:
+        with h5py.File(path, "r"):
+            pass
+    except (OSError, ValueError) as exc:
+        raise hdf5_open_error(path, exc) from None
 
 
 def _fps(path: Any, fps: Any) -> float | None:

@@ -96,9 +96,16 @@ def read_bytes(path: str | os.PathLike[str]) -> bytes:
                     chunks.append(chunk)
     except IsADirectoryError:
         raise ReadError(path, None, "expected a file, found a directory") from None
-    except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
-        raise ReadError(path, None, f"corrupt or truncated gzip data ({exc})") from None
+    except _GZIP_ERRORS as exc:
+        raise _gzip_error(path, exc) from None
     return b"".join(chunks)
+
+
+_GZIP_ERRORS = (EOFError, zlib.error, gzip.BadGzipFile)
+
+
+def _gzip_error(path: str | os.PathLike[str], exc: BaseException) -> ReadError:
+    return ReadError(path, None, f"corrupt or truncated gzip data ({exc})")
 
 
 def decode(path: str | os.PathLike[str], data: bytes) -> str:
@@ -122,15 +129,24 @@ def read_lines(path: str | os.PathLike[str]) -> list[str]:
     return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
 
 
-def read_head(path: str | os.PathLike[str], size: int = 65536) -> str:
-    """The first ``size`` bytes (decompressed for gzip), decoded leniently; for sniffing."""
+def read_head(path: str | os.PathLike[str], size: int = 65536, *, check_gzip: bool = False) -> str:
+    """The first ``size`` bytes (decompressed for gzip), decoded leniently; for sniffing.
+
+    An unreadable file gives ``""``; so does gzip data that cannot be decompressed that
+    far, unless ``check_gzip``: then the ReadError the readers raise for it
+    ("corrupt or truncated gzip data").
+    """
     try:
         with open(path, "rb") as fh:
             head = fh.read(size)
         if head[:2] == GZIP_MAGIC:
             with gzip.open(path, "rb") as gz:
                 head = gz.read(size)
-    except (OSError, EOFError, zlib.error):
+    except _GZIP_ERRORS as exc:  # before OSError: gzip.BadGzipFile is one
+        if check_gzip:
+            raise _gzip_error(path, exc) from None
+        return ""
+    except OSError:
         return ""
     return head.decode("utf-8", errors="replace")
 

@@ -7,21 +7,27 @@ suffixes). Up axis z (Vicon/Qualisys convention).
 
 ``points`` selects which POINT entries to return:
 
-* ``"positions"`` (default): real markers and Plug-in Gait segment-frame points, i.e.
-  every entry except the model outputs (which are angles, forces, moments, powers or
-  centre-of-mass values, not marker positions);
+* ``"positions"`` (default): every entry that is a position: real markers, Plug-in Gait
+  segment-frame points and the model's centre-of-mass points (``CentreOfMass``,
+  ``CentreOfMassFloor``: positions in the lab frame, in the POINT units); not the model
+  outputs that are angles, forces, moments or powers (``…Angle(s)``, ``…Force``, ``…GRF``,
+  ``…Moment``, ``…Power``: the entries C3D lists in ``POINT:ANGLES``, ``POINT:FORCES``,
+  ``POINT:MOMENTS``, ``POINT:POWERS``; any entry not listed there is a position);
 * ``"all"``: every entry, model outputs included (converted with the same unit factor);
 * ``"markers"``: real markers only: no Plug-in Gait segment frames (``…O/…A/…L/…P``
-  quadruples) and no model outputs (``…Angle(s)``, ``…Force``, ``…Moment``, ``…Power``, ``…GRF``,
-  ``CentreOfMass…``);
+  quadruples), no centre-of-mass points and no model outputs;
 * ``"joint_centres"``: the origins (``…O``) of the Plug-in Gait segment frames (PELO,
   LFEO, LTIO, LHUO, ...), usable as joint centres.
+
+Entries left out are counted by kind in ``metadata["reader_warnings"]`` (e.g. "left out
+80 of 193 POINT entries (26 angles, 20 forces, 18 moments, 16 powers)").
 """
 
 from __future__ import annotations
 
 import os
 import warnings
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +41,19 @@ from tobitkf.skeleton.topology import Topology
 __all__ = ["classify_labels", "read_c3d", "sniff_c3d"]
 
 _UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1, "in": 0.0254}
-_MODEL_OUTPUTS = ("angle", "force", "moment", "power", "centreofmass", "centerofmass", "grf")
+#: name fragments of the model outputs that are not positions, and what each is
+_MODEL_OUTPUTS = {
+    "angle": "angles", "force": "forces", "grf": "forces", "moment": "moments", "power": "powers",
+}  # fmt: skip
+#: name fragments of the model's centre-of-mass points (positions, not markers)
+_MODEL_POINTS = ("centreofmass", "centerofmass")
+#: how a left-out entry of each kind is counted in the reader's note
+_KIND_TEXT = {
+    "marker": "markers",
+    "segment_origin": "segment origins",
+    "segment_axis": "segment axis points",
+    "model_point": "centre-of-mass points",
+}
 
 
 def _import_c3d():
@@ -49,16 +67,27 @@ def _import_c3d():
     return c3d
 
 
+def _output_kind(label: str) -> str | None:
+    """``"angles"``, ``"forces"``, ``"moments"`` or ``"powers"`` for a model output's
+    label, None for a position."""
+    low = label.lower()
+    return next((what for k, what in _MODEL_OUTPUTS.items() if k in low), None)
+
+
 def classify_labels(labels: list[str]) -> list[str]:
-    """Kind of each POINT label: ``"marker"``, ``"segment_origin"``, ``"segment_axis"``
-    or ``"model_output"``."""
+    """Kind of each POINT label: ``"marker"``, ``"segment_origin"``, ``"segment_axis"``,
+    ``"model_point"`` (a centre-of-mass position) or ``"model_output"`` (not a
+    position)."""
     kinds = []
     upper = {lab.upper() for lab in labels}
     for lab in labels:
         u = lab.upper()
         low = u.lower()
-        if any(k in low for k in _MODEL_OUTPUTS):
+        if _output_kind(lab) is not None:
             kinds.append("model_output")
+            continue
+        if any(k in low for k in _MODEL_POINTS):
+            kinds.append("model_point")
             continue
         if len(u) >= 2 and u[-1] in "OALP":
             stem = u[:-1]
@@ -89,6 +118,23 @@ def _unique(labels: list[str]) -> list[str]:
         taken.add(new)
         out.append(new)
     return out
+
+
+def _left_out_note(labels: list[str], kinds: list[str], keep: list[int], points: str) -> str:
+    """What ``points`` left out, counted by kind ("" when nothing)."""
+    kept = set(keep)
+    counts = Counter(
+        _KIND_TEXT.get(kind) or _output_kind(lab)
+        for i, (lab, kind) in enumerate(zip(labels, kinds, strict=True))
+        if i not in kept
+    )
+    if not counts:
+        return ""
+    parts = ", ".join(f"{n} {what}" for what, n in counts.items())
+    return (
+        f"points={points!r} left out {len(labels) - len(kept)} of {len(labels)} POINT "
+        f"entries ({parts}); points='all' reads every entry"
+    )
 
 
 def read_c3d(
@@ -168,6 +214,9 @@ def read_c3d(
         keep = list(range(len(labels)))
     if not keep:
         raise ReadError(path, None, f"no POINT entries of the kind {points!r}")
+    notes = [str(w.message) for w in caught]
+    if left_out := _left_out_note(labels, kinds, keep, points):
+        notes.append(left_out)
     names = _unique([labels[i] for i in keep])
     positions = np.ascontiguousarray(positions[:, keep])
     real = [k for k, i in enumerate(keep) if kinds[i] != "model_output"]  # not positions
@@ -186,7 +235,7 @@ def read_c3d(
             "point_kinds": [kinds[i] for i in keep],
             "units_in_file": unit,
             "residuals": np.ascontiguousarray(residual[:, keep]),
-            "reader_warnings": [str(w.message) for w in caught],
+            "reader_warnings": notes,
         },
     )
     return [seq]

@@ -32,7 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._pose import is_hdf5, pose_arrays, require, sequences_from_arrays
+from tobitkf.io._pose import (
+    hdf5_open_error,
+    hdf5_reason,
+    is_hdf5,
+    pose_arrays,
+    require,
+    sequences_from_arrays,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -69,22 +76,30 @@ def _header_rows(path: Path) -> tuple[int, bool]:
     return n, labelled
 
 
+def _read_table(path: Path, pd: Any) -> Any:
+    """The DataFrame of a DeepLabCut ``.h5`` (PyTables' HDF5 errors in one line)."""
+    require("tables", "reading DeepLabCut .h5 files (pandas.read_hdf)")
+    try:
+        store = pd.HDFStore(path, mode="r")
+    except (OSError, ValueError, RuntimeError) as exc:  # PyTables' HDF5ExtError: RuntimeError
+        raise hdf5_open_error(path, exc) from None
+    try:
+        with store:
+            keys = store.keys()
+            key = "/" + DLC_KEY if "/" + DLC_KEY in keys else (keys[0] if keys else None)
+            if key is None:
+                raise ReadError(path, None, "no table in the HDF5 file")
+            return store[key]
+    except ReadError:
+        raise
+    except (OSError, ValueError, TypeError, KeyError, RuntimeError, AttributeError) as exc:
+        raise ReadError(path, None, f"not a DeepLabCut table ({hdf5_reason(exc)})") from None
+
+
 def _read_frame(path: Path) -> Any:
     pd = require("pandas", "reading DeepLabCut files")
     if is_hdf5(path):
-        require("tables", "reading DeepLabCut .h5 files (pandas.read_hdf)")
-        try:
-            with pd.HDFStore(path, mode="r") as store:
-                keys = store.keys()
-                key = "/" + DLC_KEY if "/" + DLC_KEY in keys else (keys[0] if keys else None)
-                if key is None:
-                    raise ReadError(path, None, "no table in the HDF5 file")
-                df = store[key]
-        except ReadError:
-            raise
-        except (OSError, ValueError, TypeError, KeyError, RuntimeError, AttributeError) as exc:
-            # PyTables' HDF5ExtError is a RuntimeError
-            raise ReadError(path, None, f"not a DeepLabCut table ({exc})") from None
+        df = _read_table(path, pd)
     else:
         n, labelled = _header_rows(path)
         try:

@@ -16,11 +16,15 @@ Layout (a plain table: ``pandas.read_csv(path)`` loads it with no options)::
   tracked, 1 inferred, 2 tracked), ``<joint>_sd`` (posterior standard deviation, in the
   positions' units), ``<joint>_sample`` (sample state, ``SampleState``: 0 measured,
   1 rejected and filled, 2 missing and filled, 3 extrapolated, 4 no estimate) and
-  ``<joint>_confidence`` (a pose estimator's score in [0, 1]).
+  ``<joint>_confidence`` (a pose estimator's score in [0, 1]). A ``.`` may stand for the
+  ``_`` (``<joint>.x``, ``<joint>.state``: R's column names), the same within a joint's
+  axes; a name ending in ``_x`` is read as joint and ``_x`` first (``a.b_x``: joint
+  ``a.b``), so every header read before reads the same.
   A leading index column as ``DataFrame.to_csv`` writes it (header field empty or
   ``Unnamed: 0``) is skipped.
 * values: plain decimal numbers in the sidecar's ``units`` (without a sidecar: metres for
-  3-D, unknown for 2-D); an empty field or ``nan`` is a missing value.
+  3-D, unknown for 2-D); an empty field, ``nan`` or ``NA`` (R's missing value; both in
+  any case) is a missing value.
 * separator: comma (``,``); a file whose header has tabs or semicolons and no comma uses
   that separator instead (text inside double quotes does not count).
 * header fields may be double-quoted (RFC 4180: ``"Head,L_x"``, ``""`` for a quote inside);
@@ -89,6 +93,10 @@ _TIME = ("time", "timestamp", "t")
 _AXES = ("_x", "_y", "_z")
 #: per-joint columns after x, y, z: suffix -> what they hold
 _EXTRA = ("_state", "_sd", "_sample", "_confidence")
+#: what may join a joint's name to its column suffix: ``a_x``, or ``a.x`` (R's names)
+_JOINERS = ("_", ".")
+#: R's missing value (``NA``, any case), read as an empty field
+_NA_FIELD = re.compile(r"[ \t]*na[ \t]*", re.IGNORECASE)
 _INDEX = ("", "unnamed: 0")  # DataFrame.to_csv's index column
 #: the ``format`` entry that marks a JSON file as a tobitkf CSV sidecar
 SIDECAR_FORMAT = "tobitkf.csv-sidecar"
@@ -150,16 +158,12 @@ def _parse_header(path, fields: list[str], line_no: int):
             body_col = k
             k += 1
             continue
-        if low.endswith("_x"):
+        joiner = next((j for j in _JOINERS if low.endswith(j + "x")), None)
+        if joiner is not None:
             base = c[:-2]
-            triple = [t.lower() for t in cols[k : k + 3]]
-            want = [(base + a).lower() for a in _AXES]
-            n = 3 if triple == want else 2 if triple[:2] == want[:2] else 0
-            if n == 2 and len(triple) == 3 and triple[2].startswith(base.lower() + "_"):
-                if triple[2][len(base) :] not in _EXTRA:
-                    n = 0  # <joint>_x, <joint>_y, <joint>_<typo>: a third axis was meant
+            n = _axis_count(cols[k : k + 3], base, joiner)
             if not base or not n or (xyz and n != len(xyz[0])):
-                expect = _AXES if not xyz else _AXES[: len(xyz[0])]
+                expect = [joiner + a for a in "xyz"[: len(xyz[0]) if xyz else 3]]
                 raise ReadError(
                     path,
                     line_no,
@@ -173,7 +177,12 @@ def _parse_header(path, fields: list[str], line_no: int):
             k += n
             continue
         suffix = next(
-            (x for x in _EXTRA if joints and low.endswith(x) and c[: -len(x)] == joints[-1]),
+            (
+                x
+                for x in _EXTRA
+                for j in _JOINERS
+                if joints and low.endswith(j + x[1:]) and c[: -len(x)] == joints[-1]
+            ),
             None,
         )
         if suffix is not None and len(joints) - 1 not in extra[suffix]:
@@ -185,11 +194,28 @@ def _parse_header(path, fields: list[str], line_no: int):
             line_no,
             f"unexpected column {c!r} (position {k + 1}); expected time, body, "
             "<joint>_x/_y(/_z), <joint>_state, <joint>_sd, <joint>_sample or "
-            "<joint>_confidence",
+            "<joint>_confidence ('.' in place of '_' too)",
         )
     if not joints:
         raise ReadError(path, line_no, "expected <joint>_x, <joint>_y(, <joint>_z) columns")
     return len(cols), time_col, body_col, joints, xyz, extra
+
+
+def _blank_na(row: str, sep: str) -> str:
+    """``row`` with its ``NA`` fields (R's missing value) empty, as missing as ``""``."""
+    return sep.join("" if _NA_FIELD.fullmatch(f) else f for f in row.split(sep))
+
+
+def _axis_count(fields: list[str], base: str, joiner: str) -> int:
+    """3 when ``fields`` start with ``<base>x, y, z`` columns (case-insensitive, joined by
+    ``joiner``), 2 for ``x, y`` alone (2-D), 0 when they do not."""
+    triple = [t.lower() for t in fields]
+    want = [(base + joiner + a).lower() for a in "xyz"]
+    n = 3 if triple == want else 2 if triple[:2] == want[:2] else 0
+    if n == 2 and len(triple) == 3 and triple[2].startswith(base.lower() + joiner):
+        if "_" + triple[2][len(base) + 1 :] not in _EXTRA:
+            n = 0  # <joint>_x, <joint>_y, <joint>_<typo>: a third axis was meant
+    return n
 
 
 def _topology(
@@ -263,6 +289,7 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         raise ReadError(path, None, "no frames after the header line")
     rows = [r.rstrip() for r in rows]
     rows = [r[: -len(sep)] if r.endswith(sep) and r.count(sep) == ncols else r for r in rows]
+    rows = [_blank_na(r, sep) if "a" in r or "A" in r else r for r in rows]
     data = parse_rows(
         path,
         rows,
@@ -696,9 +723,9 @@ def _quoted(field: str) -> str:
 
 
 def sniff_csv(path: Path, head: str) -> int:
-    """Score: a header line with ``<joint>_x,<joint>_y(,<joint>_z)`` columns (more sure
-    with the sidecar :func:`write_csv` writes beside it, or, in the old layout, after its
-    ``# topology:`` line)."""
+    """Score: a header line with ``<joint>_x,<joint>_y(,<joint>_z)`` columns (or ``.x``,
+    ``.y``, ``.z``; more sure with the sidecar :func:`write_csv` writes beside it, or, in
+    the old layout, after its ``# topology:`` line)."""
     side = sidecar_path(path)
     written = side != path and side.is_file() and _is_sidecar(side)  # not any JSON beside it
     for line in head.split("\n")[:50]:
@@ -708,8 +735,8 @@ def sniff_csv(path: Path, head: str) -> int:
             continue
         low = s.lower()
         fields = [f.strip().strip('"') for f in re.split(r"[,;\t]", low)]
-        has = {a: any(f.endswith(a) for f in fields) for a in _AXES}
-        if has["_x"] and has["_y"] and ("," in s or ";" in s or "\t" in s):
+        has = {a: any(f.endswith(("_" + a, "." + a)) for f in fields) for a in "xyz"}
+        if has["x"] and has["y"] and ("," in s or ";" in s or "\t" in s):
             if written:
                 return 90
             if low.split("\t")[0].split(",")[0].strip() in ("timestamp",) and "\t" in s:

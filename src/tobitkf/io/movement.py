@@ -28,7 +28,14 @@ from typing import Any
 import numpy as np
 
 from tobitkf.core.version import __version__
-from tobitkf.io._pose import is_hdf5, pose_arrays, require, sequences_from_arrays
+from tobitkf.io._pose import (
+    check_hdf5_opens,
+    hdf5_reason,
+    is_hdf5,
+    pose_arrays,
+    require,
+    sequences_from_arrays,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
@@ -148,8 +155,11 @@ def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     """Read a movement poses dataset saved as netCDF (``Dataset.to_netcdf``)."""
     p = Path(path)
     xr = require("xarray", "reading movement netCDF files")
+    engine = _engine_for(p)
+    if engine == "h5netcdf" and is_hdf5(p):  # h5py reads it anyway: no library clash
+        check_hdf5_opens(p, "reading movement netCDF files")
     try:
-        with xr.open_dataset(p, engine=_engine_for(p)) as ds:
+        with xr.open_dataset(p, engine=engine) as ds:
             ds.load()
             kind = ds.attrs.get("ds_type", "poses")
             if kind != "poses":
@@ -160,7 +170,8 @@ def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
     except ImportError:
         raise
     except (OSError, ValueError, TypeError, KeyError) as exc:
-        raise ReadError(p, None, f"not a movement poses netCDF file ({exc})") from None
+        reason = hdf5_reason(exc)
+        raise ReadError(p, None, f"not a movement poses netCDF file ({reason})") from None
 
 
 def _h5netcdf() -> str | None:

@@ -186,7 +186,8 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     Raises
     ------
     ReadError
-        When the file is missing, empty or matches no registered format.
+        When the file is missing, empty, holds gzip data that cannot be decompressed, or
+        matches no registered format.
     """
     p = Path(path)
     if not p.exists():
@@ -195,7 +196,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         return _detect_directory(p)
     if p.stat().st_size == 0:
         raise ReadError(p, None, "empty file: expected skeleton data")
-    head = read_head(p)
+    head = read_head(p, check_gzip=True)  # a broken gzip: no reader can read it
     by_ext = set(_extension_matches(p))
     scored: list[tuple[int, int, str]] = []
     for spec in _FORMATS.values():

@@ -32,7 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._pose import is_hdf5, require, sequences_from_arrays
+from tobitkf.io._pose import (
+    check_hdf5_opens,
+    hdf5_reason,
+    is_hdf5,
+    require,
+    sequences_from_arrays,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -83,6 +89,7 @@ def read_sleap_analysis(
     """Read a SLEAP analysis HDF5 file (module docstring)."""
     p = Path(path)
     h5py = require("h5py", "reading SLEAP analysis files")
+    check_hdf5_opens(p, "reading SLEAP analysis files")
     try:
         with h5py.File(p, "r") as f:
             for key in ("tracks", "node_names"):
@@ -102,7 +109,8 @@ def read_sleap_analysis(
     except ReadError:
         raise
     except (OSError, ValueError, TypeError, KeyError) as exc:
-        raise ReadError(p, None, f"not a readable SLEAP analysis file ({exc})") from None
+        reason = hdf5_reason(exc)
+        raise ReadError(p, None, f"not a readable SLEAP analysis file ({reason})") from None
     n_tracks = tracks.shape[1]
     if len(nodes) != tracks.shape[2]:
         raise ReadError(p, None, f"{len(nodes)} node names for {tracks.shape[2]} nodes")

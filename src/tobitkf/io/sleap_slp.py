@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tobitkf.io._pose import require, sequences_from_arrays
+from tobitkf.io._pose import check_hdf5_opens, hdf5_reason, require, sequences_from_arrays
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -27,10 +27,11 @@ def read_slp(
     """Read a SLEAP ``.slp`` file (module docstring)."""
     p = Path(path)
     sio = require("sleap_io", "reading SLEAP .slp files")
+    check_hdf5_opens(p, "reading SLEAP .slp files")  # h5py: a dependency of sleap-io
     try:
         labels = sio.load_slp(str(p))
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ReadError(p, None, f"not a readable SLEAP file ({exc})") from None
+        raise ReadError(p, None, f"not a readable SLEAP file ({hdf5_reason(exc)})") from None
     if not labels.skeletons:
         raise ReadError(p, None, "the file has no skeleton")
     skel = labels.skeletons[0]
