@@ -269,3 +269,13 @@ def test_bad_input_is_one_clear_error_with_a_nonzero_status(tmp_path):
         assert message in res.output, (args, res.output)
         assert res.exception is None or isinstance(res.exception, SystemExit), args
         assert "Traceback" not in res.output, args
+
+
+def test_info_says_what_the_reader_left_out():
+    path = data_file("btkdata/PiG_Motion-FlatFoot-Full.c3d")
+    said = load(path)[0].metadata["reader_warnings"]
+    assert said  # the angles, forces, moments and powers of Plug-in Gait
+    body = json.loads(_run("info", str(path), "--json").output)["sequences"][0]
+    assert body["reader_warnings"] == list(said)
+    out = CliRunner(env={"COLUMNS": "400"}).invoke(app, ["info", str(path)]).output
+    assert all(note in out for note in said)

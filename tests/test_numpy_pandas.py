@@ -211,6 +211,12 @@ def test_read_csv_of_a_tobitkf_csv_is_a_dataframe_from_dataframe_reads(tmp_path)
             _assert_same_samples(x, y)
     with pytest.raises(ValueError, match="flat columns"):
         tk.from_dataframe(pd.DataFrame({"a_x": [1.0], "a_q": [2.0]}))
+    # R's names, <keypoint>.x: the same sequence
+    df = pd.read_csv(tmp_path / "two.csv")
+    dotted = df.rename(columns=lambda c: c[::-1].replace("_", ".", 1)[::-1] if "_" in c else c)
+    assert "snout.x" in dotted.columns
+    for x, y in zip(tk.from_dataframe(dotted), tk.from_dataframe(df), strict=True):
+        _assert_same_samples(x, y)
 
 
 # ------------------------------------------------------------------------------ CSV

@@ -19,7 +19,8 @@ Flat layout (what ``pandas.read_csv`` gives of tobitkf's own CSV, and of many po
 tools' exports): one row per frame, an optional ``time`` (or ``timestamp``) column, an
 optional ``body`` column (rows grouped by its value), and columns ``<keypoint>_x``,
 ``<keypoint>_y`` [``_z``] with optionally ``<keypoint>_confidence`` (or ``_likelihood``),
-``_state`` (tracking state), ``_sd`` and ``_sample`` (sample state).
+``_state`` (tracking state), ``_sd`` and ``_sample`` (sample state); ``.`` may stand for
+the ``_`` (R's ``<keypoint>.x``).
 
 ``DataFrame.attrs`` carries ``fps``, ``units``, ``topology`` (name), ``parents`` and
 ``up_axis``, so a round trip through :func:`from_dataframe` gives back the sequences;
@@ -205,8 +206,10 @@ def _flat_columns(columns: Sequence[Any]) -> dict[Any, tuple[str, str] | None] |
             out[c] = None
             continue
         base, sep, suffix = name.rpartition("_")
-        if not sep or not base or suffix.lower() not in _FLAT:
-            return None
+        if not sep or not base or suffix.lower() not in _FLAT:  # R's names: <keypoint>.x
+            base, sep, suffix = name.rpartition(".")
+            if not sep or not base or suffix.lower() not in _FLAT:
+                return None
         out[c] = (base, _FLAT[suffix.lower()])
     return out if any(v is not None and v[1] == "x" for v in out.values()) else None
 

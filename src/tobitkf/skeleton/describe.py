@@ -33,6 +33,8 @@ def describe_sequence(seq: SkeletonSequence) -> dict[str, Any]:
         ),
         "missing_percent": 100.0 * float(missing.mean()) if missing.size else 0.0,
         "has_timestamps": seq.timestamps is not None,
+        # what the reader said about the file (e.g. C3D entries it left out)
+        "reader_warnings": [str(w) for w in seq.metadata.get("reader_warnings") or ()],
     }
     if seq.timestamps is not None and seq.n_frames > 1:
         dt = np.diff(np.asarray(seq.timestamps, dtype=float))

@@ -43,6 +43,8 @@ def info(path, input_format, as_json):
         if body.get("dt_range"):
             lo, med, hi = body["dt_range"]
             console.print(f"  time steps: min {lo:.4f} s, median {med:.4f} s, max {hi:.4f} s")
+        for note in body["reader_warnings"]:
+            console.print(f"  [yellow]reader[/yellow]: {escape(note)}")
         if body.get("tracking_states"):
             states = ", ".join(f"{k}: {v}" for k, v in body["tracking_states"].items())
             console.print(f"  tracking states: {states}")
