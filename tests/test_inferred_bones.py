@@ -125,8 +125,8 @@ def test_two_dimensional_bones_are_not_projected_batch_or_live():
             a = tk.smooth(flat, method=method)
             b = tk.smooth(flat, method=method, inferred_bones=False)
             np.testing.assert_array_equal(a.positions, b.positions)
-    flat = seq.replace(positions=seq.positions[..., :2])
-    live = tk.LiveSmoother(TOPO, method="robust_online", fps=seq.fps)
+    flat = seq.replace(positions=seq.positions[..., :2])  # 2-D, in metres: say so live
+    live = tk.LiveSmoother(TOPO, method="robust_online", fps=seq.fps, units="m")
     frames = np.stack([live.update(flat.positions[k], flat.tracking_state[k])
                        for k in range(flat.n_frames)])  # fmt: skip
     _same(frames, tk.smooth(flat, method="robust_online", inferred_bones=False).positions)
