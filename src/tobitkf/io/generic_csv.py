@@ -532,12 +532,14 @@ def write_csv(
 
     All sequences must share the same joints. Columns: ``time`` (when any sequence has
     timestamps), ``body`` (when more than one sequence: the body ids when they are
-    distinct integers, else 0, 1, ...), then per joint ``_x, _y, _z``, ``_state`` (when
-    tracking states are present), ``_sd`` (when a posterior standard deviation is) and
-    ``_sample`` (when sample states are); a body without sd or sample states leaves those
-    fields empty. The sidecar (:func:`sidecar_path`) holds topology, up axis, fps, body
-    ids and provenance; ``sidecar=False`` writes the table alone. An existing JSON file
-    at the sidecar's path that is not a tobitkf sidecar is never overwritten (ValueError).
+    distinct integers, else 0, 1, ...), then per joint ``_x, _y[, _z]``, ``_state`` (when
+    tracking states are present), ``_sd`` (when a posterior standard deviation is),
+    ``_sample`` (when sample states are) and ``_confidence`` (when confidences are); a
+    body without one of them leaves those fields empty. The sidecar
+    (:func:`sidecar_path`) holds topology (name and parents), units, up axis, fps, body
+    ids, the columns' meanings and provenance; ``sidecar=False`` writes the table alone.
+    An existing JSON file at the sidecar's path that is not a tobitkf sidecar is never
+    overwritten (ValueError).
     """
     seqs = list(sequences)
     if not seqs:
