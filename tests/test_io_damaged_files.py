@@ -124,3 +124,25 @@ def test_gzip_magic_then_garbage_is_reported_as_corrupt_gzip(tmp_path):
     path.write_bytes(b"\x1f\x8b" + b"not deflate data at all" * 4)
     with pytest.raises(ReadError, match=r"walk\.csv: corrupt or truncated gzip data \("):
         detect_format(path)
+
+
+def test_a_damaged_object_header_is_an_error_not_a_crash(tmp_path):
+    """200 bytes overwritten in a DeepLabCut .h5's object headers: PyTables
+    (``pandas.read_hdf``) dies of a segmentation fault inside HDF5, which no Python code
+    can catch; the reader reads the file with h5py first, which raises. Run in a child
+    process, so that a crash fails this test instead of killing the test run."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "video1DLC.h5"
+    _deeplabcut(path)
+    raw = bytearray(path.read_bytes())
+    raw[1000:1200] = b"\xff" * 200  # found by scanning offsets: PyTables crashes here
+    path.write_bytes(bytes(raw))
+    code = (
+        "import sys\nfrom tobitkf.io import ReadError, load\n"
+        f"try:\n    load({str(path)!r})\nexcept ReadError as exc:\n    print(exc)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-500:]
+    assert "corrupt HDF5 file" in done.stdout and len(done.stdout.strip().splitlines()) == 1

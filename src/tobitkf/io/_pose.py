@@ -20,6 +20,7 @@ __all__ = [
     "HDF5_MAGIC",
     "PoseArrays",
     "check_hdf5_opens",
+    "check_hdf5_reads",
     "hdf5_open_error",
     "hdf5_reason",
     "is_hdf5",
@@ -94,6 +95,23 @@ def check_hdf5_opens(path: Any, what: str) -> None:
         with h5py.File(path, "r"):
             pass
     except (OSError, ValueError) as exc:
+        raise hdf5_open_error(path, exc) from None
+
+
+def check_hdf5_reads(path: Any, what: str) -> None:
+    """Raise :func:`hdf5_open_error` unless h5py can open ``path`` and read every object
+    in it. Before PyTables: where a damaged object header makes h5py raise, PyTables
+    (``pandas.read_hdf``) crashes the interpreter (a segmentation fault inside HDF5)."""
+    h5py = require("h5py", what)
+
+    def read(_name: str, obj: Any) -> None:
+        if isinstance(obj, h5py.Dataset):
+            obj[()]
+
+    try:
+        with h5py.File(path, "r") as f:
+            f.visititems(read)
+    except (OSError, ValueError, RuntimeError, KeyError, TypeError) as exc:
         raise hdf5_open_error(path, exc) from None
 
 

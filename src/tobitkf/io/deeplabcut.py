@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from tobitkf.io._pose import (
+    check_hdf5_reads,
     hdf5_open_error,
     hdf5_reason,
     is_hdf5,
@@ -79,6 +80,7 @@ def _header_rows(path: Path) -> tuple[int, bool]:
 def _read_table(path: Path, pd: Any) -> Any:
     """The DataFrame of a DeepLabCut ``.h5`` (PyTables' HDF5 errors in one line)."""
     require("tables", "reading DeepLabCut .h5 files (pandas.read_hdf)")
+    check_hdf5_reads(path, "reading DeepLabCut .h5 files")
     try:
         store = pd.HDFStore(path, mode="r")
     except (OSError, ValueError, RuntimeError) as exc:  # PyTables' HDF5ExtError: RuntimeError
