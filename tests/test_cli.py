@@ -89,6 +89,16 @@ def test_smooth_takes_a_value_per_body_region(tmp_path):
     used = np.asarray(side["provenance"]["params"]["v_max"])
     groups = get_topology("kinect_v2").joint_groups()
     assert np.all(used[groups["hands"]] == 6.0) and np.all(used[groups["legs"]] == 10.0)
+    # two -p for one parameter's regions: both apply; one region twice: refused
+    res = _run("smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path / "q"), "-p",
+               "v_max=hands:6", "-p", "v_max=arms:4")  # fmt: skip
+    side = json.loads((tmp_path / "q" / "a.robust.json").read_text())
+    used = np.asarray(side["provenance"]["params"]["v_max"])
+    assert np.all(used[groups["hands"]] == 6.0) and np.all(used[groups["arms"]] == 4.0)
+    res = CliRunner().invoke(
+        app, ["smooth", str(tmp_path / "a.csv"), "-p", "v_max=hands:6,hands:7"]
+    )
+    assert res.exit_code == 2 and "twice" in res.output
     res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "-o", str(tmp_path / "p"),
                                    "-p", "v_max=1,2,3"])  # fmt: skip
     assert res.exit_code == 1 and "got 3 values" in res.output and "one per joint" in res.output
@@ -117,6 +127,9 @@ def test_smooth_says_when_it_assumes_a_frame_rate_and_takes_fps(tmp_path):
     (row,) = json.loads(res.output)
     assert not row["warnings"] and not row["extra"].get("skipped")  # another rate: redone
     assert json.loads((tmp_path / "a" / "norate.robust.json").read_text())["fps"] == 60.0
+    for bad in ("1e9", "nan", "inf", "0"):  # beyond the rates a reader takes back
+        res = CliRunner().invoke(app, ["smooth", str(path), "--fps", bad])
+        assert res.exit_code == 2 and "--fps" in res.output
     # info says the rate is unknown instead of a duration in frames
     info = json.loads(_run("info", str(path), "--json").output)["sequences"][0]
     assert info["fps"] is None and info["duration_s"] is None

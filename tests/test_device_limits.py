@@ -90,6 +90,23 @@ def test_the_kinect_limits_are_refused_for_pixels_and_2d(method):
     assert out.shape == px.shape
 
 
+@pytest.mark.parametrize("method", ["atkf", "atkf2016"])
+def test_the_atkf_widths_in_metres_are_refused_for_pixels(method):
+    """The ATKF's default half-widths (0.3 m) on pixels clip every sample to the last
+    estimate (the track lags far behind): refused, batch and live, as tkf's limits are."""
+    rng = np.random.default_rng(1)
+    px = rng.uniform(0, 640, size=(30, 4, 2))
+    with pytest.raises(ValueError, match="give c="):
+        tk.smooth(px, fps=30.0, method=method, units="px")
+    with pytest.raises(ValueError, match="give c="):
+        tk.LiveSmoother(tk.Topology.from_names(list("abcd")), method).update(px[0])
+    out = tk.smooth(px, fps=30.0, method=method, units="px", c=40.0)  # widths in pixels
+    assert out.shape == px.shape
+    assert tk.smooth(px / 1000, fps=30.0, method=method, units="m").shape == px.shape  # 2-D metres
+    live = tk.LiveSmoother(tk.Topology.from_names(list("abcd")), method, units="mm")
+    assert live.update(px[0] * 1000).shape == (4, 2)  # any length unit: metres for the method
+
+
 def _paused(T=120, pause=1e5, seed=2):
     seq = _still_feet(-1.46, T=T, seed=seed)  # inside the limits, near the lower one
     ts = np.arange(T) / 30.0

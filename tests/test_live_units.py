@@ -126,3 +126,35 @@ def test_bad_gates_and_units_are_refused():
     live = tk.LiveSmoother(TOPO, gates_from=y)  # 2-D gates, 3-D stream
     with pytest.raises(ValueError, match="measured on a sample with 2"):
         live.update(np.zeros((5, 3)))
+
+
+def test_a_sample_without_motion_is_refused():
+    """Gates measured on a still (or empty) sample would reject every step: the stream
+    froze on its first frame. Refused when the smoother is made."""
+    _, y = _pixels()
+    for still in (np.repeat(y[:1], 50, axis=0), np.full_like(y, np.nan)):
+        with pytest.raises(ValueError, match="no motion"):
+            tk.LiveSmoother(TOPO, gates_from=still)
+
+
+def test_a_sample_in_other_units_than_the_stream_is_refused():
+    """A 3-D stream is in metres unless told otherwise: a sample in mm would give gates
+    a thousand times too wide (outlier rejection silently off)."""
+    _, y = _pixels()
+    mm = SkeletonSequence(np.concatenate([y, 0 * y[..., :1] + 500], -1), TOPO, fps=30,
+                          units="mm")  # fmt: skip
+    with pytest.raises(ValueError, match="units='mm'"):
+        tk.LiveSmoother(TOPO, gates_from=mm)
+    tk.LiveSmoother(TOPO, gates_from=mm, units="mm")  # said: fine
+
+
+def test_a_refused_first_frame_and_reset_leave_the_coordinates_open():
+    live = tk.LiveSmoother("kinect_v2", method="kf")
+    with pytest.raises(ValueError, match="24 joints"):
+        live.update(np.zeros((24, 2)))
+    live.update(np.zeros((25, 3)))  # the refused 2-D frame fixed nothing
+    with pytest.raises(ValueError, match="body 2"):  # keyed: the same
+        tk.LiveSmoother("kinect_v2", method="kf").update({1: np.zeros((25, 2)),
+                                                          2: np.zeros((24, 2))})  # fmt: skip
+    live.reset()
+    live.update(np.zeros((25, 2)))  # forgotten: a new stream may be 2-D

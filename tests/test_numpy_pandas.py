@@ -81,6 +81,14 @@ def test_array_with_timestamps_equals_the_sequence():
     assert not np.array_equal(tk.smooth(a, timestamps=ts), tk.smooth(a))
     with pytest.raises(ValueError, match="timestamps"):
         tk.smooth(a, timestamps=ts[:-1])
+    with pytest.raises(ValueError, match="not both"):
+        tk.smooth(a, timestamps=ts, fps=60)
+    # datetimes count from the first, in seconds (not nanoseconds taken for seconds)
+    clock = pd.Timestamp("2020-01-01") + pd.to_timedelta(ts - ts[0], unit="s")
+    np.testing.assert_allclose(tk.smooth(a, timestamps=clock),
+                               tk.smooth(a, timestamps=ts - ts[0]), atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(tk.smooth(a, timestamps=clock.to_numpy()),
+                               tk.smooth(a, timestamps=ts - ts[0]), atol=1e-9)  # fmt: skip
 
 
 def test_containers_passed_by_habit_name_the_way_in():

@@ -590,6 +590,9 @@ def parse_param(text: str) -> tuple[str, Any]:
             pass
     items = [item.partition(":") for item in raw.split(",")]
     if all(sep and _NAME.fullmatch(name.strip()) for name, sep, _ in items):
+        names = [name.strip() for name, _, _ in items]
+        if len(set(names)) < len(names):
+            raise ValueError(f"parameter {text!r} names a key twice")
         try:
             return key, {name.strip(): float(value) for name, _, value in items}
         except ValueError:

@@ -189,6 +189,8 @@ def _check_offline(spec: MethodSpec, offline: bool) -> None:
 
 def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) -> SmoothOutput:
     """Call a method's runner and check what it returns (a user's method may be wrong)."""
+    if spec.check_data is not None:
+        spec.check_data(params, inp.n_dims, inp.units)
     out = spec.run(inp, **params)
     if not isinstance(out, SmoothOutput):
         out = SmoothOutput(np.asarray(out, dtype=float))

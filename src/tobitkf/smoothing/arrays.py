@@ -40,8 +40,8 @@ def sequence_from_array(
         ``units="m"`` for the physical gates of 3-D tracks in metres)
     topology : a :class:`Topology` or built-in name with J joints (bones for the bone
         gate); None: J keypoints without bones (gated by speed and confidence alone)
-    timestamps : (T,) seconds, increasing (irregular frames); None: the frames are
-        ``1 / fps`` apart
+    timestamps : (T,) seconds, increasing (irregular frames), or datetimes (counted from
+        the first); None: the frames are ``1 / fps`` apart. Not with ``fps``.
     """
     if not isinstance(array, np.ndarray):
         raise TypeError(f"expected a NumPy array, got {type(array).__name__}")
@@ -74,7 +74,22 @@ def sequence_from_array(
         topo = get_topology(topology) if isinstance(topology, str) else topology
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.number))):
         raise TypeError(f"fps must be a number, got {fps!r}")
+    if timestamps is not None:
+        if fps is not None:
+            raise ValueError("give fps or timestamps, not both (timestamps set every step)")
+        timestamps = _seconds(timestamps)
     return (
         SkeletonSequence(pos, topo, fps=fps, confidence=conf, units=units, timestamps=timestamps),
         single,
     )
+
+
+def _seconds(timestamps: Any) -> Any:
+    """Timestamps as seconds: datetimes (numpy ``datetime64``, a pandas ``DatetimeIndex``)
+    counted from the first; numbers as they are (seconds)."""
+    ts = np.asarray(timestamps)
+    if np.issubdtype(ts.dtype, np.datetime64):
+        return (ts - ts.flat[0]) / np.timedelta64(1, "s") if ts.size else ts.astype(float)
+    if np.issubdtype(ts.dtype, np.timedelta64):
+        return ts / np.timedelta64(1, "s")
+    return timestamps

@@ -159,20 +159,44 @@ def warn_contradicted_limits(
     )
 
 
-def _check_device_limits(name: str, inp: SmoothInput, params: dict[str, Any]) -> None:
-    """The default limits are the Kinect V2's, in metres, camera space, 3-D: refuse them
-    for anything else (a 2-D or pixel recording would be clipped everywhere)."""
+def _check_device_limits(name: str) -> Any:
+    """``check_data``: the default limits are the Kinect V2's, in metres, camera space,
+    3-D: refuse them for anything else (a 2-D or pixel recording would be clipped
+    everywhere)."""
+    return lambda params, n_dims, units: _device_limits_fit(name, params, n_dims, units)
+
+
+def _device_limits_fit(name: str, params: Mapping[str, Any], n_dims: int, units: Any) -> None:
     default = (
         tuple(np.ravel(params["lower"])) == paper.KINECT_DEVICE_LOWER
         and tuple(np.ravel(params["upper"])) == paper.KINECT_DEVICE_UPPER
     )
-    if default and (inp.n_dims != 3 or inp.units != "m"):
-        what = f"{inp.n_dims}-D" if inp.n_dims != 3 else f"in {inp.units or 'unknown units'}"
+    if default and (n_dims != 3 or units != "m"):
+        what = f"{n_dims}-D" if n_dims != 3 else f"in {units or 'unknown units'}"
         raise ValueError(
             f"{name}: the default censoring limits are the Kinect V2's camera-space limits "
             f"in metres (lower={paper.KINECT_DEVICE_LOWER}, upper={paper.KINECT_DEVICE_UPPER})"
             f"; this recording is {what}: give lower= and upper= in its own units"
         )
+
+
+def _check_metre_widths(name: str, defaults: Mapping[str, Any]) -> Any:
+    """``check_data``: the ATKF's default half-widths are metres; refuse them for data in
+    pixels or unknown units (every sample would be clipped to the last estimate)."""
+
+    def check(params: Mapping[str, Any], n_dims: int, units: Any) -> None:
+        default = params.get("c") is None and all(
+            params[k] == defaults[k] for k in ("c_horizontal", "c_vertical")
+        )
+        if default and units != "m":
+            raise ValueError(
+                f"{name}: the default half-widths c_horizontal={defaults['c_horizontal']}, "
+                f"c_vertical={defaults['c_vertical']} are metres; this recording is in "
+                f"{units or 'unknown units'}: give c= (or c_horizontal= and c_vertical=) "
+                "in its own units"
+            )
+
+    return check
 
 
 def _limits_3d(inp: SmoothInput, params: dict[str, Any]) -> dict[str, tuple[float, ...]]:
@@ -461,7 +485,6 @@ def _register(
 ) -> None:
     def run(inp: SmoothInput, **params: Any) -> SmoothOutput:
         if kind == "tkf":
-            _check_device_limits(name, inp, params)
             params = {**params, **_limits_3d(inp, params)}
         return run_across_pauses(inp, kind, variant, params)
 
@@ -478,6 +501,13 @@ def _register(
         offline_ok=True,
         check=_check_limits if "lower" in defaults else None,
         live=live,
+        check_data=(
+            _check_device_limits(name)
+            if kind == "tkf"
+            else _check_metre_widths(name, defaults)
+            if kind == "atkf"
+            else None
+        ),
     )
 
 

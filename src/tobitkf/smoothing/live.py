@@ -255,9 +255,11 @@ class LiveSmoother:
         if not self._gated:
             raise ValueError(f"gates_from: method {self.method!r} has no gates to measure")
         if isinstance(sample, SkeletonSequence):
-            if sample.units != self.units and self.units is not None:
+            stream = self._stream_units(sample.n_dims)
+            if sample.units is not None and sample.units != stream:
                 raise ValueError(
-                    f"gates_from: the sample is in {sample.units!r}, the stream in {self.units!r}"
+                    f"gates_from: the sample is in {sample.units!r}, the stream in {stream!r}"
+                    f" (say units={sample.units!r} if the stream is in the sample's units)"
                 )
             pos, states, steps = sample.positions, sample.tracking_state, frame_steps(sample)[0]
         else:
@@ -282,6 +284,12 @@ class LiveSmoother:
         if scale is not None and scale != 1.0:
             pos = pos * scale
         ys, _ = measurements(pad_third_axis(pos), states)
+        moved = np.abs(np.diff(ys[..., :dims], axis=0))
+        if not np.nanmax(moved, initial=0.0) > 0:  # NaN steps (missing) do not count
+            raise ValueError(
+                "gates_from: the sample shows no motion (every joint missing or still): the "
+                "gates would reject every step; give a recording of the set-up in use"
+            )
         gates = recording_gates(ys, steps, self.topology.parents, dims)
         measured = {k: gates[k] for k in GATE_PARAMS if k not in self._given}
         self.params = check_params(self.method, {**self.params, **measured})
@@ -305,6 +313,8 @@ class LiveSmoother:
         units = self._stream_units(dims)
         scale = length_scale(units)
         self._scale = 1.0 if scale is None else scale
+        if self.spec.check_data is not None:  # what the batch run checks first
+            self.spec.check_data(self.params, dims, "m" if scale is not None else units)
         if not self._gated or scale is not None:
             return
         if self.params.get("gates") == "physical":  # the user's word: in the stream's units
@@ -319,7 +329,9 @@ class LiveSmoother:
             )
 
     def reset(self) -> None:
-        """Forget the stream; the next frame starts new tracks."""
+        """Forget the stream; the next frame starts new tracks (and may have another
+        number of coordinates, unless the gates were measured on a sample)."""
+        self._dims: int | None = None
         self._stepper: LiveStepper | _HistoryStepper | None = None
         self._shape: tuple[int, ...] | None = None
         self._single = False
@@ -534,12 +546,26 @@ class LiveSmoother:
             except (TypeError, ValueError):
                 arr = np.empty(0)
             D = arr.shape[-1]
-            if (arr.ndim == 3 and arr.shape[1] == J and D == getattr(self, "_dims", D)
+            if (arr.ndim == 3 and arr.shape[1] == J and self._dims in (None, D)
                     and D in (2, 3) and not np.isinf(arr).any()):  # fmt: skip
-                if getattr(self, "_dims", None) is None:
+                if self._dims is None:
                     self._check_gates(D)
                 self._dims = D
                 return bodies, arr, None
+        dims = self._dims  # a refused frame leaves it as it was
+        try:
+            checked, arr = self._checked_bodies(frames, states, bodies)
+        except ValueError:
+            self._dims = dims
+            raise
+        if not checked:
+            arr = np.empty((0, J, self._dims or 3))
+        return bodies, arr, None if states is None else [st for _, st in checked]
+
+    def _checked_bodies(
+        self, frames: Mapping[Any, ArrayLike], states: Any, bodies: list[Any]
+    ) -> tuple[list[tuple[Array, Any]], Array]:
+        """Each body's frame checked on its own (the message names the first faulty one)."""
         checked = []
         for body in bodies:
             st = None if states is None else states.get(body)
@@ -551,15 +577,14 @@ class LiveSmoother:
                 raise ValueError(f"body {body!r}: expected positions of shape (J, 3)")
             checked.append((pos, st))
         # infinite values: one check over all the bodies (a numpy call costs microseconds)
-        if checked and np.isinf(arr := np.stack([p for p, _ in checked])).any():
+        arr = np.stack([p for p, _ in checked]) if checked else np.empty(0)
+        if checked and np.isinf(arr).any():
             body = next(b for b, (p, _) in zip(bodies, checked) if np.isinf(p).any())
             raise ValueError(f"body {body!r}: {_INFINITE}")
         unknown = [] if states is None else [b for b in states if b not in frames]
         if unknown:
             raise ValueError(f"tracking_state for bodies not in the frame: {unknown}")
-        if not checked:
-            arr = np.empty((0, J, getattr(self, "_dims", 3)))
-        return bodies, arr, None if states is None else [st for _, st in checked]
+        return checked, arr
 
     def _check_frame(
         self, positions: ArrayLike, tracking_state: Any, check_inf: bool = True
@@ -573,17 +598,18 @@ class LiveSmoother:
             raise ValueError(
                 f"positions: expected shape (J, D) or (B, J, D) with D = 3 or 2, found {shape}"
             )
-        dims = getattr(self, "_dims", None)
+        dims = self._dims
         if dims is not None and shape[-1] != dims:
             raise ValueError(f"positions: this stream has {dims} coordinates, found {shape[-1]}")
-        if dims is None:
-            self._check_gates(shape[-1])
-        self._dims = shape[-1]
         if shape[-2] != self.topology.n_joints:
             raise ValueError(
                 f"positions: {shape[-2]} joints, but topology {self.topology.name!r} has "
                 f"{self.topology.n_joints}"
             )
+        if dims is None:
+            self._check_gates(shape[-1])
         if check_inf and np.isinf(pos).any():
             raise ValueError(_INFINITE)
-        return pos, self._check_states(tracking_state, shape[:-1])
+        states = self._check_states(tracking_state, shape[:-1])
+        self._dims = shape[-1]  # the frame is good: its coordinates are the stream's
+        return pos, states

@@ -170,6 +170,10 @@ class MethodSpec:
         not fit together (e.g. ``polyorder >= window``), or None
     live : factory of a per-frame :class:`LiveStepper` (constant work per frame), or
         None: a causal method without one runs live by re-running on the history
+    check_data : ``check_data(params, n_dims, units) -> None``, raises ``ValueError`` for
+        data its parameters cannot mean anything for (limits in metres on pixels), or
+        None; called before a batch run and at a live stream's first frame, with the
+        coordinates (2 or 3) and the units the method sees (``"m"`` for any length)
     """
 
     name: str
@@ -181,6 +185,7 @@ class MethodSpec:
     offline_ok: bool = False
     check: Callable[[dict[str, Any]], None] | None = None
     live: LiveFactory | None = None
+    check_data: Callable[[Mapping[str, Any], int, str | None], None] | None = None
 
     def is_causal(self, params: Mapping[str, Any] | None = None) -> bool:
         """Whether the method with ``params`` (default: its defaults) is causal."""
@@ -232,6 +237,7 @@ def register_method(
     check: Callable[[dict[str, Any]], None] | None = None,
     live: LiveFactory | None = None,
     replace: bool = False,
+    check_data: Callable[[Mapping[str, Any], int, str | None], None] | None = None,
 ) -> Any:
     """Register a smoothing method; usable as a decorator when ``run`` is omitted.
 
@@ -248,7 +254,7 @@ def register_method(
     validators : mapping, optional
         Parameter name -> ``check(name, value) -> value`` (see
         :mod:`tobitkf.smoothing.params`); a parameter without one is passed as given.
-    description, causal, offline_ok, check, live :
+    description, causal, offline_ok, check, live, check_data :
         As in :class:`MethodSpec`.
     replace : bool
         Replace a method of the same name instead of raising ``ValueError``.
@@ -287,6 +293,7 @@ def register_method(
             offline_ok=offline_ok,
             check=check,
             live=live,
+            check_data=check_data,
         )
         _METHODS[name] = spec
         return spec

@@ -263,6 +263,8 @@ def _parse_params(params: tuple[str, ...]) -> dict[str, Any]:
             key, value = parse_param(text)
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--param") from exc
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            value = {**out[key], **value}  # -p v_max=hands:6 -p v_max=arms:4: both
         out[key] = value
     return out
 

@@ -68,7 +68,8 @@ from tobitkf.core.jsonable import dumps
 )
 @click.option(
     "--fps",
-    type=click.FloatRange(min=0, min_open=True),
+    type=click.FloatRange(min=1e-3, max=1e5),  # the readers' plausible rates (io._text)
+    callback=lambda _ctx, _param, v: _finite(v, "--fps"),
     help="Frame rate (Hz) of inputs that state none (pose-estimator tables, keypoint "
     "JSON); files with their own rate or timestamps keep it. Without it such files are "
     "smoothed as 30 fps, and the summary says so.",
@@ -288,6 +289,12 @@ def smooth(
         sys.exit(130)
     if failed:
         sys.exit(1)
+
+
+def _finite(value: float | None, name: str) -> float | None:
+    if value is not None and value != value:  # NaN passes a range check
+        raise click.BadParameter(f"{name} must be a number, got nan")
+    return value
 
 
 def _shown_names(sources: list[str]) -> list[str]:
