@@ -227,6 +227,31 @@ def test_read_csv_of_a_tobitkf_csv_is_a_dataframe_from_dataframe_reads(tmp_path)
         _assert_same_samples(x, y)
 
 
+@pytest.mark.parametrize(
+    ("columns", "match"),
+    [
+        ({"a_x": [1.0], "a_y": [2.0], "a_z": [3.0], "b_x": [1.0], "b_y": [2.0]}, "_z column"),
+        ({"a_x": [1.0], "a_y": [2.0], "subject": [7.0]}, "subject"),
+        ({"a_x": [1.0], "a_y": [2.0], "a.x": [1.5]}, "x twice"),
+        ({"a_x": [1.0], "a_y": [2.0], "a_state": [1.5]}, "whole numbers"),
+        ({"a_x": [1.0], "b_y": [2.0]}, r"without a _x column: \[.b.\]"),
+    ],
+)
+def test_a_flat_table_the_csv_reader_would_refuse_is_refused(columns, match):
+    """As strict as ``tk.load`` of the same CSV: nothing read silently wrong (a missing
+    _z as NaN, a state truncated, a column dropped or one of two taken)."""
+    with pytest.raises(ValueError, match=match):
+        tk.from_dataframe(pd.DataFrame(columns))
+
+
+def test_a_flat_table_with_states_for_some_keypoints_and_a_frame_column():
+    df = pd.DataFrame({"frame": [0, 1], "a_x": [1.0, 2.0], "a_y": [0.0, 0.0],
+                       "a_state": [1, 2], "b_x": [3.0, 4.0], "b_y": [0.0, 0.0]})  # fmt: skip
+    (seq,) = tk.from_dataframe(df)
+    np.testing.assert_array_equal(seq.tracking_state, [[1, 2], [2, 2]])  # b: tracked
+    assert seq.positions.shape == (2, 2, 2)
+
+
 # ------------------------------------------------------------------------------ CSV
 def test_csv_reads_in_pandas_without_options_and_back(tmp_path):
     conf = np.random.default_rng(4).uniform(0, 1, (20, 3))

@@ -19,8 +19,9 @@ Flat layout (what ``pandas.read_csv`` gives of tobitkf's own CSV, and of many po
 tools' exports): one row per frame, an optional ``time`` (or ``timestamp``) column, an
 optional ``body`` column (rows grouped by its value), and columns ``<keypoint>_x``,
 ``<keypoint>_y`` [``_z``] with optionally ``<keypoint>_confidence`` (or ``_likelihood``),
-``_state`` (tracking state), ``_sd`` and ``_sample`` (sample state); ``.`` may stand for
-the ``_`` (R's ``<keypoint>.x``).
+``_state`` (tracking state; a keypoint without one is tracked), ``_sd`` and ``_sample``
+(sample state); ``.`` may stand for the ``_`` (R's ``<keypoint>.x``); a ``frame`` column
+is passed over. Each body's frames are its rows; any other column is an error.
 
 ``DataFrame.attrs`` carries ``fps``, ``units``, ``topology`` (name), ``parents`` and
 ``up_axis``, so a round trip through :func:`from_dataframe` gives back the sequences;
@@ -194,27 +195,55 @@ _FLAT = {"x": "x", "y": "y", "z": "z", "confidence": "confidence", "likelihood":
          "state": "tracking_state", "sd": "std", "sample": "sample_state"}  # fmt: skip
 
 
+def _flat_role(name: str) -> tuple[str, str] | None:
+    """``(keypoint, role)`` of a flat column ``<keypoint>_<suffix>`` (or ``.<suffix>``)."""
+    for sep in ("_", "."):
+        base, found, suffix = name.rpartition(sep)
+        if found and base and suffix.lower() in _FLAT:
+            return base, _FLAT[suffix.lower()]
+    return None
+
+
 def _flat_columns(columns: Sequence[Any]) -> dict[Any, tuple[str, str] | None] | None:
-    """Column -> ``(keypoint, role)`` (None for the time, body and index columns) when
-    ``columns`` are the flat layout (module docstring) with at least one ``<k>_x``; else
-    None."""
+    """Column -> ``(keypoint, role)`` (None for the time, body, frame and index columns)
+    when ``columns`` have at least one ``<k>_x`` and no ``keypoint`` column (the flat
+    layout, module docstring); else None. ``ValueError`` naming a column that fits no
+    role, or a keypoint's role given twice."""
     out: dict[Any, tuple[str, str] | None] = {}
     for c in columns:
-        name = str(c)
-        low = name.lower()
-        if low in ("time", "timestamp", "body", "body_id") or low.startswith("unnamed:"):
-            out[c] = None
-            continue
-        base, sep, suffix = name.rpartition("_")
-        if not sep or not base or suffix.lower() not in _FLAT:  # R's names: <keypoint>.x
-            base, sep, suffix = name.rpartition(".")
-            if not sep or not base or suffix.lower() not in _FLAT:
-                return None
-        out[c] = (base, _FLAT[suffix.lower()])
-    return out if any(v is not None and v[1] == "x" for v in out.values()) else None
+        low = str(c).lower()
+        skipped = low in ("time", "timestamp", "body", "body_id", "frame") or not low
+        out[c] = None if skipped or low.startswith("unnamed:") else _flat_role(str(c))
+    if not any(v is not None and v[1] == "x" for v in out.values()):
+        return None
+    odd = [c for c, v in out.items() if v is None and str(c).lower() not in _FLAT_SKIP]
+    odd = [c for c in odd if not str(c).lower().startswith("unnamed:") and str(c)]
+    if odd:
+        raise ValueError(
+            f"flat columns <keypoint>_x, _y[, _z], _confidence, _state, _sd, _sample (and "
+            f"time, body, frame): unexpected column(s) {odd[:5]}"
+        )
+    seen: dict[tuple[str, str], Any] = {}
+    for c, v in out.items():
+        if v is not None:
+            if v in seen:
+                raise ValueError(f"keypoint {v[0]!r}: {v[1]} twice ({seen[v]!r}, {c!r})")
+            seen[v] = c
+    keypoints = {v[0] for v in seen}
+    has = {role: {k for k, r in seen if r == role} for role in ("x", "y", "z")}
+    for role in ("x", "y"):
+        if has[role] != keypoints:
+            raise ValueError(f"keypoints without a _{role} column: {sorted(keypoints - has[role])}")
+    if has["z"] and has["z"] != keypoints:
+        raise ValueError(f"keypoints without a _z column: {sorted(keypoints - has['z'])}")
+    return out
+
+
+_FLAT_SKIP = ("time", "timestamp", "body", "body_id", "frame")
 
 
 def _from_flat(df: Any, attrs: dict[str, Any], layout: dict[Any, Any]) -> list[SkeletonSequence]:
+    """The flat layout's sequences; a body's frames are its rows (in table order)."""
     pd = _pandas()
     low = {str(c).lower(): c for c, v in layout.items() if v is None}
     time_col = low.get("time", low.get("timestamp"))
@@ -222,6 +251,19 @@ def _from_flat(df: Any, attrs: dict[str, Any], layout: dict[Any, Any]) -> list[S
     keys = [c for c, v in layout.items() if v is not None]
     wide = df[keys].copy()
     wide.columns = pd.MultiIndex.from_tuples([layout[c] for c in keys])
+    for role in ("tracking_state", "sample_state"):
+        values = (
+            wide.xs(role, axis=1, level=1) if role in wide.columns.get_level_values(1) else None
+        )
+        if values is not None:
+            v = values.to_numpy(dtype=float)
+            if np.any(np.isfinite(v) & (v != np.round(v))):
+                raise ValueError(f"{role}: expected whole numbers, found {v[v != np.round(v)][:3]}")
+    states = [k for k, r in wide.columns if r == "tracking_state"]
+    if states:  # a keypoint without a _state column is TRACKED, as the CSV reader reads it
+        for k in dict.fromkeys(k for k, _ in wide.columns):
+            if k not in states:
+                wide[(k, "tracking_state")] = 2.0
     if time_col is not None:
         wide.index = pd.Index(df[time_col].to_numpy(dtype=float), name="time")
     if body_col is None:
@@ -243,7 +285,7 @@ def from_dataframe(df: Any) -> list[SkeletonSequence]:
     attrs = dict(df.attrs)
     if isinstance(df.columns, pd.MultiIndex):
         return _from_wide(df, attrs)
-    if _pick(df.columns, "keypoint") is None:
+    if _pick(df.columns, "keypoint") is None and "x" not in df.columns:
         layout = _flat_columns(list(df.columns))
         if layout is not None:
             return _from_flat(df, attrs, layout)
