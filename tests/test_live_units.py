@@ -158,3 +158,46 @@ def test_a_refused_first_frame_and_reset_leave_the_coordinates_open():
                                                           2: np.zeros((24, 2))})  # fmt: skip
     live.reset()
     live.update(np.zeros((25, 2)))  # forgotten: a new stream may be 2-D
+
+
+def _scored(seed=3):
+    """The pixel track with scores: some below the threshold, the glitches doubtful."""
+    _, y = _pixels()
+    rng = np.random.default_rng(seed)
+    conf = rng.uniform(0.2, 1.0, y.shape[:2])
+    conf[rng.uniform(size=conf.shape) < 0.05] = 0.05  # below 0.1: missing
+    conf[40, 2] = 0.3
+    conf[5, 1] = np.nan  # no score for this one
+    return y, conf
+
+
+@pytest.mark.parametrize("method", ["robust_online", "kf", "one_euro"])
+def test_a_stream_with_confidence_gives_the_batch_numbers(method):
+    """Scores below min_confidence make a sample missing, above it the robust methods
+    weigh it, live as in smooth(): fed its frames, the stream is the batch result."""
+    y, conf = _scored()
+    seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units="px", confidence=conf)
+    params = {} if method != "kf" else {"q": 4.0, "r": 4.0}
+    gates = seq if method == "robust_online" else None
+    batch = tk.smooth(seq, method=method, untangle=False, **params).positions
+    live = tk.LiveSmoother(TOPO, method, fps=30, gates_from=gates, **params)
+    out = np.array([live.update(f, confidence=c) for f, c in zip(y, conf, strict=True)])
+    np.testing.assert_allclose(out, batch, rtol=0, atol=1e-9)
+    # keyed by id alike
+    keyed = tk.LiveSmoother(TOPO, method, fps=30, gates_from=gates, **params)
+    got = np.array(
+        [keyed.update({7: f}, confidence={7: c})[7] for f, c in zip(y, conf, strict=True)]
+    )
+    np.testing.assert_allclose(got, batch, rtol=0, atol=1e-9)
+
+
+def test_bad_confidence_is_refused_and_leaves_the_stream():
+    y, conf = _scored()
+    live = tk.LiveSmoother(TOPO, "kf", fps=30)
+    for bad in (conf[0, :3], conf[0] + 2, "high"):
+        with pytest.raises(ValueError, match="confidence"):
+            live.update(y[0], confidence=bad)
+    assert live.n_frames == 0
+    live.update(y[0], confidence=conf[0])
+    with pytest.raises(ValueError, match="mapping"):
+        tk.LiveSmoother(TOPO, "kf").update({1: y[0]}, confidence=conf[0])

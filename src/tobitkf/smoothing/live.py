@@ -52,7 +52,14 @@ from tobitkf.smoothing.api import (
     method_names,
     run_method,
 )
-from tobitkf.smoothing.keypoints import drop_third_axis, length_scale, pad_third_axis
+from tobitkf.smoothing.keypoints import (
+    DEFAULT_MIN_CONFIDENCE,
+    check_min_confidence,
+    drop_third_axis,
+    length_scale,
+    low_confidence,
+    pad_third_axis,
+)
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
@@ -80,6 +87,7 @@ class _HistoryStepper:
     """A causal method without a stepper: re-run it on the history, keep the last frame."""
 
     uses_positions = True
+    uses_confidence = True
 
     def __init__(self, spec: MethodSpec, topology: Topology, up_axis: int, factor: float,
                  params: dict[str, Any]) -> None:  # fmt: skip
@@ -88,11 +96,12 @@ class _HistoryStepper:
         self._frames: list[tuple[Array, Array, NDArray[np.bool_], Any, float]] = []
 
     def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
-             positions: Array | None = None) -> Array:  # fmt: skip
+             positions: Array | None = None, confidence: Any = None) -> Array:  # fmt: skip
         # copies: a caller may reuse its frame buffer for the next frame
         pos = ys if positions is None else positions
-        self._frames.append((pos.copy(), ys.copy(), missing.copy(), states, dt))
-        pos, y, miss, st, steps = zip(*self._frames, strict=True)
+        conf = None if confidence is None else np.array(confidence, dtype=float)
+        self._frames.append((pos.copy(), ys.copy(), missing.copy(), states, dt, conf))
+        pos, y, miss, st, steps, cf = zip(*self._frames, strict=True)
         step_arr = np.asarray(steps, dtype=float)
         if all(s is None for s in st):
             states_arr = None
@@ -110,6 +119,9 @@ class _HistoryStepper:
             topology=self.topology,
             up_axis=self.up_axis,
             inferred_noise_factor=self.factor,
+            confidence=None
+            if all(c is None for c in cf)
+            else np.stack([np.full(missing.shape, np.nan) if c is None else c for c in cf]),
         )
         return np.asarray(run_method(self.spec, inp, self.params).positions[-1], dtype=float)
 
@@ -132,11 +144,25 @@ class _Body:
     last_seen: float
 
 
-def _group_frame(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tuple[Array, Any]:
+def _group_frame(
+    arr: Array, sts: list[Any] | None, rows: Sequence[int], confs: list[Any] | None = None
+) -> tuple[Array, Any, Any]:
     """The frame of one group: slot ``s`` takes row ``rows[s]`` of the keyed frame's
-    positions ``arr`` (and states ``sts``), NaN where it is -1 (a body not in the frame,
-    predicted, or a dropped slot). States: None unless one of its bodies has some (the
-    others TRACKED then, which is what None means)."""
+    positions ``arr`` (and states ``sts``, confidences ``confs``), NaN where it is -1 (a
+    body not in the frame, predicted, or a dropped slot). States: None unless one of its
+    bodies has some (the others TRACKED then, which is what None means); confidences
+    alike (NaN: none)."""
+    pos, states = _group_positions(arr, sts, rows)
+    if confs is None or all(confs[r] is None for r in rows if r >= 0):
+        return pos, states, None
+    conf = np.full(pos.shape[:2], np.nan)
+    for s, r in enumerate(rows):
+        if r >= 0 and confs[r] is not None:
+            conf[s] = confs[r]
+    return pos, states, conf
+
+
+def _group_positions(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> tuple[Array, Any]:
     n = len(arr)
     if isinstance(rows, range) or rows == list(range(n)):
         pos = arr  # the usual frame: every body of the group, in its order
@@ -180,6 +206,9 @@ class LiveSmoother:
     units : str, optional
         ``"m"``, ``"cm"``, ``"mm"`` (converted to metres for the method and back) or
         ``"px"``; None: metres for a 3-D stream, pixels for a 2-D one.
+    min_confidence : float
+        A sample whose ``confidence`` (``update``) is below this is missing (default 0.1,
+        as in :func:`smooth`); above it the robust methods weigh it by its score.
     gates_from : SkeletonSequence or ndarray, optional
         A recording of the same set-up (same camera or tracker, same units as the stream;
         an array ``(T, J, D)`` or ``(T, B, J, D)`` at ``fps``, NaN where missing): the
@@ -202,6 +231,7 @@ class LiveSmoother:
         max_missing: float = 1.0,
         units: str | None = None,
         gates_from: Any = None,
+        min_confidence: float = DEFAULT_MIN_CONFIDENCE,
         **params: Any,
     ) -> None:
         self.spec = get_method(method)
@@ -211,6 +241,7 @@ class LiveSmoother:
         if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
         self.units = units
+        self.min_confidence = check_min_confidence(min_confidence)
         self._given = frozenset(params)
         if not self.spec.is_causal(self.params):
             raise ValueError(
@@ -262,6 +293,9 @@ class LiveSmoother:
                     f" (say units={sample.units!r} if the stream is in the sample's units)"
                 )
             pos, states, steps = sample.positions, sample.tracking_state, frame_steps(sample)[0]
+            low = low_confidence(sample.confidence, self.min_confidence)
+            if low is not None:  # what the method would not see: missing, as in smooth()
+                pos = np.where(low[..., None], np.nan, pos)
         else:
             try:
                 pos = np.asarray(sample, dtype=float)
@@ -396,6 +430,7 @@ class LiveSmoother:
         positions: ArrayLike | Mapping[Any, ArrayLike],
         tracking_state: ArrayLike | Mapping[Any, ArrayLike] | None = None,
         timestamp: float | None = None,
+        confidence: ArrayLike | Mapping[Any, ArrayLike] | None = None,
     ) -> Any:
         """Filter one frame.
 
@@ -407,6 +442,10 @@ class LiveSmoother:
             0 not tracked (treated as missing), 1 inferred (noisier), 2 tracked.
         timestamp : float, optional
             Seconds; without it frames are 1/fps apart.
+        confidence : array_like, shape (J,) or (B, J), optional
+            A pose estimator's score in [0, 1] per joint (NaN: none); below
+            ``min_confidence`` the joint is missing, above it the robust methods weigh it,
+            as :func:`smooth` does.
 
         Returns
         -------
@@ -415,17 +454,23 @@ class LiveSmoother:
 
         A frame that is refused (``ValueError``) leaves the stream unchanged.
 
-        With ``positions`` a mapping ``{body_id: (J, 3)}`` (and ``tracking_state`` a
-        mapping of the same ids, or None), returns ``{body_id: (J, 3)}`` for every body
-        tracked: those in the frame and those still predicted (missing for at most
-        ``max_missing`` seconds). A stream is either keyed by id or not, from its first
-        frame on.
+        With ``positions`` a mapping ``{body_id: (J, 3)}`` (and ``tracking_state`` and
+        ``confidence`` mappings of the same ids, or None), returns ``{body_id: (J, 3)}``
+        for every body tracked: those in the frame and those still predicted (missing for
+        at most ``max_missing`` seconds). A stream is either keyed by id or not, from its
+        first frame on.
         """
         if isinstance(positions, Mapping):
-            return self._update_bodies(positions, tracking_state, timestamp)
+            return self._update_bodies(positions, tracking_state, timestamp, confidence)
         if self._bodies is not None:
             raise ValueError("this stream is keyed by body id: pass {body_id: positions}")
+        dims = self._dims
         pos, states = self._check_frame(positions, tracking_state)
+        try:
+            conf = self._check_confidence(confidence, pos.shape[:-1])
+        except ValueError:
+            self._dims = dims
+            raise
         shape = pos.shape
         if self._shape is not None and shape[:-1] != self._shape:
             raise ValueError(
@@ -437,12 +482,25 @@ class LiveSmoother:
             self._stepper = self._new_stepper()
             self._shape = shape[:-1]
         self._single = pos.ndim == 2
-        out = self._step(self._stepper, pos, states, dt)
+        out = self._step(self._stepper, pos, states, dt, conf)
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
 
-    def _step(self, stepper: Any, pos: Array, states: Any, dt: float) -> Array:
+    def _check_confidence(self, confidence: Any, shape: tuple[int, ...]) -> Array | None:
+        if confidence is None:
+            return None
+        try:
+            conf = np.asarray(confidence, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("confidence: expected numbers in [0, 1]") from None
+        if conf.shape != shape:
+            raise ValueError(f"confidence: expected shape {shape}, found {conf.shape}")
+        if np.any((conf < 0) | (conf > 1)):
+            raise ValueError("confidence: expected scores in [0, 1] (NaN: none)")
+        return conf
+
+    def _step(self, stepper: Any, pos: Array, states: Any, dt: float, conf: Any = None) -> Array:
         single = pos.ndim == 2
         batch_pos = pos[None] if single else pos
         batch_states = None if states is None else (states[None] if single else states)
@@ -452,6 +510,14 @@ class LiveSmoother:
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
         kw: dict[str, Any] = {}
+        if conf is not None:  # below the threshold: missing, for every method (as smooth)
+            conf = conf[None] if single else conf
+            low = low_confidence(conf, self.min_confidence)
+            if low is not None and (low & ~missing).any():
+                missing = missing | low
+                ys = np.where(missing[..., None], np.nan, ys)
+            if getattr(stepper, "uses_confidence", False):  # the scores weigh the rest
+                kw["confidence"] = conf
         if getattr(stepper, "uses_positions", False):  # the positions as given, too
             kw["positions"] = batch_pos
         if getattr(stepper, "uses_n_dims", False):  # the stream's coordinates (2 or 3)
@@ -463,35 +529,63 @@ class LiveSmoother:
         return out[0] if single else out
 
     def _update_bodies(
-        self, frames: Mapping[Any, ArrayLike], states: Any, timestamp: float | None
-    ) -> dict[Any, Array]:
+        self, frames: Mapping[Any, ArrayLike], states: Any, timestamp: float | None,
+        confidence: Any = None,
+    ) -> dict[Any, Array]:  # fmt: skip
         if self._stepper is not None:
             raise ValueError("this stream is not keyed by body id: pass an array of positions")
+        dims = self._dims
         bodies, arr, sts = self._check_bodies(frames, states)
+        try:
+            confs = self._keyed_confidence(confidence, bodies)
+        except ValueError:
+            self._dims = dims
+            raise
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
         self._clock += dt
         same = self._same
         if same is not None and same[0] == tuple(bodies):
-            out = self._step_same(same[1], same[2], bodies, arr, sts, dt)
+            out = self._step_same(same[1], same[2], bodies, arr, sts, dt, confs)
         else:
-            out = self._regroup(bodies, arr, sts, dt)
+            out = self._regroup(bodies, arr, sts, dt, confs)
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
 
+    def _keyed_confidence(self, confidence: Any, bodies: list[Any]) -> list[Any] | None:
+        """A keyed frame's confidences, one per body (None: none), or None."""
+        if confidence is None:
+            return None
+        if not isinstance(confidence, Mapping):
+            raise ValueError("confidence: expected a mapping {body_id: scores} like positions")
+        unknown = [b for b in confidence if b not in bodies]
+        if unknown:
+            raise ValueError(f"confidence for bodies not in the frame: {unknown}")
+        J = self.topology.n_joints
+        out = []
+        for body in bodies:
+            try:
+                out.append(self._check_confidence(confidence.get(body), (J,)))
+            except ValueError as exc:
+                raise ValueError(f"body {body!r}: {exc}") from None
+        return out
+
     def _step_same(self, group: _Group, entries: list[_Body], bodies: list[Any], arr: Array,
-                   sts: list[Any] | None, dt: float) -> dict[Any, Array]:  # fmt: skip
+                   sts: list[Any] | None, dt: float,
+                   confs: list[Any] | None = None) -> dict[Any, Array]:  # fmt: skip
         """The usual frame: the bodies of the last one, every slot of its only group."""
-        res = self._step(group.stepper, *_group_frame(arr, sts, range(len(arr))), dt)
+        pos, states, conf = _group_frame(arr, sts, range(len(arr)), confs)
+        res = self._step(group.stepper, pos, states, dt, conf)
         group.frames += 1
         for entry in entries:
             entry.last_seen = self._clock
         return dict(zip(bodies, res, strict=True))
 
     def _regroup(
-        self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float
-    ) -> dict[Any, Array]:
+        self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float,
+        confs: list[Any] | None = None,
+    ) -> dict[Any, Array]:  # fmt: skip
         """Any frame: bodies dropped, new ones grouped, each group stepped."""
         if self._bodies is None:
             self._bodies = {}
@@ -514,7 +608,8 @@ class LiveSmoother:
         for group in groups:  # groups with at least one body tracked
             rows = [row.get(b, -1) for b in group.members]
             step = dt if group.frames else 1.0 / self.fps
-            res = self._step(group.stepper, *_group_frame(arr, sts, rows), step)
+            pos, states, conf = _group_frame(arr, sts, rows, confs)
+            res = self._step(group.stepper, pos, states, step, conf)
             group.frames += 1
             results.update((b, r) for b, r in zip(group.members, res) if b is not None)
         for body in bodies:

@@ -637,9 +637,10 @@ class RobustStepper:
         self._time = 0.0
 
     uses_n_dims = True  # the stream's coordinates: inferred joints keep their bones in 3-D
+    uses_confidence = True  # a pose estimator's scores weigh the samples, as in batch
 
     def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
-             n_dims: int = 3) -> Array:  # fmt: skip
+             n_dims: int = 3, confidence: Any = None) -> Array:  # fmt: skip
         """Smooth one frame: ys (B, J, 3) NaN where missing (``n_dims`` 2: a third axis of
         zeros); returns (B, J, 3)."""
         k = kernels()
@@ -662,7 +663,9 @@ class RobustStepper:
         m1 = np.ascontiguousarray(missing, dtype=bool)[None]
         inferred = _inferred(None if states is None else np.asarray(states)[None], m1.shape)
         k.online_frames(
-            y1, m1, _inferred_scale(inferred, m1, self.factor),
+            y1, m1,
+            _inferred_scale(inferred, m1, self.factor,
+                            None if confidence is None else np.asarray(confidence)[None]),
             _guesses(inferred, self.inferred_bones, n_dims), inferred, np.array([self._time]),
             np.array([float(dt)]), *self.setup.args(), self._state, *self._scratch, out,
             self.rejected[None], self.std[None], 0,
