@@ -146,3 +146,12 @@ def test_a_damaged_object_header_is_an_error_not_a_crash(tmp_path):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-500:]
     assert "corrupt HDF5 file" in done.stdout and len(done.stdout.strip().splitlines()) == 1
+
+
+def test_a_file_named_h5_that_is_not_hdf5_says_so(tmp_path):
+    """Detection falls back to the .h5 extension (DeepLabCut): the reader said its CSV
+    header row was missing, quoting binary noise."""
+    path = tmp_path / "video1DLC.h5"
+    path.write_bytes(np.random.default_rng(0).bytes(3000))
+    with pytest.raises(ReadError, match="not an HDF5 file"):
+        load(path)

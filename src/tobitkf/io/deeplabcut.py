@@ -102,6 +102,8 @@ def _read_frame(path: Path) -> Any:
     pd = require("pandas", "reading DeepLabCut files")
     if is_hdf5(path):
         df = _read_table(path, pd)
+    elif path.suffix.lower() in (".h5", ".hdf5"):  # named HDF5, is not: say so, not "CSV"
+        raise ReadError(path, None, "not an HDF5 file (it lacks the HDF5 signature)")
     else:
         n, labelled = _header_rows(path)
         try:

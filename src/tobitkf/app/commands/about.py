@@ -37,7 +37,7 @@ def info(path, input_format, as_json):
         label = f"body {k}" + ("" if body["body_id"] is None else f" (id {body['body_id']})")
         console.print(
             f"{escape(label)}: {body['frames']} frames, {body['joints']} joints "
-            f"({body['topology']}), {_rate(body)}, missing "
+            f"({body['topology']}), {_rate(body)}, missing in the file "
             f"{_fmt(body['missing_percent'])} %"
         )
         if body.get("dt_range"):

@@ -262,7 +262,7 @@ def smooth(
                     "frames",
                     "joints",
                     "% clipped/rejected",
-                    "% missing",
+                    "% not measured",  # missing, NOT_TRACKED or below min_confidence
                     "seconds",
                 ],
                 rows,
