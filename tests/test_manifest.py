@@ -118,3 +118,24 @@ def test_inputs_and_outputs_named_by_urls(src, tmp_path):
     finally:
         if memory.exists(root):
             memory.rm(root, recursive=True)
+
+
+def test_a_uiprmd_pair_named_by_urls_is_read_together(tmp_path, shared_data):
+    """Positions and angles in their Kinect/Positions and Kinect/Angles folders on remote
+    storage: one recording (the angles are no input), read as the local pair is."""
+    fsspec = pytest.importorskip("fsspec", reason="fsspec is not installed")
+    kinect = "ui-prmd/Segmented Movements/Kinect"
+    pos = shared_data(f"{kinect}/Positions/m01_s01_e01_positions.txt.gz")
+    ang = shared_data(f"{kinect}/Angles/m01_s01_e01_angles.txt.gz")
+    memory = fsspec.filesystem("memory")
+    root = f"memory://tobitkf-uiprmd-{tmp_path.name}"
+    try:
+        memory.pipe(f"{root}/in/Positions/{pos.name}", pos.read_bytes())
+        memory.pipe(f"{root}/in/Angles/{ang.name}", ang.read_bytes())
+        (res,) = tk.smooth_files(f"{root}/in", f"{root}/out", METHOD, output_format="csv")
+        assert res.ok, res.error
+        (local,) = tk.smooth_files(pos, tmp_path / "local", METHOD, output_format="csv")
+        assert memory.cat(res.output) == open(local.output, "rb").read()
+    finally:
+        if memory.exists(root):
+            memory.rm(root, recursive=True)

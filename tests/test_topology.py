@@ -49,6 +49,8 @@ def test_kinect_v2_matches_readme():
         ("krajjat", 21, 1),
         ("plug_in_gait_39", 39, 2),
         ("keraal_vicon_17", 17, 2),
+        ("coco17", 17, 1),
+        ("h36m17", 17, 1),
     ],
 )
 def test_builtin_sizes_trees_and_symmetry(name, n, up):
@@ -199,3 +201,59 @@ def test_subset_keeps_ancestry(data):
             while k >= 0:
                 assert t.joints[k] not in keep
                 k = t.parents[k]
+
+
+# COCO's person_keypoints category (annotations/person_keypoints_*.json): its keypoint
+# names and its skeleton edges, 1-based, as the COCO files give them.
+COCO_KEYPOINTS = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder",
+    "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip",
+    "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
+)  # fmt: skip
+COCO_SKELETON = (
+    (16, 14), (14, 12), (17, 15), (15, 13), (12, 13), (6, 12), (7, 13), (6, 7), (6, 8),
+    (7, 9), (8, 10), (9, 11), (2, 3), (1, 2), (1, 3), (2, 4), (3, 5), (4, 6), (5, 7),
+)  # fmt: skip
+
+
+def test_coco17_is_cocos_keypoints_and_a_tree_of_its_skeleton():
+    t = get_topology("coco")
+    assert t.name == "coco17" and t.joints == COCO_KEYPOINTS
+    edges = {frozenset((a - 1, b - 1)) for a, b in COCO_SKELETON}
+    assert all(frozenset(bone) in edges for bone in t.bones)  # every bone is a COCO edge
+    assert len(t.bones) == 16 and t.roots == [0]  # a spanning tree of the 17 keypoints
+    assert t.joint_groups() == {
+        "hands": [9, 10],  # wrists
+        "arms": [5, 6, 7, 8],  # shoulders, elbows
+        "torso": [0, 1, 2, 3, 4],  # face
+        "legs": [11, 12, 13, 14, 15, 16],  # hips, knees, ankles
+    }
+    assert len(t.symmetry) == 8  # every keypoint but the nose has its mirror
+
+
+# Human3.6M's 17 joints as VideoPose3D (common/h36m_dataset.py) keeps them: its 32-joint
+# tree with the joints [4, 5, 9, 10, 11, 16, 20, 21, 22, 23, 24, 28, 29, 30, 31] removed,
+# each remaining joint re-attached to its nearest kept ancestor, and then, as it does
+# ("Rewire shoulders to the correct parents"), both shoulders hung from joint 8.
+H36M32_PARENTS = (
+    -1, 0, 1, 2, 3, 4, 0, 6, 7, 8, 9, 0, 11, 12, 13, 14, 12, 16, 17, 18, 19, 20, 19, 22, 12,
+    24, 25, 26, 27, 28, 27, 30,
+)  # fmt: skip
+H36M_REMOVED = (4, 5, 9, 10, 11, 16, 20, 21, 22, 23, 24, 28, 29, 30, 31)
+H36M_LEFT = (4, 5, 6, 11, 12, 13)  # VideoPose3D's joints_left after the removal
+H36M_RIGHT = (1, 2, 3, 14, 15, 16)
+
+
+def test_h36m17_is_videopose3ds_reduced_human36m_tree():
+    kept = [j for j in range(32) if j not in H36M_REMOVED]
+    full = Topology(name="h36m32", joints=tuple(f"j{j}" for j in range(32)),
+                    parents=H36M32_PARENTS)  # fmt: skip
+    reduced = list(full.subset([f"j{j}" for j in kept]).parents)
+    reduced[11] = reduced[14] = 8
+    t = get_topology("h36m")
+    assert t.name == "h36m17" and t.n_joints == 17
+    assert t.parents == tuple(reduced)
+    assert sorted(t.symmetry) == sorted(zip(H36M_LEFT, H36M_RIGHT, strict=True))
+    groups = t.joint_groups()
+    assert groups["hands"] == [13, 16] and groups["arms"] == [11, 12, 14, 15]
+    assert groups["legs"] == [1, 2, 3, 4, 5, 6] and groups["torso"] == [0, 7, 8, 9, 10]

@@ -398,7 +398,8 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
-        said = tuple(dict.fromkeys([*rate, *(str(w.message) for w in caught)]))
+        read = [str(n) for seq in sequences for n in seq.metadata.get("reader_warnings") or ()]
+        said = tuple(dict.fromkeys([*read, *rate, *(str(w.message) for w in caught)]))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
             s.metadata["provenance"]["source"] = {
                 "path": job.source_label or str(job.source),
@@ -447,14 +448,14 @@ def run_task(
     pool or Dask cluster. A job that is not a :class:`Job` but has a ``run`` method (a
     job on remote storage, :mod:`tobitkf.app.remote`) runs itself.
     """
-    from tobitkf.app.manifest import file_digest
+    from tobitkf.app.manifest import recording_digest
 
     if not isinstance(job, Job):
         return job.run(method, params, offline, expect)
 
     start = time.perf_counter()
     try:
-        size, sha = file_digest(job.source)
+        size, sha = recording_digest(job.source)
     except OSError:  # run_job says why it cannot be read
         size, sha = None, None
     extra: dict[str, Any] = {"size": size, "sha256": sha, "planned_output": str(job.output)}

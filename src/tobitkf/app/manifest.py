@@ -37,6 +37,7 @@ __all__ = [
     "Manifest",
     "ManifestBusy",
     "file_digest",
+    "recording_digest",
     "run_settings",
 ]
 
@@ -60,6 +61,24 @@ def file_digest(path: str | os.PathLike[str], chunk: int = 1 << 20) -> tuple[int
         while block := f.read(chunk):
             h.update(block)
             size += len(block)
+    return size, h.hexdigest()
+
+
+def recording_digest(path: str | os.PathLike[str]) -> tuple[int, str]:
+    """``(size, sha256)`` of a recording: the file's size (what a listing shows, the
+    resume's first check) and the sha256 of the file alone when it is read alone (as
+    :func:`file_digest`), else of the file and the files read with it together (a
+    UI-PRMD positions file and its angles, an array and its JSON sidecar:
+    :func:`tobitkf.io.input_files`), so that a change to any of them redoes the output."""
+    from tobitkf.io import input_files
+
+    size, sha = file_digest(path)
+    files = input_files(path)
+    if len(files) == 1:
+        return size, sha
+    h = hashlib.sha256(f"{sha}\n".encode())
+    for f in files[1:]:
+        h.update(f"{file_digest(f)[1]}\n".encode())
     return size, h.hexdigest()
 
 

@@ -18,7 +18,7 @@ import tempfile
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from tobitkf.app.batch import FileSummary, Job, not_a_recording, run_task, strip_extension
@@ -73,6 +73,7 @@ class RemoteJob:
             extra = {"planned_output": self.output}
             try:
                 fs.get_file(path, str(local))
+                _get_read_with(fs, path, local)
             except Exception as exc:
                 why = f"cannot read it: {type(exc).__name__}: {exc}"
                 return FileSummary(self.source, None, False, why, extra=extra)
@@ -95,6 +96,19 @@ class RemoteJob:
                 error=error,
                 extra={**summary.extra, **extra},
             )
+
+
+def _get_read_with(fs: Any, path: str, local: Path) -> None:
+    """Copy beside ``local`` the files a reader reads with the input at ``path`` (a
+    UI-PRMD positions file's angles, an array's JSON sidecar) that exist there, each to
+    where the reader will look for it beside the local copy."""
+    from tobitkf.io import read_with
+
+    there, here = read_with(PurePosixPath(path)), read_with(local)
+    for src, dst in zip(there, here, strict=True):
+        if fs.exists(str(src)):
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            fs.get_file(str(src), str(dst))
 
 
 def _upload(local: Path, url: str, output_format: str) -> None:
@@ -143,7 +157,7 @@ def plan_remote(
     Raises FileNotFoundError when an input does not exist.
     """
     from tobitkf.app.batch import default_output_format
-    from tobitkf.io import output_extension
+    from tobitkf.io import output_extension, read_with
 
     out_fs, out_root = url_to_fs(out_url)
     jobs: list[RemoteJob] = []
@@ -160,12 +174,18 @@ def plan_remote(
         else:
             listing = {root: fs.info(root)}
             base = posixpath.dirname(root)
+        # files read with another listed file (UI-PRMD angles, an array's sidecar)
+        companions = {
+            str(f) for path in listing for f in read_with(PurePosixPath(path)) if str(f) in listing
+        }
         for path in sorted(listing):
             name = posixpath.basename(path)
             if folder:  # a file named explicitly is taken as given
                 if name.startswith(".") or not fnmatch.fnmatch(name, pattern):
                     continue
                 if name == "tobitkf-manifest.jsonl" or not_a_recording(Path(name)) or _ours(name):
+                    continue
+                if path in companions:
                     continue
             in_fmt = input_format
             if in_fmt == "auto" and name.lower().endswith(".skeleton"):

@@ -18,6 +18,7 @@ name                content                                                read 
 ``bvh``             BVH hierarchy + motion (forward kinematics)             yes
 ``csv``             generic CSV (time, <joint>_x/_y/_z, <joint>_state)      yes     yes
 ``npz``             lossless NumPy archive                                  yes     yes
+``npy``             NumPy keypoint array (T, J, D); skeleton from a sidecar yes
 ``openpose``        OpenPose JSON output folder (BODY_25 / COCO-18)         yes
 ``mediapipe``       MediaPipe Pose landmarks (JSON / CSV layout, docs)      yes
 ``azure_kinect``    Azure Kinect Body Tracking JSON (offline_processor)     yes
@@ -47,6 +48,7 @@ from tobitkf.io import krajjat as _krajjat  # noqa: F401
 from tobitkf.io import lightningpose as _lightningpose  # noqa: F401
 from tobitkf.io import mediapipe as _mediapipe  # noqa: F401
 from tobitkf.io import movement as _movement  # noqa: F401
+from tobitkf.io import npy as _npy  # noqa: F401
 from tobitkf.io import npz as _npz  # noqa: F401
 from tobitkf.io import ntu as _ntu  # noqa: F401
 from tobitkf.io import openpose as _openpose  # noqa: F401
@@ -61,10 +63,12 @@ from tobitkf.io.registry import (
     detect_format,
     formats,
     get_format,
+    input_files,
     is_companion_file,
     load,
     output_extension,
     output_files,
+    read_with,
     register_format,
     save,
     unregister_format,
@@ -78,10 +82,12 @@ __all__ = [
     "detect_format",
     "formats",
     "get_format",
+    "input_files",
     "is_companion_file",
     "load",
     "output_extension",
     "output_files",
+    "read_with",
     "register_format",
     "save",
     "unregister_format",

@@ -24,10 +24,12 @@ __all__ = [
     "detect_format",
     "formats",
     "get_format",
+    "input_files",
     "is_companion_file",
     "load",
     "output_extension",
     "output_files",
+    "read_with",
     "register_format",
     "save",
     "unregister_format",
@@ -53,6 +55,7 @@ class FormatSpec:
     companion: Callable[[Path], bool] | None = None
     side_outputs: Callable[[Path], list[Path]] | None = None
     sniff_dir: DirSniffer | None = None
+    read_with: Callable[[Path], list[Path]] | None = None
 
 
 _FORMATS: dict[str, FormatSpec] = {}
@@ -71,6 +74,7 @@ def register_format(
     companion: Callable[[Path], bool] | None = None,
     side_outputs: Callable[[Path], list[Path]] | None = None,
     sniff_dir: DirSniffer | None = None,
+    read_with: Callable[[Path], list[Path]] | None = None,
 ) -> FormatSpec:
     """Register (or replace) a file format.
 
@@ -95,6 +99,11 @@ def register_format(
     sniff_dir : callable ``(directory) -> int``, optional
         Score of a directory for a format whose recordings are folders (0 = not this
         format); the reader then receives the directory's path.
+    read_with : callable ``(path) -> list of Path``, optional
+        The other files the reader reads with ``path`` when it is one of this format's
+        recordings (a UI-PRMD positions file's angles, an array's JSON sidecar), given
+        any path (``[]`` when it is none of this format's): batch tools hash them with
+        the recording (:func:`input_files`), so that editing one redoes its output.
     """
     spec = FormatSpec(
         name=name,
@@ -106,6 +115,7 @@ def register_format(
         companion=companion,
         side_outputs=side_outputs,
         sniff_dir=sniff_dir,
+        read_with=read_with,
     )
     _FORMATS[name] = spec
     for a in aliases:
@@ -130,6 +140,22 @@ def is_companion_file(path: str | os.PathLike[str]) -> bool:
     """
     p = Path(path)
     return any(s.companion is not None and s.companion(p) for s in _FORMATS.values())
+
+
+def read_with(path: str | os.PathLike[str]) -> list[Path]:
+    """The files a reader would read with ``path`` (the formats' ``read_with``), whether
+    they exist or not, once each, in the formats' order (the same for any folder)."""
+    p = Path(path)
+    found: list[Path] = []
+    for spec in _FORMATS.values():
+        if spec.read_with is not None:
+            found.extend(f for f in spec.read_with(p) if f != p and f not in found)
+    return found
+
+
+def input_files(path: str | os.PathLike[str]) -> list[Path]:
+    """``path`` and the existing files read with it (:func:`read_with`)."""
+    return [Path(path), *(f for f in read_with(path) if f.is_file())]
 
 
 def writable_formats() -> list[str]:

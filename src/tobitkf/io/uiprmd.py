@@ -236,6 +236,7 @@ register_format(
     "uiprmd_kinect", read_uiprmd_kinect, None, (".txt.gz",),
     sniff_uiprmd_kinect, description="UI-PRMD Kinect positions + angles",
     companion=lambda p: is_angles_file(p) and positions_path_for(p).exists(),
+    read_with=lambda p: [angles_path_for(p)] if "_positions" in p.name else [],
 )  # fmt: skip
 
 register_format(

@@ -457,6 +457,28 @@ KERAAL_VICON_17 = (
 )  # fmt: skip
 
 
+# The 17 COCO keypoints (COCO's person_keypoints order), the layout of most 2-D pose
+# estimators (MMPose / RTMPose, ViTPose, YOLO-pose, Detectron2, AlphaPose's COCO model).
+# COCO declares a skeleton graph, not a tree; this tree is the breadth-first spanning
+# tree of that graph from the nose (``parents_from_edges``): COCO has no neck, and its
+# edges hang the shoulders from the ears, the hips from the shoulders.
+COCO17_JOINTS = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder",
+    "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip",
+    "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
+)  # fmt: skip
+COCO17_PARENTS = (-1, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 5, 6, 11, 12, 13, 14)
+
+# The 17 Human3.6M joints in the order of the 3-D pose lifters (VideoPose3D's h36m
+# skeleton with its static joints removed; MotionBERT, MHFormer, PoseFormer): the pelvis
+# root, the legs, the spine to the head, then the arms from the thorax.
+H36M17_JOINTS = (
+    "Pelvis", "RHip", "RKnee", "RAnkle", "LHip", "LKnee", "LAnkle", "Spine", "Thorax",
+    "Nose", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow", "RWrist",
+)  # fmt: skip
+H36M17_PARENTS = (-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 8, 11, 12, 8, 14, 15)
+
+
 def _build(name: str, joints: Sequence[str], parents: Sequence[int] | None, up: int) -> Topology:
     t = Topology.from_names(joints, parents, up_axis=up, name=name)
     return t
@@ -478,6 +500,8 @@ _BUILTINS["openpose_body25"] = _build(
     "openpose_body25", OPENPOSE_BODY25_JOINTS, OPENPOSE_BODY25_PARENTS, 1
 )
 _BUILTINS["ui_prmd"] = _build("ui_prmd", UI_PRMD_JOINTS, UI_PRMD_PARENTS, 1)
+_BUILTINS["coco17"] = _build("coco17", COCO17_JOINTS, COCO17_PARENTS, 1)
+_BUILTINS["h36m17"] = _build("h36m17", H36M17_JOINTS, H36M17_PARENTS, 1)
 _BUILTINS["kinect_v2_21"] = _kinect_v2_21()
 _BUILTINS["plug_in_gait_39"] = _build("plug_in_gait_39", PLUG_IN_GAIT_39, None, 2)
 _BUILTINS["keraal_vicon_17"] = _build("keraal_vicon_17", KERAAL_VICON_17, None, 2)
@@ -492,6 +516,11 @@ _ALIASES = {
     "uiprmd": "ui_prmd",
     "ui_prmd_vicon": "plug_in_gait_39",
     "keraal_vicon": "keraal_vicon_17",
+    "coco": "coco17",
+    "coco_17": "coco17",
+    "h36m": "h36m17",
+    "h36m_17": "h36m17",
+    "human36m": "h36m17",
 }
 
 
@@ -511,7 +540,9 @@ def get_topology(name: str) -> Topology:
     """Built-in (or registered) topology by name.
 
     Names: ``kinect_v2`` (25, SDK order), ``kinect_v1`` (20), ``azure_kinect`` (32),
-    ``mediapipe_pose`` (33), ``openpose_body25`` (25), ``ui_prmd`` (22),
+    ``mediapipe_pose`` (33), ``openpose_body25`` (25), ``coco17`` / ``coco`` (17 COCO
+    keypoints), ``h36m17`` / ``h36m`` (17 Human3.6M joints of the 3-D lifters),
+    ``ui_prmd`` (22),
     ``kinect_v2_21`` / ``krajjat`` (21, krajjat TSV order), ``plug_in_gait_39`` (39
     markers, z up), ``keraal_vicon_17`` (17 ART targets, z up).
     """
