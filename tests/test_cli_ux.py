@@ -421,3 +421,25 @@ def test_columns_is_obeyed_when_piped():
     out = subprocess.run([sys.executable, "-m", "tobitkf", "methods"], env=env,
                          capture_output=True, text=True, check=True).stdout  # fmt: skip
     assert max(len(line) for line in out.splitlines()) > 100
+
+
+def test_messages_keep_a_long_path_on_one_line_in_a_narrow_pipe(tmp_path):
+    """A warning or failure names its file whole, however narrow the output: a path cut
+    in two is neither found by grep in a log nor copied from a terminal."""
+    import numpy as np
+
+    deep = tmp_path / "a_rather_long_folder_name" / "and_another_long_level_below_it"
+    deep.mkdir(parents=True)
+    arr = np.cumsum(np.random.default_rng(0).normal(0, 0.01, (20, 4, 3)), axis=0)
+    np.save(deep / "a_long_recording_name_of_its_own.npy", arr)  # warns: no rate, no bones
+    (deep / "broken_recording_with_a_long_name.trc").write_text("not a trc file\n")
+    env = {**os.environ, "COLUMNS": "50"}
+    run = subprocess.run(
+        [sys.executable, "-m", "tobitkf", "smooth", str(deep), "-o", str(tmp_path / "o")],
+        env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    lines = run.stderr.splitlines()
+    for name in ("a_long_recording_name_of_its_own.npy", "broken_recording_with_a_long_name.trc"):
+        path = str(deep / name)
+        assert any(path in line for line in lines), run.stderr
+    assert any(line.startswith("warning") and "no frame rate" in line for line in lines)

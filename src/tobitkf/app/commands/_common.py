@@ -18,7 +18,9 @@ from rich.text import Text
 console = Console()
 if not console.is_terminal and not os.environ.get("COLUMNS"):
     console = Console(width=160)  # files and pipes get whole tables, not 80-column cuts
-err_console = Console(stderr=True)
+# messages name files: never cut a line (a path split in two is neither found by grep in a
+# log nor copied whole from a terminal, which wraps long lines itself)
+err_console = Console(stderr=True, soft_wrap=True)
 
 
 def _fail(message: str) -> None:
