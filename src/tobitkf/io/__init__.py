@@ -21,6 +21,7 @@ name                content                                                read 
 ``npy``             NumPy keypoint array (T, J, D); skeleton from a sidecar yes
 ``openpose``        OpenPose JSON output folder (BODY_25 / COCO-18)         yes
 ``mediapipe``       MediaPipe Pose landmarks (JSON / CSV layout, docs)      yes
+``mmpose``          MMPose predictions JSON (frames of instances)           yes
 ``azure_kinect``    Azure Kinect Body Tracking JSON (offline_processor)     yes
 ``trc``             OpenSim marker trajectories                             yes     yes
 ``deeplabcut``      DeepLabCut .h5 / .csv (x, y, likelihood; multi-animal)  yes     yes
@@ -47,6 +48,7 @@ from tobitkf.io import kimore as _kimore  # noqa: F401
 from tobitkf.io import krajjat as _krajjat  # noqa: F401
 from tobitkf.io import lightningpose as _lightningpose  # noqa: F401
 from tobitkf.io import mediapipe as _mediapipe  # noqa: F401
+from tobitkf.io import mmpose as _mmpose  # noqa: F401
 from tobitkf.io import movement as _movement  # noqa: F401
 from tobitkf.io import npy as _npy  # noqa: F401
 from tobitkf.io import npz as _npz  # noqa: F401

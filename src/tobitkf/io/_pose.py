@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._text import check_positions, check_rate
-from tobitkf.io.errors import OptionError, ReadError
+from tobitkf.io._text import check_positions, option_rate
+from tobitkf.io.errors import ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -115,14 +115,6 @@ def check_hdf5_reads(path: Any, what: str) -> None:
         raise hdf5_open_error(path, exc) from None
 
 
-def _fps(path: Any, fps: Any) -> float | None:
-    if fps is None:
-        return None
-    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)):
-        raise OptionError(f"fps must be a number, found {fps!r}")
-    return check_rate(path, None, float(fps), "fps", repr(fps))
-
-
 def sequences_from_arrays(
     path: Any,
     positions: np.ndarray,
@@ -179,7 +171,7 @@ def sequences_from_arrays(
             topo = Topology(topo.name, topo.joints, topo.parents, tuple(pairs), topo.up_axis)
     except ValueError as exc:
         raise ReadError(path, None, f"bad skeleton: {exc}") from None
-    rate = _fps(path, fps)
+    rate = option_rate(path, fps)
     inds = [None] if individuals is None else list(individuals)
     if len(inds) != pos.shape[1]:
         raise ReadError(path, None, f"{pos.shape[1]} individuals but {len(inds)} names")

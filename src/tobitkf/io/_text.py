@@ -23,6 +23,7 @@ import os
 import re
 import zlib
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import orjson
@@ -232,6 +233,16 @@ def check_implausible_option(implausible: str) -> None:
     """Validate a reader's ``implausible`` option (:data:`IMPLAUSIBLE`)."""
     if implausible not in IMPLAUSIBLE:
         raise OptionError(f"implausible must be one of {IMPLAUSIBLE}, found {implausible!r}")
+
+
+def option_rate(path: str | os.PathLike[str], fps: Any) -> float | None:
+    """A reader's ``fps=`` option: None, or a plausible rate (:func:`check_rate`); not a
+    number is an :class:`OptionError`."""
+    if fps is None:
+        return None
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)):
+        raise OptionError(f"fps must be a number, found {fps!r}")
+    return check_rate(path, None, float(fps), "fps", repr(fps))
 
 
 def check_positions(

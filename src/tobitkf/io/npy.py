@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, check_rate, size_text
+from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, option_rate, size_text
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
@@ -63,6 +63,9 @@ def _sidecar(path: Path) -> dict[str, Any]:
         raise ReadError(side, None, f"unreadable sidecar of {path.name} ({exc})") from None
     if not isinstance(data, dict):
         raise ReadError(side, None, "expected a JSON object with topology, fps and units")
+    fps = data.get("fps")
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float))):
+        raise ReadError(side, None, f"fps must be a number of frames per second, found {fps!r}")
     unknown = sorted(set(data) - set(SIDECAR_KEYS))
     if unknown:
         raise ReadError(
@@ -133,13 +136,7 @@ def read_npy(
         raise ReadError(p, None, "infinite values (use NaN for a missing keypoint)")
     if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
         raise ReadError(p, None, f"units must be one of {sorted(KNOWN_UNITS)}, got {units!r}")
-    if fps is not None:
-        try:
-            fps = check_rate(p, None, float(fps), "fps", str(fps))
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, ReadError):
-                raise
-            raise ReadError(p, None, f"fps must be a number, got {fps!r}") from None
+    fps = option_rate(p, fps)
     bodies = arr[:, None] if arr.ndim == 3 else arr
     topo = _topology(p, topology, bodies.shape[2])
     notes = []
