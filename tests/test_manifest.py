@@ -139,3 +139,26 @@ def test_a_uiprmd_pair_named_by_urls_is_read_together(tmp_path, shared_data):
     finally:
         if memory.exists(root):
             memory.rm(root, recursive=True)
+
+
+def test_another_fps_redoes_only_the_files_that_used_it(tmp_path):
+    """--fps times the files that state no rate; a file with its own rate did not use
+    it, and a re-run with another --fps passes over it (its output would be the same)."""
+    import numpy as np
+
+    src = tmp_path / "in"
+    src.mkdir()
+    walk = np.cumsum(np.random.default_rng(0).normal(0, 0.01, (40, 25, 3)), axis=0)
+    np.save(src / "bare.npy", walk)  # no rate
+    topo = tk.get_topology("kinect_v2")
+    tk.save([tk.SkeletonSequence(walk, topo, fps=30.0)], src / "timed.npz")  # its own rate
+    out = tmp_path / "out"
+    first = tk.smooth_files(src, out, METHOD, fps=25)
+    assert all(r.ok for r in first) and _skipped(first) == []
+    again = tk.smooth_files(src, out, METHOD, fps=50)
+    assert _skipped(again) == [str(src / "timed.npz")]
+    assert _skipped(tk.smooth_files(src, out, METHOD, fps=50)) == sorted(
+        str(src / n) for n in ("bare.npy", "timed.npz")
+    )
+    redone = tk.smooth_files(src, out, METHOD)  # no rate given: the bare file again
+    assert _skipped(redone) == [str(src / "timed.npz")]

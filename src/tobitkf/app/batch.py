@@ -394,6 +394,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
+        raw_seqs = sequences
         sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -431,6 +432,9 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         seconds=time.perf_counter() - start,
         input_format=in_fmt,
         warnings=said,
+        # the file's own rate (or timestamps) timed every body: a rate given for files
+        # that state none did not touch this output (the manifest need not redo it)
+        extra={"own_rate": all(s.fps is not None or s.timestamps is not None for s in raw_seqs)},
     )
 
 

@@ -237,6 +237,9 @@ class Manifest:
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
             return None
         want = {**settings, "output": input_key(output)}
+        if entry.get("own_rate") and "input_fps" in want["params"]:
+            # a file with its own rate does not depend on the rate given for the others
+            want["params"] = {k: v for k, v in want["params"].items() if k != "input_fps"}
         if any(entry.get(k) != want[k] for k in _SAME):
             return None
         try:
@@ -253,6 +256,10 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
     """The manifest entry of one finished file (a :class:`~tobitkf.app.batch.FileSummary`
     with ``extra["size"]`` and ``extra["sha256"]`` when the input could be read)."""
     extra = summary.extra or {}
+    if extra.get("own_rate") and "input_fps" in settings.get("params", {}):
+        # the given rate did not apply to this file: its output does not depend on it
+        params = {k: v for k, v in settings["params"].items() if k != "input_fps"}
+        settings = {**settings, "params": params}
     size = extra.get("size")
     if size is None and "://" not in summary.source:
         try:
@@ -266,6 +273,7 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
         "output": input_key(summary.output) if summary.output else extra.get("planned_output"),
         "status": "ok" if summary.ok else "failed",
         "error": summary.error,
+        "own_rate": bool(extra.get("own_rate")),
         **settings,
         "frames": summary.frames,
         "bodies": summary.bodies,

@@ -199,7 +199,8 @@ def run_planned(
     workers load them instead of each compiling them (:mod:`tobitkf.smoothing.warmup`);
     ``on_compile`` is called if that compiles anything (e.g. to say why it waits).
     ``fps``: the frame rate the jobs give inputs that state none (recorded in the
-    manifest's settings, so that another rate redoes them).
+    manifest's settings, so that another rate redoes them; a file with its own rate
+    or timestamps is not redone for it).
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
