@@ -443,3 +443,17 @@ def test_messages_keep_a_long_path_on_one_line_in_a_narrow_pipe(tmp_path):
         path = str(deep / name)
         assert any(path in line for line in lines), run.stderr
     assert any(line.startswith("warning") and "no frame rate" in line for line in lines)
+
+
+def test_piped_tables_have_no_trailing_spaces(tmp_path):
+    """A title line padded to the table's width leaves trailing spaces in every log."""
+    import numpy as np
+
+    np.save(tmp_path / "a.npy", np.cumsum(np.ones((20, 4, 3)), axis=0))
+    env = {**os.environ, "COLUMNS": "200"}  # a table, not the narrow blocks
+    out = subprocess.run(
+        [sys.executable, "-m", "tobitkf", "smooth", str(tmp_path / "a.npy"), "-o",
+         str(tmp_path / "o")], capture_output=True, text=True, check=True, env=env,
+    ).stdout  # fmt: skip
+    assert "tobitkf smooth" in out and "│ a.npy" in out
+    assert not [line for line in out.splitlines() if line.endswith(" ")]

@@ -38,7 +38,7 @@ def _fmt(value: Any, digits: int = 2) -> str:
 
 
 def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: int = 2) -> None:
-    table = Table(title=title, title_justify="left")
+    table = Table()  # the title is printed on its own line: a table's is padded
     for i, col in enumerate(columns):
         # long file names fold onto a second line instead of being cut to "JointPositi…"
         table.add_column(col, justify="left" if i == 0 else "right", overflow="fold")
@@ -53,6 +53,7 @@ def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: 
             for col, v in zip(columns, row, strict=True):
                 console.print(Text.assemble((f"{col}: ", "bold"), _fmt(v, digits)))
         return
+    console.print(Text(title, style="italic"))
     console.print(table)
 
 
