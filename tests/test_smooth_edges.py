@@ -1,0 +1,42 @@
+"""Edge cases of the smoothing API found by fuzzing (hypothesis), each kept as a small
+deterministic test: short recordings with long pauses, parameters that would make the
+filters' numbers meaningless, and duplicated timestamps live and in batch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tobitkf as tk
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.smoothing.robust_fit import fit_blocks
+
+
+def _motion(frames: int, seed: int = 4) -> SkeletonSequence:
+    clean = tk.generate_motion("arms", duration=max(frames / 30, 2.0), seed=seed)
+    return SkeletonSequence(clean.positions[:frames], clean.topology, fps=30.0)
+
+
+def _assert_finite_where_measured(seq: SkeletonSequence, out: SkeletonSequence) -> None:
+    assert np.isfinite(out.positions).all()
+    assert np.isfinite(out.std).all() and (out.std >= 0).all()
+
+
+@pytest.mark.parametrize(("frames", "pause"), [(8, 10.0), (40, 3600.0), (100, 3600.0)])
+def test_fit_blocks_stay_inside_a_short_recording_with_a_pause(frames, pause):
+    # fewer frames than one 2 s block (or than the blocks the budget asks for), but
+    # longer than fit_seconds because of a pause: the blocks started before frame 0
+    steps = np.full(frames, 1 / 30)
+    steps[frames // 2] = pause
+    idx, _ = fit_blocks(steps, 5.0)
+    assert idx.size and idx.min() >= 0 and idx.max() < frames
+    assert np.all(np.diff(idx) > 0)  # each frame once, in order
+
+
+@pytest.mark.parametrize("frames", [8, 40])
+def test_robust_smooths_a_short_recording_with_a_long_pause(frames):
+    seq = _motion(frames)
+    ts = np.arange(frames) / 30
+    ts[frames // 2 :] += 10.0  # a 10 s pause: longer than fit_seconds (5 s)
+    seq = seq.replace(timestamps=ts)
+    _assert_finite_where_measured(seq, tk.smooth(seq, "robust"))
