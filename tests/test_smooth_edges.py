@@ -40,3 +40,28 @@ def test_robust_smooths_a_short_recording_with_a_long_pause(frames):
     ts[frames // 2 :] += 10.0  # a 10 s pause: longer than fit_seconds (5 s)
     seq = seq.replace(timestamps=ts)
     _assert_finite_where_measured(seq, tk.smooth(seq, "robust"))
+
+
+@pytest.mark.parametrize("name", ["v_max", "speed_sd", "noise_sd"])
+@pytest.mark.parametrize(
+    "value",
+    [
+        np.inf,
+        {"hands": np.inf, "arms": 1.0, "torso": 1.0, "legs": 1.0},
+        np.full(25, np.inf),
+    ],
+    ids=["number", "region", "per-joint"],
+)
+def test_region_parameters_refuse_infinity_in_every_form(name, value):
+    # a region's speed or noise of inf made its joints' output NaN (or raised a bare
+    # "math domain error"); a scalar inf was refused only when the method ran
+    with pytest.raises(ValueError, match=name):
+        tk.LiveSmoother("kinect_v2", **{name: value})
+    for method in ("robust", "robust_online"):
+        with pytest.raises(ValueError, match=name):
+            tk.smooth(_motion(30), method, **{name: value})
+
+
+def test_per_joint_parameters_that_are_not_numbers_are_named():
+    with pytest.raises(ValueError, match="noise_sd must be positive finite numbers"):
+        tk.smooth(_motion(30), "robust", noise_sd=["a"] * 25)
