@@ -65,3 +65,25 @@ def test_region_parameters_refuse_infinity_in_every_form(name, value):
 def test_per_joint_parameters_that_are_not_numbers_are_named():
     with pytest.raises(ValueError, match="noise_sd must be positive finite numbers"):
         tk.smooth(_motion(30), "robust", noise_sd=["a"] * 25)
+
+
+@pytest.mark.parametrize("apart", [0.0, 1e-9])
+@pytest.mark.parametrize("keyed", [False, True])
+def test_live_equals_batch_at_duplicated_timestamps(apart, keyed):
+    # batch gates on the timestamps as they are (a duplicate is 0 s after the frame
+    # before), while the live stream gated on its cumulated steps, in which a duplicate
+    # lasts a tenth of the nominal step: a hand step of 6.5 cm at the duplicate was
+    # within the live speed gate and outside the batch one
+    seq = _motion(60)
+    ts = np.arange(60) / 30
+    ts[30:] -= 1 / 30 - apart  # frame 30 has (nearly) frame 29's stamp
+    pos = seq.positions.copy()
+    pos[30:, seq.topology.joints.index("HandLeft"), 0] += 0.065
+    seq = seq.replace(positions=pos, timestamps=ts)
+    batch = tk.smooth(seq, "robust_online")
+    live = tk.LiveSmoother(seq.topology, "robust_online", fps=30.0)
+    if keyed:
+        frames = [live.update({7: p}, timestamp=t)[7] for p, t in zip(pos, ts, strict=True)]
+    else:
+        frames = [live.update(p, timestamp=t) for p, t in zip(pos, ts, strict=True)]
+    np.testing.assert_array_equal(np.stack(frames), batch.positions)
