@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 import tobitkf as tk
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.smoothing.robust_fit import fit_blocks
+from tobitkf.smoothing.timebase import frame_steps
 
 
 def _motion(frames: int, seed: int = 4) -> SkeletonSequence:
@@ -87,3 +90,29 @@ def test_live_equals_batch_at_duplicated_timestamps(apart, keyed):
     else:
         frames = [live.update(p, timestamp=t) for p, t in zip(pos, ts, strict=True)]
     np.testing.assert_array_equal(np.stack(frames), batch.positions)
+
+
+@settings(max_examples=8, deadline=None, derandomize=True)
+@given(
+    gaps=st.lists(
+        st.sampled_from([0.0, 1e-9, 0.5, 1.0, 1.0, 1.0, 2.0, 300.0]), min_size=39, max_size=39
+    ),
+    missing=st.integers(0, 2**20),
+)
+def test_live_equals_batch_on_any_timestamps(gaps, missing):
+    # steps of 0, 1e-9, half, one and two frames and 10 s pauses (in frames of 1/30 s)
+    assume(any(g > 0 for g in gaps))
+    seq = _motion(40)
+    ts = np.concatenate([[0.0], np.cumsum(gaps)]) / 30
+    pos = seq.positions.copy()
+    rng = np.random.default_rng(missing)
+    pos[rng.random(pos.shape[:2]) < 0.1] = np.nan
+    pos[rng.random(pos.shape[:2]) < 0.05] += 0.3  # glitches for the gates
+    seq = seq.replace(positions=pos, timestamps=ts)
+    batch = tk.smooth(seq, "robust_online").positions
+    # batch takes its nominal step from the timestamps (the median positive step); a
+    # stream cannot look ahead, so it is given that rate (all stamps equal: batch uses
+    # fps, which a stream cannot know is the case until its end: assumed above)
+    live = tk.LiveSmoother(seq.topology, "robust_online", fps=1 / frame_steps(seq)[1])
+    frames = np.stack([live.update(p, timestamp=t) for p, t in zip(pos, ts, strict=True)])
+    np.testing.assert_array_equal(frames, batch)
