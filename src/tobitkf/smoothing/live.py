@@ -375,6 +375,7 @@ class LiveSmoother:
         # slot order: the same ids again step that group as they are (no regrouping)
         self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
+        self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
 
     @property
@@ -482,6 +483,7 @@ class LiveSmoother:
             self._stepper = self._new_stepper()
             self._shape = shape[:-1]
         self._single = pos.ndim == 2
+        self._time = None if timestamp is None else stamp
         out = self._step(self._stepper, pos, states, dt, conf)
         self._last_timestamp = stamp
         self.n_frames += 1
@@ -522,6 +524,8 @@ class LiveSmoother:
             kw["positions"] = batch_pos
         if getattr(stepper, "uses_n_dims", False):  # the stream's coordinates (2 or 3)
             kw["n_dims"] = dims
+        if getattr(stepper, "uses_time", False):  # the frame's timestamp (None: not given)
+            kw["time"] = self._time
         out = stepper.step(ys, missing, batch_states, dt, **kw)
         out = drop_third_axis(np.asarray(out), dims)
         if self._scale != 1.0:
@@ -544,6 +548,7 @@ class LiveSmoother:
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
         self._clock += dt
+        self._time = None if timestamp is None else stamp
         same = self._same
         if same is not None and same[0] == tuple(bodies):
             out = self._step_same(same[1], same[2], bodies, arr, sts, dt, confs)

@@ -173,10 +173,12 @@ def over_default(value: Any, default: Any) -> Any:
 
 
 def region_value(name: str, value: Any) -> Any:
-    """A positive number (inf allowed), one for every body region, or per-joint values.
+    """A positive finite number, one for every body region, or per-joint values.
 
     Per-joint values (an array of shape (J,)) are checked against the topology when the
     method resolves them (:func:`tobitkf.smoothing.robust_gating.region_values`).
+    Infinite values are refused in every form: the method refuses them when it resolves
+    a number, and a speed or noise of inf in a region made that region's output NaN.
     """
     if isinstance(value, Mapping):
         missing = [g for g in BODY_REGIONS if g not in value]
@@ -186,13 +188,18 @@ def region_value(name: str, value: Any) -> Any:
                 [f"missing {missing}"] * bool(missing) + [f"unknown {extra}"] * bool(extra)
             )
             raise ValueError(f"{name} takes a value per body region {BODY_REGIONS}; {what}")
-        return {g: positive_or_inf(f"{name}[{g}]", value[g]) for g in BODY_REGIONS}
+        return {g: positive_float(f"{name}[{g}]", value[g]) for g in BODY_REGIONS}
     if np.ndim(value) > 0:
-        arr = np.asarray(value, dtype=float)
-        if arr.ndim != 1 or not np.all(arr > 0):
-            raise ValueError(f"{name} must be positive numbers, one per joint; got {value!r}")
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            arr = np.full(1, np.nan)
+        if arr.ndim != 1 or not np.all(np.isfinite(arr) & (arr > 0)):
+            raise ValueError(
+                f"{name} must be positive finite numbers, one per joint; got {value!r}"
+            )
         return tuple(float(v) for v in arr)
-    return positive_or_inf(name, value)
+    return positive_float(name, value)
 
 
 def check_up_axis(value: Any) -> int:

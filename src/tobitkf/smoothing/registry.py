@@ -133,7 +133,9 @@ class LiveStepper(Protocol):
     samples are NaN) sets a class attribute ``uses_positions = True``: ``step`` then
     also receives ``positions=`` (B, J, 3). One that depends on the stream's number of
     coordinates sets ``uses_n_dims = True`` and receives ``n_dims=`` (2 or 3; a 2-D
-    stream reaches ``step`` with a third axis of zeros)."""
+    stream reaches ``step`` with a third axis of zeros). One that reads the frames'
+    times (as batch reads ``SmoothInput.times``) sets ``uses_time = True`` and receives
+    ``time=``, the frame's timestamp in seconds (None when the stream gives none)."""
 
     def step(
         self,

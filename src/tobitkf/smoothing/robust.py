@@ -638,11 +638,16 @@ class RobustStepper:
 
     uses_n_dims = True  # the stream's coordinates: inferred joints keep their bones in 3-D
     uses_confidence = True  # a pose estimator's scores weigh the samples, as in batch
+    # the gates read the frames' times, which batch takes from the timestamps as they are:
+    # duplicated ones are 0 s apart there, while their step is a tenth of the nominal one
+    uses_time = True
 
     def step(self, ys: Array, missing: NDArray[np.bool_], states: Any, dt: float,
-             n_dims: int = 3, confidence: Any = None) -> Array:  # fmt: skip
+             n_dims: int = 3, confidence: Any = None,
+             time: float | None = None) -> Array:  # fmt: skip
         """Smooth one frame: ys (B, J, 3) NaN where missing (``n_dims`` 2: a third axis of
-        zeros); returns (B, J, 3)."""
+        zeros); returns (B, J, 3). ``time``: the frame's timestamp (batch: ``times``), else
+        the cumulated steps (batch without timestamps)."""
         k = kernels()
         B, J = missing.shape
         if self._state is None:
@@ -650,9 +655,9 @@ class RobustStepper:
                                       bool(self.setup.pi[k.I_SHARED]))  # fmt: skip
             self._scratch = k.new_work(B, J)
             self._guard = step_guard().new_state(B, J, ys.shape[-1])
-            self._time = 0.0
-        else:
-            self._time = self._time + dt  # the batch times: the cumulated steps
+            self._time = 0.0 if time is None else float(time)
+        else:  # the batch times: the timestamps, else the cumulated steps
+            self._time = self._time + dt if time is None else float(time)
         out = np.empty((1, B, J, 3))
         self.rejected = np.zeros((B, J), dtype=bool)
         self.std = np.empty((B, J))

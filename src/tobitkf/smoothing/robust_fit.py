@@ -111,13 +111,16 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
     :data:`FIT_BLOCK_SECONDS` adding up to at most ``max_seconds`` (at least one)."""
     T = steps.shape[0]
     total = float(np.sum(steps[1:])) if T > 1 else 0.0
-    if not math.isfinite(max_seconds) or total <= max_seconds or T < 2:
+    dt = typical_step(steps) if T > 1 else 1.0
+    blen = max(2, round(FIT_BLOCK_SECONDS / dt))
+    # a recording with pauses may last longer than max_seconds on fewer frames than one
+    # block: all of them (a block would start before the first frame)
+    if not math.isfinite(max_seconds) or total <= max_seconds or T < blen:
         frames = np.arange(T, dtype=np.int64)
         restart = np.zeros(T, dtype=bool)
         return frames, restart
-    dt = typical_step(steps)
-    blen = max(2, round(FIT_BLOCK_SECONDS / dt))
-    nblocks = max(1, math.floor(max_seconds / (blen * dt)))  # at most max_seconds
+    # at most max_seconds, and no more blocks than the frames hold without overlapping
+    nblocks = max(1, min(math.floor(max_seconds / (blen * dt)), T // blen))
     starts = np.unique(np.linspace(0, T - blen, nblocks).round().astype(np.int64))
     frames = (starts[:, None] + np.arange(blen)[None]).ravel()
     restart = np.zeros(frames.size, dtype=bool)
