@@ -116,3 +116,14 @@ def test_live_equals_batch_on_any_timestamps(gaps, missing):
     live = tk.LiveSmoother(seq.topology, "robust_online", fps=1 / frame_steps(seq)[1])
     frames = np.stack([live.update(p, timestamp=t) for p, t in zip(pos, ts, strict=True)])
     np.testing.assert_array_equal(frames, batch)
+
+
+def test_an_absurd_lookback_is_a_clear_error_not_a_huge_allocation():
+    """Each frame of lookback is a copy of every joint's filter state: 10**9 of them asked
+    numpy for terabytes (a MemoryError) instead of saying what is wrong."""
+    walk = np.cumsum(np.full((6, 25, 3), 0.001), axis=0)
+    with pytest.raises(ValueError, match="lookback must be an integer from 0 to 300"):
+        tk.smooth(walk, "robust_online", lookback=10**9)
+    with pytest.raises(ValueError, match="lookback"):
+        tk.LiveSmoother(method="robust_online", lookback=301)
+    assert np.isfinite(tk.smooth(walk, "robust_online", lookback=300)).all()

@@ -133,6 +133,19 @@ def at_least_int(lo: int) -> Validator:
     return check
 
 
+def int_between(lo: int, hi: int) -> Validator:
+    """An integer from ``lo`` to ``hi`` (bools refused)."""
+    at_least = at_least_int(lo)
+
+    def check(name: str, value: Any) -> int:
+        v = at_least(name, value)
+        if v > hi:
+            raise ValueError(f"{name} must be an integer from {lo} to {hi}, got {value!r}")
+        return v
+
+    return check
+
+
 def odd_window(name: str, value: Any) -> int:
     """An odd integer >= 1."""
     v = at_least_int(1)(name, value)

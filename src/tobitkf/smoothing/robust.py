@@ -130,8 +130,8 @@ from tobitkf.smoothing.keypoints import (
 )
 from tobitkf.smoothing.params import (
     as_bool,
-    at_least_int,
     check_inferred_factor,
+    int_between,
     nonneg_float,
     nonneg_or_inf,
     one_of,
@@ -151,6 +151,9 @@ from tobitkf.smoothing.timebase import (
     frame_times,
     readonly,
 )
+
+#: the largest ``lookback`` (frames): 10 s at 30 fps, far beyond how failures enter
+MAX_LOOKBACK = 300
 
 __all__ = ["ROBUST_DEFAULTS", "ROBUST_VALIDATORS", "robust_smooth"]
 
@@ -210,7 +213,9 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "bones": as_bool,
     "two_pass": as_bool,
     "max_reject": positive_or_inf,
-    "lookback": at_least_int(0),
+    # frames re-predicted at a rejection's start (failures enter over a few); each one is
+    # a copy of the filter's state per joint, so a bound keeps the memory reasonable
+    "lookback": int_between(0, MAX_LOOKBACK),
     "min_run": nonneg_float,
     "carry": as_bool,
     "inferred_bones": as_bool,
