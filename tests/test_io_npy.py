@@ -80,7 +80,6 @@ def test_sidecar_names_skeleton_rate_and_units_arguments_win(tmp_path):
         (np.zeros((5, 17, 3)), None, {"fps": -3}, "frame rate"),
         (np.zeros((5, 17, 3)), None, {"units": "feet"}, "units must be"),
         (np.zeros((5, 17, 3)), {"topology": "coco", "rate": 30}, {}, "unknown keys ['rate']"),
-        (np.zeros((5, 17, 3)), "[1, 2]", {}, "JSON object"),
         (np.zeros((5, 17, 3)), "{not json", {}, "unreadable sidecar"),
     ],
 )
@@ -221,3 +220,24 @@ def test_an_array_and_its_sidecar_named_by_urls(tmp_path):
     finally:
         if memory.exists(root):
             memory.rm(root, recursive=True)
+
+
+def test_a_json_file_of_the_same_name_that_is_no_description(tmp_path):
+    """clip.npy (lifted 3-D) beside clip.json (MMPose's 2-D predictions of the clip): the
+    JSON file is a recording of its own, not the array's sidecar."""
+    import tobitkf as tk
+
+    np.save(tmp_path / "clip.npy", _walk())
+    kp = _walk(T=10, D=2) * 100 + 300
+    frames = [{"frame_id": t, "instances": [{"keypoints": kp[t].tolist(),
+                                              "keypoint_scores": [0.9] * 17}]}
+              for t in range(10)]  # fmt: skip
+    (tmp_path / "clip.json").write_text(json.dumps(frames))
+    (seq,) = load(tmp_path / "clip.npy")
+    assert seq.topology.name == "unnamed"  # no description read
+    res = {r.source.rsplit("/", 1)[-1]: r for r in tk.smooth_files(tmp_path, tmp_path / "o")}
+    assert sorted(res) == ["clip.json", "clip.npy"] and res["clip.json"].ok
+    # both would write clip.robust.csv: the second is refused with what to do
+    assert "files named alike in one folder, clip.json and clip.npy" in res["clip.npy"].error
+    (alone,) = tk.smooth_files(tmp_path / "clip.npy", tmp_path / "o2")
+    assert alone.ok

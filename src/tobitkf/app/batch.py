@@ -295,10 +295,13 @@ def plan_jobs(
             if f.resolve() in inputs:
                 reason = f"output {f} would overwrite an input"
             elif f.resolve() in taken:
-                reason = (
-                    f"output {f} is already the output of {taken[f.resolve()]} (files of one "
-                    "name from different folders: give the folder they share, whose layout "
-                    "the outputs keep)"
+                other = taken[f.resolve()]
+                reason = f"output {f} is already the output of {other} " + (
+                    f"(files named alike in one folder, {other.name} and {src.name}: "
+                    "smooth one of them into another output folder)"
+                    if other.parent.resolve() == src.parent.resolve()
+                    else "(files of one name from different folders: give the folder they "
+                    "share, whose layout the outputs keep)"
                 )
             elif f.is_dir():
                 reason = f"output {f} is a folder"

@@ -51,18 +51,29 @@ def sidecar_path(path: str | os.PathLike[str]) -> Path:
     return p.with_suffix(".json")
 
 
+def _parse(side: Path) -> Any:
+    """The JSON document of ``side`` (at most 1 MiB: a description is small)."""
+    if side.stat().st_size > 2**20:
+        raise ValueError("larger than 1 MiB")
+    return json.loads(side.read_text(encoding="utf-8"))
+
+
+def _is_description(data: Any) -> bool:
+    """A sidecar is an object naming at least one of :data:`SIDECAR_KEYS`; any other JSON
+    file of the same name (an MMPose prediction file of the same clip, say) is not one."""
+    return isinstance(data, dict) and any(k in data for k in SIDECAR_KEYS)
+
+
 def _sidecar(path: Path) -> dict[str, Any]:
     side = sidecar_path(path)
     if not side.is_file():
         return {}
     try:
-        if side.stat().st_size > 2**20:
-            raise ReadError(side, None, "a sidecar of more than 1 MiB is not a description")
-        data = json.loads(side.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = _parse(side)
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise ReadError(side, None, f"unreadable sidecar of {path.name} ({exc})") from None
-    if not isinstance(data, dict):
-        raise ReadError(side, None, "expected a JSON object with topology, fps and units")
+    if not _is_description(data):
+        return {}  # another file of the same name, not a description of the array
     fps = data.get("fps")
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float))):
         raise ReadError(side, None, f"fps must be a number of frames per second, found {fps!r}")
@@ -169,8 +180,14 @@ def sniff_npy(path: Path, head: str) -> int:
 
 
 def _is_sidecar(path: Path) -> bool:
-    """True for ``poses.json`` beside ``poses.npy`` (read with the array, not alone)."""
-    return path.suffix.lower() == ".json" and path.with_suffix(".npy").is_file()
+    """True for ``poses.json`` beside ``poses.npy`` when it describes the array (read with
+    it, not alone); a JSON file of the same name that is no description is a recording."""
+    if path.suffix.lower() != ".json" or not path.with_suffix(".npy").is_file():
+        return False
+    try:
+        return _is_description(_parse(path))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return True  # a broken description: reading the array reports it
 
 
 register_format(
