@@ -139,7 +139,7 @@ def test_other_counts_have_no_bones_and_say_so(tmp_path):
         ([{"frame_id": 0, "instances": [{"bbox": [[0, 0, 1, 1]]}]}], 'no "keypoints"'),
         ([{"frame_id": 0, "instances": [{"keypoints": [[1, 2, 3, 4]]}]}], "[[x, y], ...]"),
         ([{"frame_id": 0, "instances": [{"keypoints": [[1, 2]], "keypoint_scores": [1, 2]}]}],
-         "2 scores for 1 keypoints"),
+         "2 values for 1 keypoints"),
         ([{"frame_id": 0, "instances": [{"keypoints": [[1, 2]]}]},
           {"frame_id": 0, "instances": [{"keypoints": [[1, 2]]}]}], "frame_id appears twice"),
         ([{"frame_id": "a", "instances": []}], "frame_id must be an integer"),
@@ -176,3 +176,64 @@ def test_token_soup(tmp_path, parts):
     p = tmp_path / "f.json"
     p.write_text("[" + "".join(parts))
     check_reader(read_mmpose, p)
+
+
+def test_smoothed_output_round_trips_and_keeps_the_files_meta(tmp_path):
+    import tobitkf as tk
+
+    T = 25
+    a = _person(T, 300, 11)
+    a[5:9, 9] += 150  # a glitch of the left wrist
+    scores = np.full((T, 17), 0.9)
+    meta = {"dataset_name": "coco", "keypoint_id2name": dict(enumerate(COCO17_JOINTS))}
+    frames = [{"frame_id": t + 1, "instances": [_instance(a[t], scores[t])]} for t in range(T)]
+    src = tmp_path / "in.json"
+    _write(src, frames, {k: v if k != "keypoint_id2name" else {str(i): n for i, n in v.items()}
+                         for k, v in meta.items()})  # fmt: skip
+    (seq,) = tk.load(src, fps=30)
+    smoothed = tk.smooth(seq)
+    out = tmp_path / "out.json"
+    tk.save([smoothed], out, format="mmpose")
+    doc = json.loads(out.read_text())
+    assert doc["meta_info"]["dataset_name"] == "coco"  # the file's meta kept
+    assert doc["meta_info"]["tobitkf"]["method"] == "robust"  # and the provenance added
+    assert [f["frame_id"] for f in doc["instance_info"]] == list(range(1, T + 1))
+    (back,) = tk.load(out)
+    assert back.fps == 30.0  # MMPose keeps no rate: the writer's meta does
+    np.testing.assert_allclose(back.positions, smoothed.positions)
+    np.testing.assert_allclose(back.std, smoothed.std)
+    np.testing.assert_array_equal(back.sample_state, smoothed.sample_state)
+    np.testing.assert_allclose(back.confidence, smoothed.confidence)
+    assert back.topology == seq.topology and back.metadata["person_ids"] == "track_id"
+
+
+def test_writer_several_people_and_missing_values(tmp_path):
+    import tobitkf as tk
+
+    topo = tk.get_topology("coco17")
+    a, b = _person(6, 100, 12), _person(6, 700, 13)
+    a[:2] = np.nan  # not yet in the picture
+    b[3, 4] = np.nan  # one keypoint missing
+    seqs = [tk.SkeletonSequence(a, topo, body_id="left"), tk.SkeletonSequence(b, topo, body_id=3)]
+    p = tmp_path / "two.json"
+    tk.save(seqs, p, format="mmpose")
+    doc = json.loads(p.read_text())
+    assert [len(f["instances"]) for f in doc["instance_info"]] == [1, 1, 2, 2, 2, 2]
+    assert doc["instance_info"][3]["instances"][1]["keypoints"][4] == [None, None]
+    back = {s.body_id: s for s in tk.load(p)}
+    np.testing.assert_array_equal(back["left"].positions, a)
+    np.testing.assert_array_equal(back[3].positions, b)
+    with pytest.raises(ValueError, match="one keypoint layout"):
+        tk.save(
+            [
+                seqs[0],
+                tk.SkeletonSequence(
+                    a[:, :5],
+                    tk.get_topology("kinect_v2").subset(
+                        ["SpineBase", "SpineMid", "Neck", "Head", "ShoulderLeft"]
+                    ),
+                ),
+            ],
+            p,
+            format="mmpose",
+        )

@@ -21,7 +21,7 @@ name                content                                                read 
 ``npy``             NumPy keypoint array (T, J, D); skeleton from a sidecar yes
 ``openpose``        OpenPose JSON output folder (BODY_25 / COCO-18)         yes
 ``mediapipe``       MediaPipe Pose landmarks (JSON / CSV layout, docs)      yes
-``mmpose``          MMPose predictions JSON (frames of instances)           yes
+``mmpose``          MMPose predictions JSON (frames of instances)           yes     yes
 ``azure_kinect``    Azure Kinect Body Tracking JSON (offline_processor)     yes
 ``trc``             OpenSim marker trajectories                             yes     yes
 ``deeplabcut``      DeepLabCut .h5 / .csv (x, y, likelihood; multi-animal)  yes     yes

@@ -27,12 +27,15 @@ from the 3-D inferencer), ``keypoint_scores`` and, when a tracker ran, ``track_i
 
 from __future__ import annotations
 
+import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
 from tobitkf.io._text import check_output_size, check_positions, option_rate
@@ -45,7 +48,7 @@ from tobitkf.skeleton.topology import (
     get_topology,
 )
 
-__all__ = ["read_mmpose", "sniff_mmpose"]
+__all__ = ["read_mmpose", "sniff_mmpose", "write_mmpose"]
 
 
 def _frames(path: Path, doc: Any) -> tuple[list[Any], dict[str, Any] | None]:
@@ -105,8 +108,23 @@ def _topology(path: Path, meta: dict[str, Any] | None, n: int, dims: int) -> Top
         raise ReadError(path, None, f"meta_info: {exc}") from None
 
 
-def _instance(path: Path, inst: Any, where: str) -> tuple[np.ndarray, np.ndarray, Any]:
-    """(J, D) keypoints, (J,) scores (NaN without), and the track id (None without)."""
+#: per-keypoint lists of an instance: MMPose's scores, and the standard deviation and
+#: sample state tobitkf's writer adds (NaN where absent)
+_PER_KEYPOINT = ("keypoint_scores", "keypoint_std", "keypoint_states")
+
+
+def _per_keypoint(path: Path, inst: dict[str, Any], key: str, where: str, n: int) -> np.ndarray:
+    if inst.get(key) is None:
+        return np.full(n, np.nan)
+    values = number_array(path, inst[key], f"{where}.{key}", allow_null=True)
+    if values.shape != (n,):
+        raise ReadError(path, None, f"{where}.{key}: {values.size} values for {n} keypoints")
+    return values
+
+
+def _instance(path: Path, inst: Any, where: str) -> tuple[np.ndarray, ...]:
+    """(J, D) keypoints; (J,) scores, standard deviations and sample states (NaN
+    without); and the track id (None without)."""
     inst = as_object(path, inst, where)
     if "keypoints" not in inst:
         raise ReadError(path, None, f'{where}: no "keypoints"')
@@ -116,18 +134,11 @@ def _instance(path: Path, inst: Any, where: str) -> tuple[np.ndarray, np.ndarray
             path, None, f"{where}.keypoints: expected [[x, y], ...] or [[x, y, z], ...], found "
             f"shape {kp.shape}"
         )  # fmt: skip
-    scores = np.full(len(kp), np.nan)
-    if inst.get("keypoint_scores") is not None:
-        s = number_array(path, inst["keypoint_scores"], f"{where}.keypoint_scores")
-        if s.shape != (len(kp),):
-            raise ReadError(
-                path, None, f"{where}.keypoint_scores: {s.size} scores for {len(kp)} keypoints"
-            )
-        scores = s
+    scores, std, states = (_per_keypoint(path, inst, k, where, len(kp)) for k in _PER_KEYPOINT)
     track = inst.get("track_id")
     if track is not None and (isinstance(track, bool) or not isinstance(track, (int, str))):
         raise ReadError(path, None, f"{where}.track_id: expected an integer or a string")
-    return kp, scores, track
+    return kp, scores, std, states, track
 
 
 def read_mmpose(
@@ -142,8 +153,10 @@ def read_mmpose(
     p = Path(path)
     fps = option_rate(p, fps)
     frames, meta = _frames(p, load_json(p))
+    if fps is None and meta is not None and meta.get("fps") is not None:
+        fps = option_rate(p, meta["fps"])  # written by tobitkf's writer
     ids: list[int] = []
-    dets: list[list[tuple[np.ndarray, np.ndarray, Any]]] = []
+    dets: list[list[tuple[Any, ...]]] = []
     for i, fr in enumerate(frames):
         fr = as_object(p, fr, f"frame {i}")
         fid = fr.get("frame_id", i)
@@ -154,7 +167,7 @@ def read_mmpose(
         dets.append([_instance(p, q, f"frame {i}.instances[{k}]") for k, q in enumerate(insts)])
     if len(set(ids)) != len(ids):
         raise ReadError(p, None, "a frame_id appears twice")
-    shapes = {kp.shape for fr in dets for kp, _s, _t in fr}
+    shapes = {inst[0].shape for fr in dets for inst in fr}
     if not shapes:
         raise ReadError(p, None, "no person detected in any frame")
     if len(shapes) > 1:
@@ -165,7 +178,7 @@ def read_mmpose(
     size = p.stat().st_size
     check_output_size(p, T * n_joints * (dims + 1) * 8, size, f"{T} frames")
     at = [fid - first for fid in ids]
-    tracks_ids = [t for fr in dets for _k, _s, t in fr]
+    tracks_ids = [inst[-1] for fr in dets for inst in fr]
     tracked = all(t is not None for t in tracks_ids)
     if tracked:
         bodies = list(dict.fromkeys(tracks_ids))
@@ -173,7 +186,7 @@ def read_mmpose(
         for b in bodies:
             track = {}
             for t, fr in zip(at, dets, strict=True):
-                mine = [k for k, (_kp, _s, tid) in enumerate(fr) if tid == b]
+                mine = [k for k, inst in enumerate(fr) if inst[-1] == b]
                 if len(mine) > 1:
                     raise ReadError(p, None, f"track_id {b!r} appears twice in one frame")
                 if mine:
@@ -182,7 +195,7 @@ def read_mmpose(
         by_frame = dict(zip(at, dets, strict=True))
     else:
         by_frame = dict(zip(at, dets, strict=True))
-        poses = [[kp for kp, _s, _t in by_frame.get(t, [])] for t in range(T)]
+        poses = [[inst[0] for inst in by_frame.get(t, [])] for t in range(T)]
         tracks = associate(poses, max_distance)
         bodies = list(range(len(tracks)))
     check_output_size(p, len(tracks) * T * n_joints * (dims + 1) * 8, size, f"{len(tracks)} people")
@@ -196,10 +209,9 @@ def read_mmpose(
     out = []
     for body, track in zip(bodies, tracks, strict=True):
         pos = np.full((T, n_joints, dims), np.nan)
-        conf = np.full((T, n_joints), np.nan)
+        conf, std, states = (np.full((T, n_joints), np.nan) for _ in range(3))
         for t, d in track.items():
-            kp, s, _tid = by_frame[t][d]
-            pos[t], conf[t] = kp, s
+            pos[t], conf[t], std[t], states[t] = by_frame[t][d][:4]
         clipped = bool(np.any((conf > 1) | (conf < 0)))  # scores, not probabilities
         conf = np.clip(conf, 0.0, 1.0)  # NaN (no score) stays NaN
         check_positions(p, pos, None, names=topo.joints, units="px" if dims == 2 else None)
@@ -207,7 +219,10 @@ def read_mmpose(
             "source": str(p),
             "format": "mmpose",
             "person_ids": "track_id" if tracked else "associated",
+            "frame_id_start": first,  # the writer numbers the frames alike
         }
+        if meta is not None:
+            meta_out["mmpose_meta"] = meta  # written back by the writer
         if clipped:
             meta_out["confidence_clipped"] = True
         if notes:
@@ -221,9 +236,66 @@ def read_mmpose(
                 confidence=None if np.isnan(conf).all() else conf,
                 units="px" if dims == 2 else None,
                 metadata=meta_out,
+                std=None if np.isnan(std).all() else std,
+                sample_state=_states(p, states),
             )
         )
     return out
+
+
+def _states(path: Path, states: np.ndarray) -> np.ndarray | None:
+    """tobitkf's sample states (0-4) as written by :func:`write_mmpose`; NONE (4) where a
+    body was not in the frame."""
+    if np.isnan(states).all():
+        return None
+    filled = np.where(np.isnan(states), 4.0, states)
+    if np.any((filled != np.round(filled)) | (filled < 0) | (filled > 4)):
+        raise ReadError(path, None, "keypoint_states: expected sample states 0 to 4")
+    return filled.astype(np.int8)
+
+
+def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
+    """Write sequences (one per person, same keypoints) as MMPose predictions in the
+    demos' layout: ``{"meta_info": ..., "instance_info": [{"frame_id": n, "instances":
+    [...]}, ...]}``.
+
+    ``meta_info`` is the one read from an MMPose file (if any) with ``tobitkf``, the
+    output's provenance, and ``fps`` added (the reader takes the rate back from it).
+    Each person present in a frame is an instance with ``keypoints``,
+    ``keypoint_scores`` (the confidence, where there is one), ``track_id`` (the body
+    id) and, for smoothed output, ``keypoint_std`` and ``keypoint_states`` (tobitkf's
+    sample states); a missing value is ``null``. Frames are numbered as in the file
+    read (``metadata["frame_id_start"]``), else from 0.
+    """
+    seqs = list(sequences)
+    if not seqs:
+        raise ValueError("no sequence to write")
+    shape = {(s.n_joints, s.n_dims) for s in seqs}
+    if len(shape) > 1:
+        raise ValueError(f"MMPose instances share one keypoint layout; found {sorted(shape)}")
+    start = seqs[0].metadata.get("frame_id_start", 0)
+    if isinstance(start, bool) or not isinstance(start, (int, np.integer)):
+        raise ValueError(f"metadata frame_id_start must be an integer, found {start!r}")
+    T = max(s.n_frames for s in seqs)
+    frames: list[dict[str, Any]] = [{"frame_id": int(start) + t, "instances": []} for t in range(T)]
+    for k, s in enumerate(seqs):
+        track = k if s.body_id is None else s.body_id
+        for t in np.flatnonzero(~np.isnan(s.positions).all(axis=(1, 2))):
+            inst: dict[str, Any] = {"keypoints": s.positions[t]}
+            for key, values in zip(_PER_KEYPOINT, (s.confidence, s.std, s.sample_state)):
+                if values is not None:
+                    inst[key] = values[t]
+            inst["track_id"] = track
+            frames[t]["instances"].append(inst)
+    meta = next((s.metadata["mmpose_meta"] for s in seqs if "mmpose_meta" in s.metadata), {})
+    meta = dict(meta)
+    if seqs[0].fps is not None:  # MMPose keeps none; tobitkf's reader takes it back
+        meta["fps"] = seqs[0].fps
+    if "provenance" in seqs[0].metadata:
+        meta["tobitkf"] = seqs[0].metadata["provenance"]
+    doc = {"meta_info": meta, "instance_info": frames}
+    text = json.dumps(to_jsonable(doc), allow_nan=False)
+    Path(path).write_text(text + "\n", encoding="utf-8")
 
 
 def sniff_mmpose(path: Path, head: str) -> int:
@@ -240,6 +312,6 @@ def sniff_mmpose(path: Path, head: str) -> int:
 
 
 register_format(
-    "mmpose", read_mmpose, None, (".json",), sniff_mmpose,
+    "mmpose", read_mmpose, write_mmpose, (".json",), sniff_mmpose,
     description="MMPose predictions JSON (a video's frames and instances)",
 )  # fmt: skip
