@@ -241,3 +241,47 @@ def test_a_json_file_of_the_same_name_that_is_no_description(tmp_path):
     assert "files named alike in one folder, clip.json and clip.npy" in res["clip.npy"].error
     (alone,) = tk.smooth_files(tmp_path / "clip.npy", tmp_path / "o2")
     assert alone.ok
+
+
+def test_a_skeleton_for_the_files_that_name_none(tmp_path):
+    """--topology (smooth_files(topology=)) names the joints of arrays without a sidecar;
+    a file naming its own skeleton keeps it, and another --topology does not redo it."""
+    import tobitkf as tk
+
+    src = tmp_path / "in"
+    src.mkdir()
+    np.save(src / "lifted.npy", _walk())  # 17 unnamed joints
+    named = tk.SkeletonSequence(_walk(J=25), tk.get_topology("kinect_v2"), fps=30.0)
+    tk.save([named], src / "kinect.npz")
+    out = tmp_path / "out"
+    res = {r.source.rsplit("/", 1)[-1]: r for r in tk.smooth_files(src, out, topology="h36m")}
+    assert all(r.ok for r in res.values())
+    assert not any("skeleton" in w for w in res["lifted.npy"].warnings)  # no note: named
+    assert json.loads((out / "lifted.robust.json").read_text())["topology"] == "h36m17"
+    assert json.loads((out / "kinect.robust.json").read_text())["topology"] == "kinect_v2"
+    again = tk.smooth_files(src, out, topology="coco17")  # another skeleton: the array only
+    assert [r.source.rsplit("/", 1)[-1] for r in again if not r.extra.get("skipped")] == [
+        "lifted.npy"
+    ]
+    assert json.loads((out / "lifted.robust.json").read_text())["topology"] == "coco17"
+    with pytest.raises(KeyError, match="unknown topology"):
+        tk.smooth_files(src, out, topology="nope")
+    (wrong,) = tk.smooth_files(src / "lifted.npy", tmp_path / "o2", topology="kinect_v2")
+    assert not wrong.ok and "17 keypoints, --topology kinect_v2 25" in wrong.error
+
+
+def test_the_cli_topology_option(tmp_path):
+    np.save(tmp_path / "a.npy", _walk())
+    run = subprocess.run(
+        [sys.executable, "-m", "tobitkf", "smooth", str(tmp_path / "a.npy"), "-o",
+         str(tmp_path / "o"), "--topology", "h36m", "--fps", "50", "--json"],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    meta = json.loads((tmp_path / "o" / "a.robust.json").read_text())
+    assert meta["topology"] == "h36m17" and meta["fps"] == 50.0
+    bad = subprocess.run(
+        [sys.executable, "-m", "tobitkf", "smooth", str(tmp_path / "a.npy"), "-o",
+         str(tmp_path / "o"), "--topology", "nope"], capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert bad.returncode == 2 and "coco17" in bad.stderr  # the known names listed

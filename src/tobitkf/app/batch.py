@@ -39,6 +39,8 @@ class Job:
     source_label: str | None = None
     #: frame rate (Hz) for an input that states none (no rate, no timestamps)
     input_fps: float | None = None
+    #: skeleton (topology name) for an input that names none (an array's joints 0, 1, ...)
+    input_topology: str | None = None
 
 
 @dataclass(frozen=True)
@@ -252,6 +254,7 @@ def plan_jobs(
     input_format: str = "auto",
     overwrite: bool = False,
     input_fps: float | None = None,
+    input_topology: str | None = None,
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
@@ -316,7 +319,9 @@ def plan_jobs(
             refused.append(FileSummary(str(src), None, False, reason))
             continue
         taken.update({f.resolve(): src for f in files})
-        jobs.append(Job(src, out, fmt, input_format, input_fps=input_fps))
+        jobs.append(
+            Job(src, out, fmt, input_format, input_fps=input_fps, input_topology=input_topology)
+        )
     return jobs, refused
 
 
@@ -374,6 +379,40 @@ def _with_rate(sequences: list[Any], fps: float | None) -> tuple[list[Any], tupl
     return sequences, ("the file states no frame rate: smoothed as 30 fps (give --fps)",)
 
 
+def _with_topology(sequences: list[Any], name: str | None) -> list[Any]:
+    """The sequences with topology ``name`` where the file named no skeleton (joints
+    ``0``, ``1``, ...); a file that names its own keeps it."""
+    from tobitkf.skeleton.topology import UNNAMED, get_topology
+
+    if name is None:
+        return sequences
+    topo = get_topology(name)
+    out = []
+    for s in sequences:
+        if s.topology.name == UNNAMED:
+            if s.n_joints != topo.n_joints:
+                raise ValueError(
+                    f"the file has {s.n_joints} keypoints, --topology {topo.name} {topo.n_joints}"
+                )
+            notes = [n for n in s.metadata.get("reader_warnings") or () if "0..J-1" not in n]
+            s = s.replace(topology=topo, metadata={**s.metadata, "reader_warnings": notes})
+        out.append(s)
+    return out
+
+
+def _unused_settings(sequences: list[Any]) -> list[str]:
+    """The run settings this file did not use (its own rate, its own skeleton): a re-run
+    with other values of them need not redo it (:mod:`tobitkf.app.manifest`)."""
+    from tobitkf.skeleton.topology import UNNAMED
+
+    unused = []
+    if all(s.fps is not None or s.timestamps is not None for s in sequences):
+        unused.append("input_fps")
+    if all(s.topology.name != UNNAMED for s in sequences):
+        unused.append("input_topology")
+    return unused
+
+
 def _not_measured(smoothed: Any, raw: Any) -> np.ndarray:
     """Samples without a measurement the method used: NaN or not tracked in the input,
     or below the confidence threshold (the output's sample states 2, 3 and 4)."""
@@ -397,7 +436,8 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences = load(job.source, format=in_fmt)
         if not sequences:
             raise ValueError("the file holds no skeleton")
-        raw_seqs = sequences
+        unused = _unused_settings(sequences)
+        sequences = _with_topology(sequences, job.input_topology)
         sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -435,9 +475,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         seconds=time.perf_counter() - start,
         input_format=in_fmt,
         warnings=said,
-        # the file's own rate (or timestamps) timed every body: a rate given for files
-        # that state none did not touch this output (the manifest need not redo it)
-        extra={"own_rate": all(s.fps is not None or s.timestamps is not None for s in raw_seqs)},
+        extra={"unused_settings": unused},
     )
 
 

@@ -97,12 +97,14 @@ def run_settings(
     output_format: str = "auto",
     input_format: str = "auto",
     input_fps: float | None = None,
+    input_topology: str | None = None,
 ) -> dict[str, Any]:
     """What an output depends on besides its input: method, complete parameters
     (defaults filled in and validated, ``offline`` and the formats included) and the
     tobitkf version, as stored in the manifest. ``offline`` is whether the output used
     later frames (``--offline``, or a method that is offline by itself), as the output's
-    provenance says; ``input_fps`` the rate given to inputs that state none."""
+    provenance says; ``input_fps`` the rate given to inputs that state none,
+    ``input_topology`` the skeleton given to inputs that name none."""
     from tobitkf.core.version import __version__
     from tobitkf.smoothing.api import COMMON_KEYWORDS, check_params, get_method
 
@@ -112,6 +114,8 @@ def run_settings(
     full["input_format"] = input_format
     if input_fps is not None:
         full["input_fps"] = float(input_fps)
+    if input_topology is not None:
+        full["input_topology"] = input_topology
     full["output_format"] = output_format
     return {"method": method, "params": _plain(full), "tobitkf_version": __version__}
 
@@ -237,9 +241,9 @@ class Manifest:
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
             return None
         want = {**settings, "output": input_key(output)}
-        if entry.get("own_rate") and "input_fps" in want["params"]:
-            # a file with its own rate does not depend on the rate given for the others
-            want["params"] = {k: v for k, v in want["params"].items() if k != "input_fps"}
+        unused = entry.get("unused_settings") or ()
+        if unused:  # a file with its own rate or skeleton does not depend on those given
+            want["params"] = {k: v for k, v in want["params"].items() if k not in unused}
         if any(entry.get(k) != want[k] for k in _SAME):
             return None
         try:
@@ -256,9 +260,9 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
     """The manifest entry of one finished file (a :class:`~tobitkf.app.batch.FileSummary`
     with ``extra["size"]`` and ``extra["sha256"]`` when the input could be read)."""
     extra = summary.extra or {}
-    if extra.get("own_rate") and "input_fps" in settings.get("params", {}):
-        # the given rate did not apply to this file: its output does not depend on it
-        params = {k: v for k, v in settings["params"].items() if k != "input_fps"}
+    unused = list(extra.get("unused_settings") or ())
+    if unused:  # the rate or skeleton given did not apply: the output does not depend on it
+        params = {k: v for k, v in settings["params"].items() if k not in unused}
         settings = {**settings, "params": params}
     size = extra.get("size")
     if size is None and "://" not in summary.source:
@@ -273,7 +277,7 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
         "output": input_key(summary.output) if summary.output else extra.get("planned_output"),
         "status": "ok" if summary.ok else "failed",
         "error": summary.error,
-        "own_rate": bool(extra.get("own_rate")),
+        "unused_settings": unused,
         **settings,
         "frames": summary.frames,
         "bodies": summary.bodies,

@@ -101,6 +101,7 @@ def plan_run(
     input_format: str = "auto",
     overwrite: bool = False,
     fps: float | None = None,
+    topology: str | None = None,
 ) -> Plan:
     """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
     :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
@@ -118,6 +119,7 @@ def plan_run(
             output_format=output_format,
             input_format=input_format,
             input_fps=fps,
+            input_topology=topology,
         )
         return Plan(list(jobs), refused, Discovered([]))
     from tobitkf.io import detect_format
@@ -132,6 +134,7 @@ def plan_run(
         input_format=input_format,
         overwrite=overwrite,
         input_fps=fps,
+        input_topology=topology,
     )
     return Plan(list(jobs), refused, found)
 
@@ -188,6 +191,7 @@ def run_planned(
     warm_first: bool | None = None,
     on_compile: Callable[[], Any] | None = None,
     fps: float | None = None,
+    topology: str | None = None,
 ) -> list[FileSummary]:
     """Run planned jobs with the output folder's manifest; summaries in job order, then
     the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
@@ -200,7 +204,8 @@ def run_planned(
     ``on_compile`` is called if that compiles anything (e.g. to say why it waits).
     ``fps``: the frame rate the jobs give inputs that state none (recorded in the
     manifest's settings, so that another rate redoes them; a file with its own rate
-    or timestamps is not redone for it).
+    or timestamps is not redone for it). ``topology``: the skeleton (a topology name) the
+    jobs give inputs that name none, recorded alike.
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
@@ -213,6 +218,7 @@ def run_planned(
         output_format=output_format,
         input_format=input_format,
         input_fps=fps,
+        input_topology=topology,
     )
     with Manifest(outdir) as manifest:
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
@@ -277,6 +283,7 @@ def smooth_files(
     overwrite: bool = False,
     on_done: Callable[[FileSummary], None] | None = None,
     fps: float | None = None,
+    topology: str | None = None,
 ) -> list[FileSummary]:
     """Smooth every recording in ``inputs`` (files or folders, searched recursively) into
     ``out_dir``, as ``tobitkf smooth`` does, and return one summary per input.
@@ -296,6 +303,8 @@ def smooth_files(
     on_done : called with each file's summary as it finishes (e.g. a progress bar).
     fps : frame rate (Hz) of inputs that state none (no rate, no timestamps); without it
         they are smoothed as 30 fps, and their summaries say so.
+    topology : skeleton (a name of :func:`tobitkf.available_topologies`) of inputs that
+        name none (an array's joints ``0``, ``1``, ...); files naming their own keep it.
 
     Returns
     -------
@@ -307,6 +316,10 @@ def smooth_files(
     from tobitkf.smoothing.api import DEFAULT_METHOD
 
     method = method or DEFAULT_METHOD
+    if topology is not None:
+        from tobitkf.skeleton.topology import get_topology
+
+        topology = get_topology(topology).name  # KeyError naming the known ones
     params = dict(params or {})
     offline = bool(params.pop("offline", False)) or offline
     if isinstance(inputs, (str, os.PathLike)):
@@ -320,6 +333,7 @@ def smooth_files(
         input_format=input_format,
         overwrite=overwrite,
         fps=fps,
+        topology=topology,
     )
     refused = [
         *plan.refused,
@@ -339,4 +353,5 @@ def smooth_files(
         client=client,
         on_done=on_done,
         fps=fps,
+        topology=topology,
     )

@@ -44,6 +44,7 @@ from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import (
     COCO17_JOINTS,
+    UNNAMED,
     Topology,
     get_topology,
 )
@@ -87,7 +88,7 @@ def _topology(path: Path, meta: dict[str, Any] | None, n: int, dims: int) -> Top
     if names is None:
         if n == 17:
             return get_topology("coco17" if dims == 2 else "h36m17")
-        return Topology.from_names([str(j) for j in range(n)], name="mmpose")
+        return Topology.from_names([str(j) for j in range(n)], name=UNNAMED)
     if tuple(names) == COCO17_JOINTS:
         return get_topology("coco17")
     links = None if meta is None else meta.get("skeleton_links")
@@ -201,10 +202,11 @@ def read_mmpose(
     check_output_size(p, len(tracks) * T * n_joints * (dims + 1) * 8, size, f"{len(tracks)} people")
     topo = _topology(p, meta, n_joints, dims)
     notes = []
-    if topo.name == "mmpose" and not topo.bones:
+    if topo.name == UNNAMED:
         notes.append(
             f"{n_joints} keypoints and no keypoint names in the file: joints 0..J-1 without "
-            "bones (the robust methods gate by speed only)"
+            "bones (the robust methods gate by speed only); give the skeleton "
+            "(tobitkf smooth --topology)"
         )
     out = []
     for body, track in zip(bodies, tracks, strict=True):

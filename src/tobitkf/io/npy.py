@@ -33,7 +33,7 @@ from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, option_rate, size
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
-from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
+from tobitkf.skeleton.topology import UNNAMED, Topology, available_topologies, get_topology
 
 __all__ = ["read_npy", "sidecar_path", "sniff_npy"]
 
@@ -41,8 +41,6 @@ __all__ = ["read_npy", "sidecar_path", "sniff_npy"]
 NPY_MAGIC = ("\x93NUMPY", "\ufffdNUMPY")
 #: the keys a sidecar may hold
 SIDECAR_KEYS = ("topology", "fps", "units")
-#: the topology name of an array read without one (joints ``0``, ``1``, ...; no bones)
-UNNAMED = "unnamed"
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -154,8 +152,8 @@ def read_npy(
     if topo.name == UNNAMED:
         notes.append(
             "the array names no skeleton: joints 0..J-1 without bones (the robust methods "
-            f"gate by speed only); give topology= or write {sidecar_path(p).name} with "
-            '{"topology": ...}'
+            f"gate by speed only); give topology= (tobitkf smooth --topology) or write "
+            f'{sidecar_path(p).name} with {{"topology": ...}}'
         )
     sequences = []
     for b in range(bodies.shape[1]):

@@ -17,6 +17,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 __all__ = [
+    "UNNAMED",
     "Topology",
     "available_topologies",
     "get_topology",
@@ -25,6 +26,10 @@ __all__ = [
 ]
 
 GROUP_NAMES = ("hands", "arms", "torso", "legs")
+#: the name of a reader's topology when the file names no skeleton (an array, MMPose
+#: output of an unknown model): joints ``0``, ``1``, ... without bones; the batch tools'
+#: ``--topology`` replaces it
+UNNAMED = "unnamed"
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,18 @@ from tobitkf.app.commands._common import (
 from tobitkf.core.jsonable import dumps
 
 
+def _topology_name(value: str | None) -> str | None:
+    """``--topology``: a known skeleton's canonical name (aliases such as h36m accepted)."""
+    if value is None:
+        return None
+    from tobitkf.skeleton.topology import get_topology
+
+    try:
+        return get_topology(value).name
+    except KeyError as exc:
+        raise click.BadParameter(str(exc.args[0]), param_hint="--topology") from None
+
+
 # --------------------------------------------------------------------------- smooth
 @app.command()
 @click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
@@ -73,6 +85,14 @@ from tobitkf.core.jsonable import dumps
     help="Frame rate (Hz) of inputs that state none (pose-estimator tables, keypoint "
     "JSON); files with their own rate or timestamps keep it. Without it such files are "
     "smoothed as 30 fps, and the summary says so.",
+)
+@click.option(
+    "--topology",
+    metavar="NAME",
+    callback=lambda _ctx, _param, v: _topology_name(v),
+    help="Skeleton of inputs that name none (a .npy array's joints 0, 1, ...; MMPose "
+    "output of an unknown model), e.g. h36m17 or coco17 (an unknown name lists the "
+    "others); files naming their own keep it.",
 )
 @click.option(
     "--overwrite",
@@ -129,6 +149,7 @@ def smooth(
     output_format,
     input_format,
     fps,
+    topology,
     overwrite,
     params,
     offline,
@@ -174,6 +195,7 @@ def smooth(
             input_format=input_format,
             overwrite=overwrite,
             fps=fps,
+            topology=topology,
         )
     except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
@@ -228,6 +250,7 @@ def smooth(
                     warm_first=cluster is None or cluster == "local",
                     on_compile=None if as_json else _compiling_notice(method),
                     fps=fps,
+                    topology=topology,
                 )
             except ManifestBusy as exc:
                 _fail(str(exc))
