@@ -237,3 +237,21 @@ def test_writer_several_people_and_missing_values(tmp_path):
             p,
             format="mmpose",
         )
+
+
+def test_a_skeleton_for_a_file_that_names_none(tmp_path):
+    p = tmp_path / "halpe.json"
+    kp = _person(4, 0, 14, J=25)
+    _write(p, [{"frame_id": t, "instances": [_instance(kp[t], np.ones(25))]} for t in range(4)])
+    (s,) = read_mmpose(p, topology="openpose_body25")
+    assert s.topology.name == "openpose_body25" and "reader_warnings" not in s.metadata
+    with pytest.raises(ReadError, match="25 keypoints, topology 'coco17' 17"):
+        read_mmpose(p, topology="coco17")
+    with pytest.raises(ReadError, match="unknown topology"):
+        read_mmpose(p, topology="nope")
+    coco = tmp_path / "coco.json"
+    kp = _person(3, 0, 15)
+    _write(coco, [{"frame_id": t, "instances": [_instance(kp[t], np.ones(17))]} for t in range(3)])
+    assert read_mmpose(coco)[0].topology.name == "coco17"  # 17 in 2-D: COCO's by default
+    (s,) = read_mmpose(coco, topology="h36m17")  # a 2-D Human3.6M model: as given
+    assert s.topology.name == "h36m17"

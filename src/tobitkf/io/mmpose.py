@@ -83,8 +83,16 @@ def _names(path: Path, meta: dict[str, Any] | None, n: int) -> list[str] | None:
     return list(raw)
 
 
-def _topology(path: Path, meta: dict[str, Any] | None, n: int, dims: int) -> Topology:
+def _topology(
+    path: Path, meta: dict[str, Any] | None, n: int, dims: int, given: Any = None
+) -> Topology:
+    """The file's names (meta_info), else the skeleton ``given``, else by the count."""
     names = _names(path, meta, n)
+    if names is None and given is not None:
+        topo = given if isinstance(given, Topology) else _named(path, given)
+        if topo.n_joints != n:
+            raise ReadError(path, None, f"{n} keypoints, topology {topo.name!r} {topo.n_joints}")
+        return topo
     if names is None:
         if n == 17:
             return get_topology("coco17" if dims == 2 else "h36m17")
@@ -123,6 +131,13 @@ def _per_keypoint(path: Path, inst: dict[str, Any], key: str, where: str, n: int
     return values
 
 
+def _named(path: Path, name: str) -> Topology:
+    try:
+        return get_topology(str(name))
+    except KeyError as exc:
+        raise ReadError(path, None, str(exc.args[0])) from None
+
+
 def _instance(path: Path, inst: Any, where: str) -> tuple[np.ndarray, ...]:
     """(J, D) keypoints; (J,) scores, standard deviations and sample states (NaN
     without); and the track id (None without)."""
@@ -147,10 +162,13 @@ def read_mmpose(
     *,
     fps: float | None = None,
     max_distance: float | None = None,
+    topology: Topology | str | None = None,
 ) -> list[SkeletonSequence]:
     """Read MMPose predictions (module docstring): one sequence per person, with the
-    video's frame rate ``fps`` (the file has none) and, for people without a
-    ``track_id``, the association's gate ``max_distance`` as OpenPose's reader takes it."""
+    video's frame rate ``fps`` (the file has none), for people without a ``track_id``
+    the association's gate ``max_distance`` as OpenPose's reader takes it, and
+    ``topology`` (a name or a Topology) for a file whose meta does not name its keypoints
+    (instead of the guess by their count)."""
     p = Path(path)
     fps = option_rate(p, fps)
     frames, meta = _frames(p, load_json(p))
@@ -200,7 +218,7 @@ def read_mmpose(
         tracks = associate(poses, max_distance)
         bodies = list(range(len(tracks)))
     check_output_size(p, len(tracks) * T * n_joints * (dims + 1) * 8, size, f"{len(tracks)} people")
-    topo = _topology(p, meta, n_joints, dims)
+    topo = _topology(p, meta, n_joints, dims, topology)
     notes = []
     if topo.name == UNNAMED:
         notes.append(
