@@ -314,12 +314,103 @@ def test_gif_window_draws_every_frame(tmp_path):
         assert im.n_frames == 100  # every frame of the window, the spike's included
 
 
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
-def test_report_renders_in_chromium(tmp_path):
+def _traces_spy(monkeypatch) -> list[dict]:
+    """Every call of plot_joint_traces and plot_skeleton_frames: kwargs and the figure."""
+    from tobitkf.app import plots
+
+    calls: list[dict] = []
+    for name in ("plot_joint_traces", "plot_skeleton_frames"):
+        original = getattr(plots, name)
+
+        def spy(*args, _original=original, _name=name, **kwargs):
+            fig = _original(*args, **kwargs)
+            calls.append({"name": _name, "args": args, "kwargs": kwargs, "fig": fig})
+            return fig
+
+        monkeypatch.setattr(plots, name, spy)
+    return calls
+
+
+def test_report_of_2d_image_keypoints_in_pixels(tmp_path, monkeypatch):
+    from tobitkf.app.report import track_report
+
+    pytest.importorskip("matplotlib")
+    seq = _recording(T=60)
+    px = 400.0 * np.asarray(seq.positions)[..., :2]  # x, y in pixels
+    px[..., 1] *= -1  # image y points down
+    seq2d = seq.replace(positions=px, units="px")
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(seq2d, tmp_path / "r.html", methods=["raw", "kf", "robust"])
+    page = path.read_text()
+    # lengths in the recording's own unit, not converted to cm or m²
+    assert "M (px²)" in page and "largest jump (px)" in page
+    assert "(cm)" not in page and "1e-3 m²" not in page
+    traces = [c for c in calls if c["name"] == "plot_joint_traces"]
+    assert traces
+    for c in traces:
+        axes = c["fig"].axes
+        assert len(axes) == 2  # x and y: no z panel
+        assert [a.get_ylabel() for a in axes] == ["x [px]", "y [px], down"]
+        assert axes[1].yaxis_inverted() and not axes[0].yaxis_inverted()
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert all(ax.yaxis_inverted() for ax in skel["fig"].axes)  # as in the image
+    assert "x and y (pointing down, as in the image)" in page
+    assert "Skeletons as in the image" in page
+    # the 10 cm threshold has no meaning in pixels: a share of the body's height instead
+    assert "px (6 % of the body&#x27;s height)" in page and "10 cm" not in page
+
+
+def test_report_command_runs_on_pixels_without_the_methods_in_metres(tmp_path):
+    seq = _recording(T=60)
+    px = 400.0 * np.asarray(seq.positions)[..., :2]
+    save([seq.replace(positions=px, units="px")], tmp_path / "k.csv", format="csv")
+    res = _invoke("report", tmp_path / "k.csv", "-o", tmp_path / "r.html", "--no-gif")
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.output.split())
+    assert "Left out: atkf, atkf2016" in out and "in px" in out
+    page = (tmp_path / "r.html").read_text()
+    assert "Left out: atkf, atkf2016" in page
+    assert "<tr><td>robust</td>" in page and "<tr><td>atkf</td>" not in page
+
+
+def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch):
+    """Without truth the raw track is held against robust, not a filter that follows the
+    glitch: the 30 frames a hand sits 40 cm off are the frames shaded."""
+    from tobitkf.app.report import track_report
+
+    pytest.importorskip("matplotlib")
+    seq = _recording(T=120)
+    pos = np.asarray(seq.positions).copy()
+    hand = seq.topology.index("HandLeft")
+    pos[50:80, hand, 1] += 0.4
+    calls = _traces_spy(monkeypatch)
+    track_report(seq.replace(positions=pos), tmp_path / "r.html", methods=["raw", "kf", "robust"])
+    shaded = {
+        c["kwargs"]["title"]: c["kwargs"]["shade"]
+        for c in calls
+        if c["name"] == "plot_joint_traces"
+    }
+    assert shaded["HandLeft"] == [(50, 80)]
+
+
+def test_report_caption_does_not_claim_shading_where_there_is_none(tmp_path):
+    from tobitkf.app.report import track_report
+
+    seq = _recording(T=60)
+    path, _ = track_report(
+        seq, tmp_path / "r.html", truth=seq.positions, methods=["raw", "kf"], gif=False
+    )
+    page = path.read_text()
+    assert "Shaded red" not in page and "most such frames" not in page
+    assert "nothing shaded" in page and "largest one-frame jumps" in page
+
+
+def _screenshot(page: Path, tmp_path: Path, width: int, height: int) -> np.ndarray:
+    """The page as headless Chromium draws it in a window of ``width`` × ``height`` px,
+    in grey levels."""
     from PIL import Image
 
-    page = _small_report(tmp_path)
-    shot = tmp_path / "shot.png"
+    shot = tmp_path / f"shot{width}.png"
     subprocess.run(
         [
             "chromium",
@@ -330,8 +421,9 @@ def test_report_renders_in_chromium(tmp_path):
             "--disable-component-update",
             "--disable-sync",
             "--no-first-run",
+            "--hide-scrollbars",
             f"--user-data-dir={tmp_path / 'profile'}",
-            "--window-size=1400,2400",
+            f"--window-size={width},{height}",
             f"--screenshot={shot}",
             page.resolve().as_uri(),
         ],
@@ -340,11 +432,34 @@ def test_report_renders_in_chromium(tmp_path):
         timeout=120,
     )
     with Image.open(shot) as im:
-        assert im.size == (1400, 2400)
-        grey = np.asarray(im.convert("L"), dtype=float)
+        assert im.size == (width, height)
+        return np.asarray(im.convert("L"), dtype=float)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
+def test_report_renders_in_chromium(tmp_path):
+    grey = _screenshot(_small_report(tmp_path), tmp_path, 1400, 2400)
     assert grey.std() > 10  # a page with tables and figures, not a blank or error page
     # nothing runs off to the right: the rightmost 40 px are page background
     assert (grey[:, -40:-20] > 240).mean() > 0.99
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
+def test_report_fits_a_phone_screen_even_with_a_long_file_name(tmp_path):
+    from tobitkf.app.report import track_report
+
+    name = "G3_Kinect_ELK_P1T1_Unknown_C_0_" * 3 + ".txt"  # one long word, no hyphen
+    seq = _recording(T=60)
+    seq = seq.replace(metadata={**seq.metadata, "source": f"/home/someone/private/{name}"})
+    page, _ = track_report(seq, tmp_path / "r.html", methods=["raw", "kf"], gif=False)
+    text = page.read_text()
+    # the file's name, not the folders it sits in (the page is mailed to others)
+    assert f"<h1>tobitkf report: {name}</h1>" in text and "/home/someone" not in text
+    assert "name='viewport' content='width=device-width" in text
+    grey = _screenshot(page, tmp_path, 420, 1600)
+    assert grey[:300].std() > 10  # the title is drawn
+    # the title wraps inside the window: the rightmost 12 px are page background
+    assert grey[:, -12:].min() > 230
 
 
 def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import html
 import tempfile
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,10 @@ from typing import Any
 import numpy as np
 
 GLITCH_THRESHOLD_M = 0.10
+
+#: the glitch threshold of a track without a length unit (pixels, unknown): this share of
+#: the body's height in the image (10 cm on a person 1.7 m tall)
+GLITCH_SHARE_OF_HEIGHT = GLITCH_THRESHOLD_M / 1.7
 
 #: methods drawn in the coordinate traces by default: the paper's filter, the best
 #: published offline smoother, and ours (the tables always list every method)
@@ -70,15 +75,37 @@ def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITC
 
     Parameters
     ----------
-    raw, reference : (T, J, 3)
+    raw, reference : (T, J, D), D = 3 or 2 (image keypoints), in the same units
+    threshold : in those units
 
     Returns
     -------
     (T, J) bool
     """
-    from tobitkf.evaluation.metrics import joint_errors
+    err = np.linalg.norm(np.asarray(raw, float) - np.asarray(reference, float), axis=-1)
+    return np.nan_to_num(err, nan=0.0) > threshold
 
-    return np.nan_to_num(joint_errors(raw, reference), nan=0.0) > threshold
+
+def glitch_threshold(track: Any) -> tuple[float, str]:
+    """The glitch threshold in ``track``'s units, and how the page says it.
+
+    10 cm in a length unit (``0.1`` in metres, ``100`` in millimetres); for pixels or
+    unknown units, :data:`GLITCH_SHARE_OF_HEIGHT` of the body's median height in the
+    recording (the extent of its joints along the up axis)."""
+    scale = track.metres_per_unit
+    if scale is not None:
+        return GLITCH_THRESHOLD_M / scale, f"{100 * GLITCH_THRESHOLD_M:.0f} cm"
+    pos = np.asarray(track.positions, dtype=float)
+    up = int(getattr(track.topology, "up_axis", 1)) if pos.shape[-1] == 3 else 1
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no joint at all
+        heights = np.nanmax(pos[..., up], axis=1) - np.nanmin(pos[..., up], axis=1)
+        height = float(np.nanmedian(heights)) if np.isfinite(heights).any() else 0.0
+    threshold = GLITCH_SHARE_OF_HEIGHT * height if height > 0 else 1.0
+    unit = track.units or "units"
+    return threshold, (
+        f"{threshold:.3g} {unit} ({100 * GLITCH_SHARE_OF_HEIGHT:.0f} % of the body's height)"
+    )
 
 
 def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
@@ -130,17 +157,24 @@ def make_figures(
 
     raw = np.asarray(inp.raw.positions, dtype=float)
     names = list(inp.methods)
+    # without truth, the raw track is held against the default smoother, which rejects
+    # glitches (a plain Kalman filter follows a sustained one and lags a fast movement)
+    ref_name = BAND_METHOD if BAND_METHOD in names else names[0] if names else ""
     reference = (
         inp.truth
         if inp.truth is not None
-        else (np.asarray(inp.methods[names[0]].positions) if names else raw)
+        else (np.asarray(inp.methods[ref_name].positions) if names else raw)
     )
-    mask = glitch_mask(raw, reference)
+    threshold, threshold_text = glitch_threshold(inp.raw)
+    mask = glitch_mask(raw, reference, threshold)
     times = np.asarray(inp.raw.times(), dtype=float)
     figures: dict[str, bytes] = dict(inp.figures)
     joint_names = list(inp.raw.joint_names)
-    against = "the truth" if inp.truth is not None else f"the {names[0]} output" if names else ""
-    shade_label = f"raw > {100 * GLITCH_THRESHOLD_M:.0f} cm from {against}"
+    against = "the truth" if inp.truth is not None else f"the {ref_name} output" if names else ""
+    shade_label = f"raw > {threshold_text.split(' (')[0]} from {against}"
+    image = raw.shape[-1] == 2  # image keypoints: pixels, y pointing down
+    unit = inp.raw.units or "units"
+    axes_text = "x and y (pointing down, as in the image)" if image else "x, y and z"
     for j in pick_joints(mask, raw, n_joints):
         series: dict[str, np.ndarray] = {"raw": raw[:, j]}
         for name in [n for n in inp.traces if n in inp.methods] or names:
@@ -149,13 +183,16 @@ def make_figures(
             series["truth"] = inp.truth[:, j]
         std = getattr(inp.methods.get(BAND_METHOD), "std", None) if BAND_METHOD in series else None
         bands = {BAND_METHOD: np.asarray(std, float)[:, j]} if std is not None else {}
+        shade = plots.episodes(mask[:, j])
         fig = plots.plot_joint_traces(
             times,
             series,
             title=f"{joint_names[j]}",
-            shade=plots.episodes(mask[:, j]),
+            shade=shade,
+            unit=unit,
             shade_label=shade_label,
             bands=bands,
+            y_down=image,
         )
         name = f"traces_{joint_names[j]}.png"
         figures[name] = plots.figure_to_png(fig)
@@ -167,12 +204,18 @@ def make_figures(
             if bands
             else ""
         )
-        captions[name] = (
-            f"{joint_names[j]}: x, y and z over time, raw track (grey dots) against "
-            f"{', '.join(n for n in series if n != 'raw')}.{band_text} Shaded red: frames "
-            f"where the raw track is more than {100 * GLITCH_THRESHOLD_M:.0f} cm from "
+        shade_text = (
+            f" Shaded red: frames where the raw track is more than {threshold_text} from "
             f"{against}. {joint_names[j]} is one of the {n_joints} joints with the most such "
             "frames."
+            if shade
+            else f" No frame of {joint_names[j]} is more than {threshold_text} from "
+            f"{against} (nothing shaded); it is one of the {n_joints} joints with the "
+            "largest one-frame jumps."
+        )
+        captions[name] = (
+            f"{joint_names[j]}: {axes_text} over time, raw track (grey dots) against "
+            f"{', '.join(n for n in series if n != 'raw')}.{band_text}{shade_text}"
         )
 
     # skeletons before, during and after the worst glitch
@@ -194,10 +237,12 @@ def make_figures(
         up_axis=up,
         frame_labels=[f"frame {c}" + (" (worst)" if c == worst else "") for c in cols],
         title="skeletons around the worst glitch",
+        y_down=image,
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
+    view = "as in the image" if image else "seen from the front"
     captions["skeletons_worst_glitch.png"] = (
-        f"Skeletons seen from the front at frames {', '.join(map(str, cols))}: around frame "
+        f"Skeletons {view} at frames {', '.join(map(str, cols))}: around frame "
         f"{worst}, where the raw track is furthest from {against}; one column per method."
     )
 
@@ -212,12 +257,25 @@ def make_figures(
         fps = float(inp.raw.fps or 30.0)
         with tempfile.TemporaryDirectory() as tmp:
             path = plots.animate_skeletons(
-                anim, parents, Path(tmp) / "anim.gif", fps=fps, up_axis=up, window=(start, stop)
+                anim,
+                parents,
+                Path(tmp) / "anim.gif",
+                fps=fps,
+                up_axis=up,
+                window=(start, stop),
+                y_down=image,
             )
             figures["animation.gif"] = path.read_bytes()
+        slowed = fps / plots.gif_playback_fps(fps)
+        speed = (
+            "real time"
+            if slowed < 1.05
+            else f"slowed down {slowed:.1f} times: a GIF plays at most "
+            f"{plots.GIF_MAX_FPS:.0f} frames a second"
+        )
         captions["animation.gif"] = (
             f"Animation of frames {start} to {stop - 1} ({(stop - start) / fps:.1f} s, every "
-            f"frame, real time) around the worst glitch at frame {worst}: "
+            f"frame, {speed}) around the worst glitch at frame {worst}: "
             f"{', '.join(anim)} side by side."
         )
     return figures
@@ -226,6 +284,8 @@ def make_figures(
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1300px;margin:2em auto;padding:0 1em;
 color:#222}
+h1,h2{overflow-wrap:anywhere}
+figure{margin:1em 0}
 .table-scroll{overflow-x:auto;max-width:100%;margin:0.5em 0 1em}
 table{border-collapse:collapse}
 th{vertical-align:bottom}
@@ -248,6 +308,7 @@ def render_html(
 
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
         f"<title>{html.escape(inp.title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>{html.escape(inp.title)}</h1>",
     ]
@@ -339,6 +400,38 @@ def _display_row(row: Mapping[str, Any], output: Any = None) -> dict[str, Any]:
     return out
 
 
+def _source_name(seq: Any) -> str:
+    """The file name a sequence was read from (not its folders: the page may be mailed)."""
+    source = (getattr(seq, "metadata", None) or {}).get("source")
+    return Path(str(source)).name if source else "recording"
+
+
+def _title(track: Any, mocap: Any = None) -> str:
+    against = f" against {_source_name(mocap)}" if mocap is not None else ""
+    return f"tobitkf report: {_source_name(track)}{against}"
+
+
+def methods_for_units(specs: Sequence[Any], track: Any) -> tuple[list[Any], list[str]]:
+    """The method specs that run on ``track`` with their default parameters, and the names
+    left out: those whose defaults are lengths in metres (``atkf``'s half-widths) cannot
+    smooth pixels or unknown units (``tobitkf report`` without ``--methods``)."""
+    from tobitkf.smoothing.registry import methods
+
+    registered = methods()
+    units = "m" if track.metres_per_unit is not None else track.units
+    kept, left_out = [], []
+    for spec in specs:
+        method = registered.get(spec.removesuffix("+rts")) if isinstance(spec, str) else None
+        try:
+            if method is not None and method.check_data is not None:
+                method.check_data(dict(method.defaults), track.n_dims, units)
+        except ValueError:
+            left_out.append(spec)
+            continue
+        kept.append(spec)
+    return kept, left_out
+
+
 def track_report(
     track: Any,
     path: str | Path,
@@ -412,11 +505,15 @@ def track_report(
             )
     else:
         table = evaluate_without_truth(track, methods, outputs=outputs)
+        # lengths in metres when the track has a length unit, else in its own units
+        metric = table.units == "m"
+        unit = table.units or "units"
         rows = [
             {
                 "method": r["method"],
-                "M (1e-3 m²)": 1e3 * r["M"],
-                "largest jump (cm)": 100 * r["max_jump_m"],
+                ("M (1e-3 m²)" if metric else f"M ({unit}²)"): (1e3 if metric else 1) * r["M"],
+                f"largest jump ({'cm' if metric else unit})": (100 if metric else 1)
+                * r["max_jump_m"],
                 "at": f"{r['jumps'][0]['joint']} frame {r['jumps'][0]['frame']}"
                 if r["jumps"]
                 else "-",
@@ -426,7 +523,7 @@ def track_report(
         tables = [_table_from_rows("Smoothness M (2020 paper eq. 41) and largest jumps", rows)]
     smoothed = {k: v for k, v in outputs.items() if k != "raw" and hasattr(v, "positions")}
     inp = ReportInput(
-        title=title or f"tobitkf report: {track.metadata.get('source', 'recording')}",
+        title=title or _title(track, mocap),
         raw=track,
         methods=smoothed,
         truth=truth_positions,

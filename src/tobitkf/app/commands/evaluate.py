@@ -231,7 +231,7 @@ def _scaled(value: Any, factor: float) -> Any:
 @_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
 def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.app.report import track_report
+    from tobitkf.app.report import methods_for_units, track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -239,10 +239,26 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     _writable_file(output, "the report")  # before seconds of evaluating and drawing
     raw = _load_one(track, "track", input_format)
     mocap = _load_one(truth, "truth", truth_format) if truth else None
+    notes = []
+    if not methods:  # the defaults, less those that cannot smooth this track's units
+        specs, left_out = methods_for_units(specs, raw)
+        if left_out:
+            notes.append(
+                f"Left out: {', '.join(left_out)} (default parameters in metres; this "
+                f"recording is in {raw.units or 'unknown units'}). To include one, name "
+                "it in --methods with half-widths in the recording's units, e.g. atkf[c=20]."
+            )
+            err_console.print(f"{escape(track)}: {escape(notes[-1])}")
     with console.status("evaluating and drawing..."):
         try:
             path, table = track_report(
-                raw, output, mocap=mocap, methods=specs, pairs=pairs, gif=not no_gif
+                raw,
+                output,
+                mocap=mocap,
+                methods=specs,
+                pairs=pairs,
+                gif=not no_gif,
+                notes=notes,
             )
         except ImportError as exc:
             _fail(str(exc))
