@@ -393,16 +393,18 @@ def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch):
     assert shaded["HandLeft"] == [(50, 80)]
 
 
-def test_report_caption_does_not_claim_shading_where_there_is_none(tmp_path):
+def test_report_does_not_claim_glitches_where_there_are_none(tmp_path, monkeypatch):
     from tobitkf.app.report import track_report
 
     seq = _recording(T=60)
-    path, _ = track_report(
-        seq, tmp_path / "r.html", truth=seq.positions, methods=["raw", "kf"], gif=False
-    )
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(seq, tmp_path / "r.html", truth=seq.positions, methods=["raw", "kf"])
     page = path.read_text()
     assert "Shaded red" not in page and "most such frames" not in page
     assert "nothing shaded" in page and "largest one-frame jumps" in page
+    assert "worst glitch" not in page and "no glitch: never more than 10 cm" in page
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert skel["kwargs"]["title"] == "skeletons where raw is furthest from the truth"
 
 
 def _screenshot(page: Path, tmp_path: Path, width: int, height: int) -> np.ndarray:

@@ -221,6 +221,13 @@ def make_figures(
     # skeletons before, during and after the worst glitch
     err = np.linalg.norm(raw - reference, axis=-1)
     worst = int(np.nanargmax(np.nan_to_num(err, nan=-1.0).max(axis=1))) if raw.size else 0
+    # a recording without glitches is not said to have a worst one
+    around = (
+        f"the worst glitch at frame {worst}"
+        if mask.any()
+        else f"frame {worst}, where the raw track is furthest from {against} (no glitch: "
+        f"never more than {threshold_text})"
+    )
     T = raw.shape[0]
     cols = sorted({max(0, worst - 10), worst, min(T - 1, worst + 10)})
     frames: dict[str, np.ndarray] = {"raw": raw}
@@ -236,7 +243,9 @@ def make_figures(
         parents,
         up_axis=up,
         frame_labels=[f"frame {c}" + (" (worst)" if c == worst else "") for c in cols],
-        title="skeletons around the worst glitch",
+        title="skeletons around the worst glitch"
+        if mask.any()
+        else f"skeletons where raw is furthest from {against}",
         y_down=image,
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
@@ -275,7 +284,7 @@ def make_figures(
         )
         captions["animation.gif"] = (
             f"Animation of frames {start} to {stop - 1} ({(stop - start) / fps:.1f} s, every "
-            f"frame, {speed}) around the worst glitch at frame {worst}: "
+            f"frame, {speed}) around {around}: "
             f"{', '.join(anim)} side by side."
         )
     return figures
