@@ -233,6 +233,11 @@ def test_progress_on_a_terminal_for_evaluate_benchmark_and_fit(tmp_path, monkeyp
     buf = _terminal(monkeypatch)
     assert _invoke("fit", track, "--per-joint").exit_code == 0
     assert "25/25" in buf.getvalue()
+    buf = _terminal(monkeypatch)  # report: each method, then the drawing
+    res = _invoke("report", track, "--methods", "raw,kf", "-o", tmp_path / "r.html", "--no-gif")
+    assert res.exit_code == 0, res.output
+    assert "a.csv" in buf.getvalue() and "drawing figures" in buf.getvalue()
+    assert "2/3" in buf.getvalue()  # both methods run, the figures are the third step
 
 
 def test_methods_and_fit_print_units(tmp_path):

@@ -452,6 +452,7 @@ def track_report(
     title: str | None = None,
     gif: bool = True,
     notes: Sequence[str] = (),
+    on_drawing: Any = None,
 ) -> tuple[Path, Any]:
     """Evaluate methods on ``track`` and write the HTML report (``tobitkf report``).
 
@@ -465,6 +466,8 @@ def track_report(
     methods : method specs for :func:`~tobitkf.evaluation.evaluate.evaluate_methods`
     pairs : pairing table or CSV path for ``mocap``
     title, gif, notes : page title, whether to embed the animation, extra paragraphs
+    on_drawing : optional ``on_drawing()``, called when the methods have run and the
+        figures are drawn (the command line's progress)
 
     Returns
     -------
@@ -541,4 +544,6 @@ def track_report(
         animate=[m for m in ("atkf", "robust") if m in smoothed],
         traces=[m for m in FOCUS_METHODS if m in smoothed],
     )
+    if on_drawing is not None:
+        on_drawing()
     return write_report(inp, path, gif=gif), table

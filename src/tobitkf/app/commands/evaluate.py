@@ -249,16 +249,19 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
                 "it in --methods with half-widths in the recording's units, e.g. atkf[c=20]."
             )
             err_console.print(f"{escape(track)}: {escape(notes[-1])}")
-    with console.status("evaluating and drawing..."):
+    # one step per method, then the figures (the slowest part with the animation)
+    with _progress() as progress:
+        task = progress.add_task(Path(track).name, total=len(specs) + 1, now="")
         try:
             path, table = track_report(
                 raw,
                 output,
                 mocap=mocap,
-                methods=specs,
+                methods=_ticking(specs, progress, task),
                 pairs=pairs,
                 gif=not no_gif,
                 notes=notes,
+                on_drawing=lambda: progress.update(task, now="drawing figures"),
             )
         except ImportError as exc:
             _fail(str(exc))
