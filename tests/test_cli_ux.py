@@ -408,6 +408,8 @@ def test_report_does_not_claim_glitches_where_there_are_none(tmp_path, monkeypat
     assert "Shaded red" not in page and "most such frames" not in page
     assert "nothing shaded" in page and "largest one-frame jumps" in page
     assert "worst glitch" not in page and "no glitch: never more than 10 cm" in page
+    # Kinect camera space: y up, x to the sensor's left (a mirror view, not "the front")
+    assert "Skeletons in the recording&#x27;s x-y plane (x to the right, y up)" in page
     (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
     assert skel["kwargs"]["title"] == "skeletons where raw is furthest from the truth"
 

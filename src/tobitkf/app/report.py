@@ -249,7 +249,14 @@ def make_figures(
         y_down=image,
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
-    view = "as in the image" if image else "seen from the front"
+    # the recording's own axes, not "from the front": Kinect camera space has x to the
+    # sensor's left, so a person facing it is drawn as in a mirror
+    h, v = (plots.AXIS_NAMES[k] for k in plots._view_axes(up))
+    view = (
+        "as in the image"
+        if image
+        else f"in the recording's {h}-{v} plane ({h} to the right, {v} up)"
+    )
     captions["skeletons_worst_glitch.png"] = (
         f"Skeletons {view} at frames {', '.join(map(str, cols))}: around frame "
         f"{worst}, where the raw track is furthest from {against}; one column per method."
