@@ -485,6 +485,32 @@ def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
     assert "UserWarning" not in res.output
 
 
+def test_report_in_a_narrow_terminal_prints_a_summary_not_wrapped_lines(tmp_path, monkeypatch):
+    from tobitkf.app.commands import _common
+    from tobitkf.app.commands import evaluate as evaluate_command
+
+    seq = _recording(T=60)
+    save([seq], tmp_path / "a.csv", format="csv")
+    save([seq], tmp_path / "truth.csv", format="csv")
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("".join(f"{j},{j}\n" for j in seq.joint_names))
+    for width in (50, 250):
+        buf = io.StringIO()
+        console = Console(file=buf, width=width)
+        monkeypatch.setattr(_common, "console", console)
+        monkeypatch.setattr(evaluate_command, "console", console)
+        args = ["report", tmp_path / "a.csv", "-t", tmp_path / "truth.csv", "--pairs", pairs]
+        res = _invoke(*args, "--methods", "raw,kf", "-o", tmp_path / "r.html", "--no-gif")
+        assert res.exit_code == 0, res.output
+        out = buf.getvalue()
+        assert "report written to" in out
+        if width == 50:  # every line fits; each method's RMSE on a line of its own
+            assert max(len(line) for line in out.splitlines()) <= width, out
+            assert out.count("RMSE (cm): ") == 2 and "method: kf" in out
+        else:  # wide enough: the whole table, as evaluate prints it
+            assert "hands" in out and "sust." in out
+
+
 def test_a_narrow_terminal_gets_whole_words_not_squeezed_columns(monkeypatch):
     from tobitkf.app.commands import _common
 

@@ -416,6 +416,33 @@ def _display_row(row: Mapping[str, Any], output: Any = None) -> dict[str, Any]:
     return out
 
 
+def no_truth_rows(table: Any) -> list[dict[str, Any]]:
+    """The rows of a :class:`~tobitkf.evaluation.evaluate.NoTruthTable` as the report
+    shows them: M in 1e-3 m² and jumps in cm when the track has a length unit, else in
+    its own units (pixels)."""
+    metric = table.units == "m"
+    unit = table.units or "units"
+    return [
+        {
+            "method": r["method"],
+            ("M (1e-3 m²)" if metric else f"M ({unit}²)"): (1e3 if metric else 1) * r["M"],
+            f"largest jump ({'cm' if metric else unit})": (100 if metric else 1) * r["max_jump_m"],
+            "at": f"{r['jumps'][0]['joint']} frame {r['jumps'][0]['frame']}" if r["jumps"] else "-",
+        }
+        for r in table.rows
+    ]
+
+
+def summary_rows(table: Any) -> list[dict[str, Any]]:
+    """A few columns per method for a narrow terminal (the page has every column): RMSE,
+    max and the 95 % ball against ground truth, else :func:`no_truth_rows`."""
+    if not hasattr(table, "score"):
+        return no_truth_rows(table)
+    keys = {"method": "method", "RMSE": "RMSE (cm)", "max": "max (cm)"}
+    keys["in 95% ball (%)"] = "in 95% ball (%)"
+    return [{v: _display_row(r).get(k) for k, v in keys.items()} for r in table.rows()]
+
+
 def _source_name(seq: Any) -> str:
     """The file name a sequence was read from (not its folders: the page may be mailed)."""
     source = (getattr(seq, "metadata", None) or {}).get("source")
@@ -524,21 +551,7 @@ def track_report(
             )
     else:
         table = evaluate_without_truth(track, methods, outputs=outputs)
-        # lengths in metres when the track has a length unit, else in its own units
-        metric = table.units == "m"
-        unit = table.units or "units"
-        rows = [
-            {
-                "method": r["method"],
-                ("M (1e-3 m²)" if metric else f"M ({unit}²)"): (1e3 if metric else 1) * r["M"],
-                f"largest jump ({'cm' if metric else unit})": (100 if metric else 1)
-                * r["max_jump_m"],
-                "at": f"{r['jumps'][0]['joint']} frame {r['jumps'][0]['frame']}"
-                if r["jumps"]
-                else "-",
-            }
-            for r in table.rows
-        ]
+        rows = no_truth_rows(table)
         tables = [_table_from_rows("Smoothness M (2020 paper eq. 41) and largest jumps", rows)]
     smoothed = {k: v for k, v in outputs.items() if k != "raw" and hasattr(v, "positions")}
     inp = ReportInput(

@@ -231,7 +231,7 @@ def _scaled(value: Any, factor: float) -> Any:
 @_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
 def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.app.report import methods_for_units, track_report
+    from tobitkf.app.report import methods_for_units, summary_rows, track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -269,7 +269,14 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
             _fail(f"{track}: {exc}")
     for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
         err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
-    console.print(table.to_text(), highlight=False, soft_wrap=True)
+    text = table.to_text()
+    if max(map(len, text.splitlines()), default=0) <= console.width:
+        console.print(text, highlight=False, soft_wrap=True)
+    else:  # a narrow terminal: a few columns, whole words, instead of wrapped lines
+        rows = summary_rows(table)
+        columns = list(rows[0])
+        _print_table("summary (every column is in the report)", columns,
+                     [list(r.values()) for r in rows])  # fmt: skip
     console.print(f"report written to {Path(path).resolve()}")
 
 
