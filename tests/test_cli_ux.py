@@ -378,9 +378,11 @@ def test_report_command_runs_on_pixels_without_the_methods_in_metres(tmp_path):
     assert "<tr><td>robust</td>" in page and "<tr><td>atkf</td>" not in page
 
 
-def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch):
+@pytest.mark.parametrize("units", ["m", "mm"])
+def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch, units):
     """Without truth the raw track is held against robust, not a filter that follows the
-    glitch: the 30 frames a hand sits 40 cm off are the frames shaded."""
+    glitch: the 30 frames a hand sits 40 cm off are the frames shaded, in metres or in
+    millimetres (10 cm = 100 mm, axes labelled in the track's unit)."""
     from tobitkf.app.report import track_report
 
     pytest.importorskip("matplotlib")
@@ -388,14 +390,17 @@ def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch):
     pos = np.asarray(seq.positions).copy()
     hand = seq.topology.index("HandLeft")
     pos[50:80, hand, 1] += 0.4
+    scale = {"m": 1.0, "mm": 1000.0}[units]
     calls = _traces_spy(monkeypatch)
-    track_report(seq.replace(positions=pos), tmp_path / "r.html", methods=["raw", "kf", "robust"])
-    shaded = {
-        c["kwargs"]["title"]: c["kwargs"]["shade"]
-        for c in calls
-        if c["name"] == "plot_joint_traces"
-    }
-    assert shaded["HandLeft"] == [(50, 80)]
+    track_report(
+        seq.replace(positions=scale * pos, units=units),
+        tmp_path / "r.html",
+        methods=["raw", "kf", "robust"],
+        gif=False,
+    )
+    traces = {c["kwargs"]["title"]: c for c in calls if c["name"] == "plot_joint_traces"}
+    assert traces["HandLeft"]["kwargs"]["shade"] == [(50, 80)]
+    assert traces["HandLeft"]["fig"].axes[0].get_ylabel() == f"x [{units}]"
 
 
 def test_report_does_not_claim_glitches_where_there_are_none(tmp_path, monkeypatch):
