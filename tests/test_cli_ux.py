@@ -490,6 +490,15 @@ def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
     assert "UserWarning" not in res.output
 
 
+def test_report_warnings_stand_out_from_the_notes():
+    from tobitkf.app.report import ReportInput, render_html
+
+    notes = ["Warning: time alignment is doubtful.", "Left out: atkf."]
+    page = render_html(ReportInput("t", _recording(T=40), {}, notes=notes), {})
+    assert "<p class='warning'>Warning: time alignment is doubtful.</p>" in page
+    assert "<p>Left out: atkf.</p>" in page and ".warning{border-left" in page
+
+
 def test_report_in_a_narrow_terminal_prints_a_summary_not_wrapped_lines(tmp_path, monkeypatch):
     from tobitkf.app.commands import _common
     from tobitkf.app.commands import evaluate as evaluate_command

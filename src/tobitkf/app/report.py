@@ -309,6 +309,7 @@ th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;font-size:0.9em}
 th:first-child,td:first-child{text-align:left}
 th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
 .note{color:#555;font-size:0.9em}
+.warning{border-left:4px solid #c60;background:#fff4e5;padding:0.4em 0.8em}
 """
 
 
@@ -328,8 +329,9 @@ def render_html(
         f"<title>{html.escape(inp.title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>{html.escape(inp.title)}</h1>",
     ]
-    for note in inp.notes:
-        parts.append(f"<p>{html.escape(note)}</p>")
+    for note in inp.notes:  # a warning (a doubtful time fit) stands out from the text
+        css = " class='warning'" if note.startswith("Warning:") else ""
+        parts.append(f"<p{css}>{html.escape(note)}</p>")
     for spec in inp.tables:
         parts.append(_table_html(spec))
     parts.append("<h2>Figures</h2>")
