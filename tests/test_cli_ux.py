@@ -470,6 +470,11 @@ def test_report_fits_a_phone_screen_even_with_a_long_file_name(tmp_path):
     # the file's name, not the folders it sits in (the page is mailed to others)
     assert f"<h1>tobitkf report: {name}</h1>" in text and "/home/someone" not in text
     assert "name='viewport' content='width=device-width" in text
+    # a file of several bodies: the title says which one the page shows
+    page2, _ = track_report(
+        seq.replace(body_id="person1"), tmp_path / "r2.html", methods=["raw"], gif=False
+    )
+    assert f"<h1>tobitkf report: {name} (body person1)</h1>" in page2.read_text()
     grey = _screenshot(page, tmp_path, 420, 1600)
     assert grey[:300].std() > 10  # the title is drawn
     # the title wraps inside the window: the rightmost 12 px are page background

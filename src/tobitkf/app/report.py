@@ -452,8 +452,10 @@ def _source_name(seq: Any) -> str:
 
 
 def _title(track: Any, mocap: Any = None) -> str:
+    # a file of several bodies: which one the page shows
+    body = f" (body {track.body_id})" if getattr(track, "body_id", None) is not None else ""
     against = f" against {_source_name(mocap)}" if mocap is not None else ""
-    return f"tobitkf report: {_source_name(track)}{against}"
+    return f"tobitkf report: {_source_name(track)}{body}{against}"
 
 
 def methods_for_units(specs: Sequence[Any], track: Any) -> tuple[list[Any], list[str]]:
