@@ -495,6 +495,20 @@ def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
     assert "UserWarning" not in res.output
 
 
+def test_report_of_the_raw_track_alone_says_so(tmp_path, monkeypatch):
+    from tobitkf.app.report import track_report
+
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(_recording(T=60), tmp_path / "r.html", methods=["raw"])
+    page = path.read_text()
+    assert "furthest from ;" not in page and "against ." not in page
+    assert "the raw track alone (no method or truth to compare it with)" in page
+    # the snapshots sit around the one-frame hand spike at frame 30 (_recording)
+    assert "around frame 30, where a raw sample is furthest from its neighbouring" in page
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert skel["args"][1] == [20, 30, 40]
+
+
 def test_report_warnings_stand_out_from_the_notes():
     from tobitkf.app.report import ReportInput, render_html
 

@@ -216,10 +216,20 @@ def make_figures(
         captions[name] = (
             f"{joint_names[j]}: {axes_text} over time, raw track (grey dots) against "
             f"{', '.join(n for n in series if n != 'raw')}.{band_text}{shade_text}"
+            if len(series) > 1
+            else f"{joint_names[j]}: {axes_text} over time, the raw track alone (no method "
+            f"or truth to compare it with); one of the {n_joints} joints with the largest "
+            "one-frame jumps."
         )
 
-    # skeletons before, during and after the worst glitch
+    # skeletons before, during and after the worst glitch (the raw track alone: the
+    # sample furthest from the mean of its two neighbours, the top of a one-frame spike)
     err = np.linalg.norm(raw - reference, axis=-1)
+    furthest = f"where the raw track is furthest from {against}"
+    if not against and raw.shape[0] > 2:
+        err = np.zeros(raw.shape[:2])
+        err[1:-1] = np.linalg.norm(raw[1:-1] - 0.5 * (raw[:-2] + raw[2:]), axis=-1)
+        furthest = "where a raw sample is furthest from its neighbouring frames"
     worst = int(np.nanargmax(np.nan_to_num(err, nan=-1.0).max(axis=1))) if raw.size else 0
     # a recording without glitches is not said to have a worst one
     around = (
@@ -245,7 +255,9 @@ def make_figures(
         frame_labels=[f"frame {c}" + (" (worst)" if c == worst else "") for c in cols],
         title="skeletons around the worst glitch"
         if mask.any()
-        else f"skeletons where raw is furthest from {against}",
+        else f"skeletons where raw is furthest from {against}"
+        if against
+        else "skeletons around the raw track's largest spike",
         y_down=image,
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
@@ -259,7 +271,7 @@ def make_figures(
     )
     captions["skeletons_worst_glitch.png"] = (
         f"Skeletons {view} at frames {', '.join(map(str, cols))}: around frame "
-        f"{worst}, where the raw track is furthest from {against}; one column per method."
+        f"{worst}, {furthest}; one column per method."
     )
 
     if gif and names:
