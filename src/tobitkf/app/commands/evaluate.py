@@ -270,9 +270,11 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
         err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
     text = table.to_text()
-    if max(map(len, text.splitlines()), default=0) <= console.width:
+    # a pipe or a log file gets the whole table; a narrow terminal a few columns, whole
+    # words, instead of lines wrapped into each other
+    if not console.is_terminal or max(map(len, text.splitlines()), default=0) <= console.width:
         console.print(text, highlight=False, soft_wrap=True)
-    else:  # a narrow terminal: a few columns, whole words, instead of wrapped lines
+    else:
         rows = summary_rows(table)
         columns = list(rows[0])
         _print_table("summary (every column is in the report)", columns,
