@@ -19,6 +19,7 @@ import pytest
 click = pytest.importorskip("click")
 from click.testing import CliRunner  # noqa: E402
 from rich.console import Console  # noqa: E402
+from rich.text import Text  # noqa: E402
 
 from test_cli import _recording  # noqa: E402
 from tobitkf.app.commands import _common as commands  # noqa: E402
@@ -233,6 +234,11 @@ def test_progress_on_a_terminal_for_evaluate_benchmark_and_fit(tmp_path, monkeyp
     buf = _terminal(monkeypatch)
     assert _invoke("fit", track, "--per-joint").exit_code == 0
     assert "25/25" in buf.getvalue()
+    buf = _terminal(monkeypatch)  # report: each method, then the drawing
+    res = _invoke("report", track, "--methods", "raw,kf", "-o", tmp_path / "r.html", "--no-gif")
+    assert res.exit_code == 0, res.output
+    assert "a.csv" in buf.getvalue() and "drawing figures" in buf.getvalue()
+    assert "2/3" in buf.getvalue()  # both methods run, the figures are the third step
 
 
 def test_methods_and_fit_print_units(tmp_path):
@@ -314,12 +320,112 @@ def test_gif_window_draws_every_frame(tmp_path):
         assert im.n_frames == 100  # every frame of the window, the spike's included
 
 
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
-def test_report_renders_in_chromium(tmp_path):
+def _traces_spy(monkeypatch) -> list[dict]:
+    """Every call of plot_joint_traces and plot_skeleton_frames: kwargs and the figure."""
+    from tobitkf.app import plots
+
+    calls: list[dict] = []
+    for name in ("plot_joint_traces", "plot_skeleton_frames"):
+        original = getattr(plots, name)
+
+        def spy(*args, _original=original, _name=name, **kwargs):
+            fig = _original(*args, **kwargs)
+            calls.append({"name": _name, "args": args, "kwargs": kwargs, "fig": fig})
+            return fig
+
+        monkeypatch.setattr(plots, name, spy)
+    return calls
+
+
+def test_report_of_2d_image_keypoints_in_pixels(tmp_path, monkeypatch):
+    from tobitkf.app.report import track_report
+
+    pytest.importorskip("matplotlib")
+    seq = _recording(T=60)
+    px = 400.0 * np.asarray(seq.positions)[..., :2]  # x, y in pixels
+    px[..., 1] *= -1  # image y points down
+    seq2d = seq.replace(positions=px, units="px")
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(seq2d, tmp_path / "r.html", methods=["raw", "kf", "robust"])
+    page = path.read_text()
+    # lengths in the recording's own unit, not converted to cm or m²
+    assert "M (px²)" in page and "largest jump (px)" in page
+    assert "(cm)" not in page and "1e-3 m²" not in page
+    traces = [c for c in calls if c["name"] == "plot_joint_traces"]
+    assert traces
+    for c in traces:
+        axes = c["fig"].axes
+        assert len(axes) == 2  # x and y: no z panel
+        assert [a.get_ylabel() for a in axes] == ["x [px]", "y [px], down"]
+        assert axes[1].yaxis_inverted() and not axes[0].yaxis_inverted()
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert all(ax.yaxis_inverted() for ax in skel["fig"].axes)  # as in the image
+    assert "x and y (pointing down, as in the image)" in page
+    assert "Skeletons as in the image" in page
+    # the 10 cm threshold has no meaning in pixels: a share of the body's height instead
+    assert "px (6 % of the body&#x27;s height)" in page and "10 cm" not in page
+
+
+def test_report_command_runs_on_pixels_without_the_methods_in_metres(tmp_path):
+    seq = _recording(T=60)
+    px = 400.0 * np.asarray(seq.positions)[..., :2]
+    save([seq.replace(positions=px, units="px")], tmp_path / "k.csv", format="csv")
+    res = _invoke("report", tmp_path / "k.csv", "-o", tmp_path / "r.html", "--no-gif")
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.output.split())
+    assert "Left out: atkf, atkf2016" in out and "in px" in out
+    page = (tmp_path / "r.html").read_text()
+    assert "Left out: atkf, atkf2016" in page
+    assert "<tr><td>robust</td>" in page and "<tr><td>atkf</td>" not in page
+
+
+@pytest.mark.parametrize("units", ["m", "mm"])
+def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch, units):
+    """Without truth the raw track is held against robust, not a filter that follows the
+    glitch: the 30 frames a hand sits 40 cm off are the frames shaded, in metres or in
+    millimetres (10 cm = 100 mm, axes labelled in the track's unit)."""
+    from tobitkf.app.report import track_report
+
+    pytest.importorskip("matplotlib")
+    seq = _recording(T=120)
+    pos = np.asarray(seq.positions).copy()
+    hand = seq.topology.index("HandLeft")
+    pos[50:80, hand, 1] += 0.4
+    scale = {"m": 1.0, "mm": 1000.0}[units]
+    calls = _traces_spy(monkeypatch)
+    track_report(
+        seq.replace(positions=scale * pos, units=units),
+        tmp_path / "r.html",
+        methods=["raw", "kf", "robust"],
+        gif=False,
+    )
+    traces = {c["kwargs"]["title"]: c for c in calls if c["name"] == "plot_joint_traces"}
+    assert traces["HandLeft"]["kwargs"]["shade"] == [(50, 80)]
+    assert traces["HandLeft"]["fig"].axes[0].get_ylabel() == f"x [{units}]"
+
+
+def test_report_does_not_claim_glitches_where_there_are_none(tmp_path, monkeypatch):
+    from tobitkf.app.report import track_report
+
+    seq = _recording(T=60)
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(seq, tmp_path / "r.html", truth=seq.positions, methods=["raw", "kf"])
+    page = path.read_text()
+    assert "Shaded red" not in page and "most such frames" not in page
+    assert "nothing shaded" in page and "largest one-frame jumps" in page
+    assert "worst glitch" not in page and "no glitch: never more than 10 cm" in page
+    # Kinect camera space: y up, x to the sensor's left (a mirror view, not "the front")
+    assert "Skeletons in the recording&#x27;s x-y plane (x to the right, y up)" in page
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert skel["kwargs"]["title"] == "skeletons where raw is furthest from the truth"
+
+
+def _screenshot(page: Path, tmp_path: Path, width: int, height: int) -> np.ndarray:
+    """The page as headless Chromium draws it in a window of ``width`` × ``height`` px,
+    in grey levels."""
     from PIL import Image
 
-    page = _small_report(tmp_path)
-    shot = tmp_path / "shot.png"
+    shot = tmp_path / f"shot{width}.png"
     subprocess.run(
         [
             "chromium",
@@ -330,8 +436,9 @@ def test_report_renders_in_chromium(tmp_path):
             "--disable-component-update",
             "--disable-sync",
             "--no-first-run",
+            "--hide-scrollbars",
             f"--user-data-dir={tmp_path / 'profile'}",
-            "--window-size=1400,2400",
+            f"--window-size={width},{height}",
             f"--screenshot={shot}",
             page.resolve().as_uri(),
         ],
@@ -340,11 +447,39 @@ def test_report_renders_in_chromium(tmp_path):
         timeout=120,
     )
     with Image.open(shot) as im:
-        assert im.size == (1400, 2400)
-        grey = np.asarray(im.convert("L"), dtype=float)
+        assert im.size == (width, height)
+        return np.asarray(im.convert("L"), dtype=float)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
+def test_report_renders_in_chromium(tmp_path):
+    grey = _screenshot(_small_report(tmp_path), tmp_path, 1400, 2400)
     assert grey.std() > 10  # a page with tables and figures, not a blank or error page
     # nothing runs off to the right: the rightmost 40 px are page background
     assert (grey[:, -40:-20] > 240).mean() > 0.99
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed")
+def test_report_fits_a_phone_screen_even_with_a_long_file_name(tmp_path):
+    from tobitkf.app.report import track_report
+
+    name = "G3_Kinect_ELK_P1T1_Unknown_C_0_" * 3 + ".txt"  # one long word, no hyphen
+    seq = _recording(T=60)
+    seq = seq.replace(metadata={**seq.metadata, "source": f"/home/someone/private/{name}"})
+    page, _ = track_report(seq, tmp_path / "r.html", methods=["raw", "kf"], gif=False)
+    text = page.read_text()
+    # the file's name, not the folders it sits in (the page is mailed to others)
+    assert f"<h1>tobitkf report: {name}</h1>" in text and "/home/someone" not in text
+    assert "name='viewport' content='width=device-width" in text
+    # a file of several bodies: the title says which one the page shows
+    page2, _ = track_report(
+        seq.replace(body_id="person1"), tmp_path / "r2.html", methods=["raw"], gif=False
+    )
+    assert f"<h1>tobitkf report: {name} (body person1)</h1>" in page2.read_text()
+    grey = _screenshot(page, tmp_path, 420, 1600)
+    assert grey[:300].std() > 10  # the title is drawn
+    # the title wraps inside the window: the rightmost 12 px are page background
+    assert grey[:, -12:].min() > 230
 
 
 def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
@@ -359,6 +494,55 @@ def test_smooth_says_a_methods_warning_once_per_file_in_plain_words(tmp_path):
     assert out.count("beyond the censoring limits") == 1
     assert "warning" in out and "low.csv" in out
     assert "UserWarning" not in res.output
+
+
+def test_report_of_the_raw_track_alone_says_so(tmp_path, monkeypatch):
+    from tobitkf.app.report import track_report
+
+    calls = _traces_spy(monkeypatch)
+    path, _ = track_report(_recording(T=60), tmp_path / "r.html", methods=["raw"])
+    page = path.read_text()
+    assert "furthest from ;" not in page and "against ." not in page
+    assert "the raw track alone (no method or truth to compare it with)" in page
+    # the snapshots sit around the one-frame hand spike at frame 30 (_recording)
+    assert "around frame 30, where a raw sample is furthest from its neighbouring" in page
+    (skel,) = [c for c in calls if c["name"] == "plot_skeleton_frames"]
+    assert skel["args"][1] == [20, 30, 40]
+
+
+def test_report_warnings_stand_out_from_the_notes():
+    from tobitkf.app.report import ReportInput, render_html
+
+    notes = ["Warning: time alignment is doubtful.", "Left out: atkf."]
+    page = render_html(ReportInput("t", _recording(T=40), {}, notes=notes), {})
+    assert "<p class='warning'>Warning: time alignment is doubtful.</p>" in page
+    assert "<p>Left out: atkf.</p>" in page and ".warning{border-left" in page
+
+
+def test_report_in_a_narrow_terminal_prints_a_summary_not_wrapped_lines(tmp_path, monkeypatch):
+    from tobitkf.app.commands import _common
+    from tobitkf.app.commands import evaluate as evaluate_command
+
+    seq = _recording(T=60)
+    save([seq], tmp_path / "a.csv", format="csv")
+    save([seq], tmp_path / "truth.csv", format="csv")
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("".join(f"{j},{j}\n" for j in seq.joint_names))
+    for width, terminal in ((50, True), (250, True), (50, False)):
+        buf = io.StringIO()
+        console = Console(file=buf, width=width, force_terminal=terminal)
+        monkeypatch.setattr(_common, "console", console)
+        monkeypatch.setattr(evaluate_command, "console", console)
+        args = ["report", tmp_path / "a.csv", "-t", tmp_path / "truth.csv", "--pairs", pairs]
+        res = _invoke(*args, "--methods", "raw,kf", "-o", tmp_path / "r.html", "--no-gif")
+        assert res.exit_code == 0, res.output
+        out = Text.from_ansi(buf.getvalue()).plain
+        assert "report written to" in out
+        if width == 50 and terminal:  # every line fits; each method's RMSE on its own line
+            assert max(len(line) for line in out.splitlines()) <= width
+            assert out.count("RMSE (cm): ") == 2 and "method: kf" in out
+        else:  # wide enough, or a pipe / log file: the whole table, as evaluate prints it
+            assert "hands" in out and "sust." in out
 
 
 def test_a_narrow_terminal_gets_whole_words_not_squeezed_columns(monkeypatch):

@@ -86,3 +86,40 @@ def test_a_method_keeps_its_colour_across_figures_and_grey_is_raw_only():
     colours = [to_rgb(c) for name, c in many.items() if name != "raw"]
     assert all(len(set(c)) > 1 or c == (0.0, 0.0, 0.0) for c in colours)  # no grey but raw
     assert len(set(colours)) == len(colours)  # all distinct
+
+
+def _gif_frames(path):
+    """Every frame of a GIF as an RGB array, and each frame's delay in ms."""
+    from PIL import Image, ImageSequence
+
+    with Image.open(path) as im:
+        frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(im)]
+        delays = [f.info.get("duration") for f in ImageSequence.Iterator(im)]
+    return frames, delays
+
+
+def test_animation_shows_a_marker_set_without_bones(tmp_path):
+    # three markers, no bones (every parent -1), as motion capture files give them
+    T = 12
+    pos = np.zeros((T, 3, 3))
+    pos[:, :, 0] = [0.0, 0.3, 0.6]
+    pos[:, :, 1] = [0.0, 1.0, 0.5]
+    out = plots.animate_skeletons({"robust": pos}, [-1, -1, -1], tmp_path / "m.gif")
+    frames, _ = _gif_frames(out)
+    green = np.array([44, 160, 44])  # robust's colour, tab:green (text and box are black)
+    for rgb in frames:
+        near = np.all(np.abs(rgb.astype(int) - green) < 30, axis=-1)
+        assert near.sum() >= 3  # the markers are drawn, not an empty box
+
+
+def test_animation_of_a_fast_recording_is_not_played_ten_times_too_slowly(tmp_path):
+    """Browsers play a GIF delay under 20 ms as 100 ms: 120 Hz gets 20 ms frames
+    (slowed down, every frame shown), 25 Hz keeps its own 40 ms."""
+    pos = np.cumsum(np.random.default_rng(2).normal(scale=0.01, size=(20, 3, 3)), axis=0)
+    for fps, delay in ((120.0, 20), (25.0, 40)):
+        out = plots.animate_skeletons(
+            {"raw": pos}, [-1, 0, 1], tmp_path / f"a{fps:.0f}.gif", fps=fps, window=(0, 20)
+        )
+        frames, delays = _gif_frames(out)
+        assert len(frames) == 20
+        assert all(d == delay for d in delays[:-1]), delays

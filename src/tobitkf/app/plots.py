@@ -113,13 +113,15 @@ def plot_joint_traces(
     unit: str = "m",
     shade_label: str = "glitch",
     bands: Mapping[str, np.ndarray] | None = None,
+    y_down: bool = False,
 ):
     """Per-axis coordinate traces of one joint (like Fig. 1, 2, 4, 6 of the 2020 paper).
 
     Parameters
     ----------
     times : (T,) seconds
-    series : mapping name -> (T, 3) positions; ``"raw"`` and ``"truth"`` get fixed colours
+    series : mapping name -> (T, D) positions, D = 3 or 2 (one panel per axis); ``"raw"``
+        and ``"truth"`` get fixed colours
     title : str
     shade : frame ranges ``(start, stop)`` to shade (glitch episodes)
     unit : axis label unit
@@ -127,6 +129,8 @@ def plot_joint_traces(
     bands : mapping name -> (T,) per-axis posterior sd of that series: a light band of
         ±2 sd in the series' colour around its curve on every axis, behind the lines,
         with the legend entry ``"<name> ± 2 sd"``
+    y_down : the y axis points down (image keypoints): its panel is drawn upside down,
+        so a keypoint moving up in the image moves up in the panel
 
     Returns
     -------
@@ -137,7 +141,8 @@ def plot_joint_traces(
     colours = _colours(list(series))
     # half a frame on each side of a shaded episode, in the track's own time step
     half = 0.5 * float(np.median(np.diff(times))) if len(times) > 1 else 0.0
-    fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
+    n_axes = np.asarray(next(iter(series.values()))).shape[-1] if series else 3
+    fig, axes = plt.subplots(n_axes, 1, figsize=(9, 0.7 + 1.95 * n_axes), sharex=True)
     for k, ax in enumerate(axes):
         for start, stop in shade:
             lo = times[min(start, len(times) - 1)]
@@ -157,6 +162,9 @@ def plot_joint_traces(
                 style.update(lw=0.9, marker=".", ms=2.5)
             ax.plot(times[: len(v)], v[:, k], label=name, color=colours[name], **style)
         ax.set_ylabel(f"{AXIS_NAMES[k]} [{unit}]")
+        if y_down and k == 1:
+            ax.invert_yaxis()
+            ax.set_ylabel(f"y [{unit}], down")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     # one legend above the plots (never over a curve), the shading included
@@ -198,6 +206,30 @@ def _view_axes(up_axis: int) -> tuple[int, int]:
     return horizontal, up_axis
 
 
+def _view_box(points: np.ndarray, percentile: float, pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corner of the box drawn around ``points`` (N, D): from the
+    ``percentile``-th to the ``100 - percentile``-th percentile per coordinate, widened by
+    ``pad`` times the box's largest side (the same look in metres, millimetres or pixels)."""
+    d = points.shape[-1]
+    finite = points[np.all(np.isfinite(points), axis=1)]
+    if not finite.size:
+        return np.zeros(d), np.ones(d)
+    lo = np.percentile(finite, percentile, axis=0)
+    hi = np.percentile(finite, 100 - percentile, axis=0)
+    margin = pad * float(np.max(hi - lo)) or 1.0
+    return lo - margin, hi + margin
+
+
+def _frame_axes(ax, lo, hi, h: int, v: int, y_down: bool) -> None:
+    """A skeleton panel: the box ``lo``..``hi`` on coordinates ``h`` and ``v``, equal
+    scales, no ticks; the vertical axis drawn downwards for image keypoints."""
+    ax.set_xlim(lo[h], hi[h])
+    ax.set_ylim((hi[v], lo[v]) if y_down else (lo[v], hi[v]))
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
 def plot_skeleton_frames(
     frames: Mapping[str, np.ndarray],
     frame_indices: Sequence[int],
@@ -206,17 +238,19 @@ def plot_skeleton_frames(
     up_axis: int = 1,
     frame_labels: Sequence[str] | None = None,
     title: str = "",
+    y_down: bool = False,
 ):
     """Skeletons at a few frames, one column per method (like Fig. 5 of the 2020 paper).
 
     Parameters
     ----------
-    frames : mapping name -> (T, J, 3) positions
+    frames : mapping name -> (T, J, D) positions, D = 3 or 2
     frame_indices : frames to draw (rows)
     parents : (J,) parent index per joint, -1 for the root
-    up_axis : which coordinate points up (drawn vertically)
+    up_axis : which coordinate is vertical
     frame_labels : row labels (default "frame k")
     title : figure title
+    y_down : the vertical coordinate points down (image keypoints): drawn downwards
 
     Returns
     -------
@@ -226,12 +260,11 @@ def plot_skeleton_frames(
     names = list(frames)
     colours = _colours(names)
     h, v = _view_axes(up_axis)
+    d = np.asarray(frames[names[0]]).shape[-1]
     allpts = np.concatenate(
-        [np.asarray(frames[n])[list(frame_indices)].reshape(-1, 3) for n in names]
+        [np.asarray(frames[n])[list(frame_indices)].reshape(-1, d) for n in names]
     )
-    finite = allpts[np.all(np.isfinite(allpts), axis=1)]
-    lo = finite.min(axis=0) - 0.1 if finite.size else np.zeros(3)
-    hi = finite.max(axis=0) + 0.1 if finite.size else np.ones(3)
+    lo, hi = _view_box(allpts, 0.0, 0.06)
     nrow = len(frame_indices)
     fig, axes = plt.subplots(
         nrow, len(names), figsize=(1.5 * len(names) + 0.6, 2.4 * nrow), squeeze=False
@@ -245,11 +278,7 @@ def plot_skeleton_frames(
                 if par >= 0:
                     ax.plot([p[par, h], p[j, h]], [p[par, v], p[j, v]], color=colours[name])
             ax.plot(p[:, h], p[:, v], ".", color=colours[name], ms=3)
-            ax.set_xlim(lo[h], hi[h])
-            ax.set_ylim(lo[v], hi[v])
-            ax.set_aspect("equal")
-            ax.set_xticks([])
-            ax.set_yticks([])
+            _frame_axes(ax, lo, hi, h, v, y_down)
             if r == 0:
                 ax.set_title(name, fontsize=9)
             if c == 0:
@@ -258,6 +287,18 @@ def plot_skeleton_frames(
         fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+#: GIF frames per second a browser plays at most: it stores delays in 1/100 s and plays
+#: a delay under 2/100 s (more than 50 frames a second) at 1/10 s instead
+GIF_MAX_FPS = 50.0
+
+
+def gif_playback_fps(fps: float) -> float:
+    """Frames per second a GIF of ``fps`` frames a second is written with: ``fps`` itself,
+    between 1 and :data:`GIF_MAX_FPS` (a faster recording plays slowed down, every frame
+    shown, instead of ten times too slowly)."""
+    return float(min(max(1.0, fps), GIF_MAX_FPS))
 
 
 def animate_skeletons(
@@ -270,16 +311,20 @@ def animate_skeletons(
     step: int = 2,
     max_frames: int = 150,
     window: tuple[int, int] | None = None,
+    y_down: bool = False,
 ) -> Path:
     """Write an animated GIF with the skeletons of several methods side by side.
 
     Parameters
     ----------
-    frames : mapping name -> (T, J, 3) positions (same T)
+    frames : mapping name -> (T, J, D) positions (same T), D = 3 or 2; the joints are
+        drawn as dots and the bones as lines (a marker set without bones shows its dots)
     parents : (J,) parent index per joint, -1 for the root
     path : output ``.gif`` path
-    fps : frame rate of the input; the GIF plays at ``fps / step``
+    fps : frame rate of the input; the GIF plays at ``fps / step``, at most
+        :data:`GIF_MAX_FPS` (:func:`gif_playback_fps`)
     up_axis : coordinate drawn vertically
+    y_down : the vertical coordinate points down (image keypoints): drawn downwards
     step : draw every ``step``-th frame
     max_frames : at most this many GIF frames (the step grows for long recordings)
     window : frames ``(start, stop)`` to draw, every one of them (full rate: a one-frame
@@ -305,20 +350,16 @@ def animate_skeletons(
     h, v = _view_axes(up_axis)
     # the frames drawn set the view, a few wild samples do not (a spike leaves the box
     # for a frame instead of shrinking every skeleton to a speck)
-    allpts = np.concatenate([a[idx].reshape(-1, 3) for a in arrays])
-    finite = allpts[np.all(np.isfinite(allpts), axis=1)]
-    lo = np.percentile(finite, 0.5, axis=0) - 0.15 if finite.size else np.zeros(3)
-    hi = np.percentile(finite, 99.5, axis=0) + 0.15 if finite.size else np.ones(3)
+    d = arrays[0].shape[-1]
+    allpts = np.concatenate([a[idx].reshape(-1, d) for a in arrays])
+    lo, hi = _view_box(allpts, 0.5, 0.09)
     fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 3.2), squeeze=False)
     lines = []
     for ax, name in zip(axes[0], names):
-        ax.set_xlim(lo[h], hi[h])
-        ax.set_ylim(lo[v], hi[v])
-        ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
+        _frame_axes(ax, lo, hi, h, v, y_down)
         ax.set_title(name, fontsize=9)
         segs = [ax.plot([], [], color=colours[name])[0] for par in parents if par >= 0]
+        segs.append(ax.plot([], [], ".", color=colours[name], ms=3)[0])  # the joints
         lines.append(segs)
     label = fig.text(0.01, 0.01, "", fontsize=8)
     bones = [(j, par) for j, par in enumerate(parents) if par >= 0]
@@ -328,12 +369,13 @@ def animate_skeletons(
             p = a[t]
             for seg, (j, par) in zip(segs, bones):
                 seg.set_data([p[par, h], p[j, h]], [p[par, v], p[j, v]])
+            segs[-1].set_data(p[:, h], p[:, v])
         label.set_text(f"t = {t / fps:5.2f} s   frame {t}")
         return [s for segs in lines for s in segs]
 
     anim = FuncAnimation(fig, draw, frames=idx, blit=False)
     path = Path(path)
-    anim.save(path, writer=PillowWriter(fps=max(1.0, fps / step)))
+    anim.save(path, writer=PillowWriter(fps=gif_playback_fps(fps / step)))
     plt.close(fig)
     return path
 

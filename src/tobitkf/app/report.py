@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import html
 import tempfile
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,10 @@ from typing import Any
 import numpy as np
 
 GLITCH_THRESHOLD_M = 0.10
+
+#: the glitch threshold of a track without a length unit (pixels, unknown): this share of
+#: the body's height in the image (10 cm on a person 1.7 m tall)
+GLITCH_SHARE_OF_HEIGHT = GLITCH_THRESHOLD_M / 1.7
 
 #: methods drawn in the coordinate traces by default: the paper's filter, the best
 #: published offline smoother, and ours (the tables always list every method)
@@ -70,15 +75,37 @@ def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITC
 
     Parameters
     ----------
-    raw, reference : (T, J, 3)
+    raw, reference : (T, J, D), D = 3 or 2 (image keypoints), in the same units
+    threshold : in those units
 
     Returns
     -------
     (T, J) bool
     """
-    from tobitkf.evaluation.metrics import joint_errors
+    err = np.linalg.norm(np.asarray(raw, float) - np.asarray(reference, float), axis=-1)
+    return np.nan_to_num(err, nan=0.0) > threshold
 
-    return np.nan_to_num(joint_errors(raw, reference), nan=0.0) > threshold
+
+def glitch_threshold(track: Any) -> tuple[float, str]:
+    """The glitch threshold in ``track``'s units, and how the page says it.
+
+    10 cm in a length unit (``0.1`` in metres, ``100`` in millimetres); for pixels or
+    unknown units, :data:`GLITCH_SHARE_OF_HEIGHT` of the body's median height in the
+    recording (the extent of its joints along the up axis)."""
+    scale = track.metres_per_unit
+    if scale is not None:
+        return GLITCH_THRESHOLD_M / scale, f"{100 * GLITCH_THRESHOLD_M:.0f} cm"
+    pos = np.asarray(track.positions, dtype=float)
+    up = int(getattr(track.topology, "up_axis", 1)) if pos.shape[-1] == 3 else 1
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no joint at all
+        heights = np.nanmax(pos[..., up], axis=1) - np.nanmin(pos[..., up], axis=1)
+        height = float(np.nanmedian(heights)) if np.isfinite(heights).any() else 0.0
+    threshold = GLITCH_SHARE_OF_HEIGHT * height if height > 0 else 1.0
+    unit = track.units or "units"
+    return threshold, (
+        f"{threshold:.3g} {unit} ({100 * GLITCH_SHARE_OF_HEIGHT:.0f} % of the body's height)"
+    )
 
 
 def pick_joints(mask: np.ndarray, raw: np.ndarray, n: int = 3) -> list[int]:
@@ -130,17 +157,24 @@ def make_figures(
 
     raw = np.asarray(inp.raw.positions, dtype=float)
     names = list(inp.methods)
+    # without truth, the raw track is held against the default smoother, which rejects
+    # glitches (a plain Kalman filter follows a sustained one and lags a fast movement)
+    ref_name = BAND_METHOD if BAND_METHOD in names else names[0] if names else ""
     reference = (
         inp.truth
         if inp.truth is not None
-        else (np.asarray(inp.methods[names[0]].positions) if names else raw)
+        else (np.asarray(inp.methods[ref_name].positions) if names else raw)
     )
-    mask = glitch_mask(raw, reference)
+    threshold, threshold_text = glitch_threshold(inp.raw)
+    mask = glitch_mask(raw, reference, threshold)
     times = np.asarray(inp.raw.times(), dtype=float)
     figures: dict[str, bytes] = dict(inp.figures)
     joint_names = list(inp.raw.joint_names)
-    against = "the truth" if inp.truth is not None else f"the {names[0]} output" if names else ""
-    shade_label = f"raw > {100 * GLITCH_THRESHOLD_M:.0f} cm from {against}"
+    against = "the truth" if inp.truth is not None else f"the {ref_name} output" if names else ""
+    shade_label = f"raw > {threshold_text.split(' (')[0]} from {against}"
+    image = raw.shape[-1] == 2  # image keypoints: pixels, y pointing down
+    unit = inp.raw.units or "units"
+    axes_text = "x and y (pointing down, as in the image)" if image else "x, y and z"
     for j in pick_joints(mask, raw, n_joints):
         series: dict[str, np.ndarray] = {"raw": raw[:, j]}
         for name in [n for n in inp.traces if n in inp.methods] or names:
@@ -149,13 +183,16 @@ def make_figures(
             series["truth"] = inp.truth[:, j]
         std = getattr(inp.methods.get(BAND_METHOD), "std", None) if BAND_METHOD in series else None
         bands = {BAND_METHOD: np.asarray(std, float)[:, j]} if std is not None else {}
+        shade = plots.episodes(mask[:, j])
         fig = plots.plot_joint_traces(
             times,
             series,
             title=f"{joint_names[j]}",
-            shade=plots.episodes(mask[:, j]),
+            shade=shade,
+            unit=unit,
             shade_label=shade_label,
             bands=bands,
+            y_down=image,
         )
         name = f"traces_{joint_names[j]}.png"
         figures[name] = plots.figure_to_png(fig)
@@ -167,17 +204,40 @@ def make_figures(
             if bands
             else ""
         )
-        captions[name] = (
-            f"{joint_names[j]}: x, y and z over time, raw track (grey dots) against "
-            f"{', '.join(n for n in series if n != 'raw')}.{band_text} Shaded red: frames "
-            f"where the raw track is more than {100 * GLITCH_THRESHOLD_M:.0f} cm from "
+        shade_text = (
+            f" Shaded red: frames where the raw track is more than {threshold_text} from "
             f"{against}. {joint_names[j]} is one of the {n_joints} joints with the most such "
             "frames."
+            if shade
+            else f" No frame of {joint_names[j]} is more than {threshold_text} from "
+            f"{against} (nothing shaded); it is one of the {n_joints} joints with the "
+            "largest one-frame jumps."
+        )
+        captions[name] = (
+            f"{joint_names[j]}: {axes_text} over time, raw track (grey dots) against "
+            f"{', '.join(n for n in series if n != 'raw')}.{band_text}{shade_text}"
+            if len(series) > 1
+            else f"{joint_names[j]}: {axes_text} over time, the raw track alone (no method "
+            f"or truth to compare it with); one of the {n_joints} joints with the largest "
+            "one-frame jumps."
         )
 
-    # skeletons before, during and after the worst glitch
+    # skeletons before, during and after the worst glitch (the raw track alone: the
+    # sample furthest from the mean of its two neighbours, the top of a one-frame spike)
     err = np.linalg.norm(raw - reference, axis=-1)
+    furthest = f"where the raw track is furthest from {against}"
+    if not against and raw.shape[0] > 2:
+        err = np.zeros(raw.shape[:2])
+        err[1:-1] = np.linalg.norm(raw[1:-1] - 0.5 * (raw[:-2] + raw[2:]), axis=-1)
+        furthest = "where a raw sample is furthest from its neighbouring frames"
     worst = int(np.nanargmax(np.nan_to_num(err, nan=-1.0).max(axis=1))) if raw.size else 0
+    # a recording without glitches is not said to have a worst one
+    around = (
+        f"the worst glitch at frame {worst}"
+        if mask.any()
+        else f"frame {worst}, where the raw track is furthest from {against} (no glitch: "
+        f"never more than {threshold_text})"
+    )
     T = raw.shape[0]
     cols = sorted({max(0, worst - 10), worst, min(T - 1, worst + 10)})
     frames: dict[str, np.ndarray] = {"raw": raw}
@@ -193,12 +253,25 @@ def make_figures(
         parents,
         up_axis=up,
         frame_labels=[f"frame {c}" + (" (worst)" if c == worst else "") for c in cols],
-        title="skeletons around the worst glitch",
+        title="skeletons around the worst glitch"
+        if mask.any()
+        else f"skeletons where raw is furthest from {against}"
+        if against
+        else "skeletons around the raw track's largest spike",
+        y_down=image,
     )
     figures["skeletons_worst_glitch.png"] = plots.figure_to_png(fig)
+    # the recording's own axes, not "from the front": Kinect camera space has x to the
+    # sensor's left, so a person facing it is drawn as in a mirror
+    h, v = (plots.AXIS_NAMES[k] for k in plots._view_axes(up))
+    view = (
+        "as in the image"
+        if image
+        else f"in the recording's {h}-{v} plane ({h} to the right, {v} up)"
+    )
     captions["skeletons_worst_glitch.png"] = (
-        f"Skeletons seen from the front at frames {', '.join(map(str, cols))}: around frame "
-        f"{worst}, where the raw track is furthest from {against}; one column per method."
+        f"Skeletons {view} at frames {', '.join(map(str, cols))}: around frame "
+        f"{worst}, {furthest}; one column per method."
     )
 
     if gif and names:
@@ -212,12 +285,25 @@ def make_figures(
         fps = float(inp.raw.fps or 30.0)
         with tempfile.TemporaryDirectory() as tmp:
             path = plots.animate_skeletons(
-                anim, parents, Path(tmp) / "anim.gif", fps=fps, up_axis=up, window=(start, stop)
+                anim,
+                parents,
+                Path(tmp) / "anim.gif",
+                fps=fps,
+                up_axis=up,
+                window=(start, stop),
+                y_down=image,
             )
             figures["animation.gif"] = path.read_bytes()
+        slowed = fps / plots.gif_playback_fps(fps)
+        speed = (
+            "real time"
+            if slowed < 1.05
+            else f"slowed down {slowed:.1f} times: a GIF plays at most "
+            f"{plots.GIF_MAX_FPS:.0f} frames a second"
+        )
         captions["animation.gif"] = (
             f"Animation of frames {start} to {stop - 1} ({(stop - start) / fps:.1f} s, every "
-            f"frame, real time) around the worst glitch at frame {worst}: "
+            f"frame, {speed}) around {around}: "
             f"{', '.join(anim)} side by side."
         )
     return figures
@@ -226,6 +312,8 @@ def make_figures(
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1300px;margin:2em auto;padding:0 1em;
 color:#222}
+h1,h2{overflow-wrap:anywhere}
+figure{margin:1em 0}
 .table-scroll{overflow-x:auto;max-width:100%;margin:0.5em 0 1em}
 table{border-collapse:collapse}
 th{vertical-align:bottom}
@@ -233,6 +321,7 @@ th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;font-size:0.9em}
 th:first-child,td:first-child{text-align:left}
 th{background:#f3f3f3} img{max-width:100%;border:1px solid #eee;margin:0.3em 0}
 .note{color:#555;font-size:0.9em}
+.warning{border-left:4px solid #c60;background:#fff4e5;padding:0.4em 0.8em}
 """
 
 
@@ -248,11 +337,13 @@ def render_html(
 
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
         f"<title>{html.escape(inp.title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>{html.escape(inp.title)}</h1>",
     ]
-    for note in inp.notes:
-        parts.append(f"<p>{html.escape(note)}</p>")
+    for note in inp.notes:  # a warning (a doubtful time fit) stands out from the text
+        css = " class='warning'" if note.startswith("Warning:") else ""
+        parts.append(f"<p{css}>{html.escape(note)}</p>")
     for spec in inp.tables:
         parts.append(_table_html(spec))
     parts.append("<h2>Figures</h2>")
@@ -339,6 +430,67 @@ def _display_row(row: Mapping[str, Any], output: Any = None) -> dict[str, Any]:
     return out
 
 
+def no_truth_rows(table: Any) -> list[dict[str, Any]]:
+    """The rows of a :class:`~tobitkf.evaluation.evaluate.NoTruthTable` as the report
+    shows them: M in 1e-3 m² and jumps in cm when the track has a length unit, else in
+    its own units (pixels)."""
+    metric = table.units == "m"
+    unit = table.units or "units"
+    return [
+        {
+            "method": r["method"],
+            ("M (1e-3 m²)" if metric else f"M ({unit}²)"): (1e3 if metric else 1) * r["M"],
+            f"largest jump ({'cm' if metric else unit})": (100 if metric else 1) * r["max_jump_m"],
+            "at": f"{r['jumps'][0]['joint']} frame {r['jumps'][0]['frame']}" if r["jumps"] else "-",
+        }
+        for r in table.rows
+    ]
+
+
+def summary_rows(table: Any) -> list[dict[str, Any]]:
+    """A few columns per method for a narrow terminal (the page has every column): RMSE,
+    max and the 95 % ball against ground truth, else :func:`no_truth_rows`."""
+    if not hasattr(table, "score"):
+        return no_truth_rows(table)
+    keys = {"method": "method", "RMSE": "RMSE (cm)", "max": "max (cm)"}
+    keys["in 95% ball (%)"] = "in 95% ball (%)"
+    return [{v: _display_row(r).get(k) for k, v in keys.items()} for r in table.rows()]
+
+
+def _source_name(seq: Any) -> str:
+    """The file name a sequence was read from (not its folders: the page may be mailed)."""
+    source = (getattr(seq, "metadata", None) or {}).get("source")
+    return Path(str(source)).name if source else "recording"
+
+
+def _title(track: Any, mocap: Any = None) -> str:
+    # a file of several bodies: which one the page shows
+    body = f" (body {track.body_id})" if getattr(track, "body_id", None) is not None else ""
+    against = f" against {_source_name(mocap)}" if mocap is not None else ""
+    return f"tobitkf report: {_source_name(track)}{body}{against}"
+
+
+def methods_for_units(specs: Sequence[Any], track: Any) -> tuple[list[Any], list[str]]:
+    """The method specs that run on ``track`` with their default parameters, and the names
+    left out: those whose defaults are lengths in metres (``atkf``'s half-widths) cannot
+    smooth pixels or unknown units (``tobitkf report`` without ``--methods``)."""
+    from tobitkf.smoothing.registry import methods
+
+    registered = methods()
+    units = "m" if track.metres_per_unit is not None else track.units
+    kept, left_out = [], []
+    for spec in specs:
+        method = registered.get(spec.removesuffix("+rts")) if isinstance(spec, str) else None
+        try:
+            if method is not None and method.check_data is not None:
+                method.check_data(dict(method.defaults), track.n_dims, units)
+        except ValueError:
+            left_out.append(spec)
+            continue
+        kept.append(spec)
+    return kept, left_out
+
+
 def track_report(
     track: Any,
     path: str | Path,
@@ -350,6 +502,7 @@ def track_report(
     title: str | None = None,
     gif: bool = True,
     notes: Sequence[str] = (),
+    on_drawing: Any = None,
 ) -> tuple[Path, Any]:
     """Evaluate methods on ``track`` and write the HTML report (``tobitkf report``).
 
@@ -363,6 +516,8 @@ def track_report(
     methods : method specs for :func:`~tobitkf.evaluation.evaluate.evaluate_methods`
     pairs : pairing table or CSV path for ``mocap``
     title, gif, notes : page title, whether to embed the animation, extra paragraphs
+    on_drawing : optional ``on_drawing()``, called when the methods have run and the
+        figures are drawn (the command line's progress)
 
     Returns
     -------
@@ -412,21 +567,11 @@ def track_report(
             )
     else:
         table = evaluate_without_truth(track, methods, outputs=outputs)
-        rows = [
-            {
-                "method": r["method"],
-                "M (1e-3 m²)": 1e3 * r["M"],
-                "largest jump (cm)": 100 * r["max_jump_m"],
-                "at": f"{r['jumps'][0]['joint']} frame {r['jumps'][0]['frame']}"
-                if r["jumps"]
-                else "-",
-            }
-            for r in table.rows
-        ]
+        rows = no_truth_rows(table)
         tables = [_table_from_rows("Smoothness M (2020 paper eq. 41) and largest jumps", rows)]
     smoothed = {k: v for k, v in outputs.items() if k != "raw" and hasattr(v, "positions")}
     inp = ReportInput(
-        title=title or f"tobitkf report: {track.metadata.get('source', 'recording')}",
+        title=title or _title(track, mocap),
         raw=track,
         methods=smoothed,
         truth=truth_positions,
@@ -435,4 +580,6 @@ def track_report(
         animate=[m for m in ("atkf", "robust") if m in smoothed],
         traces=[m for m in FOCUS_METHODS if m in smoothed],
     )
+    if on_drawing is not None:
+        on_drawing()
     return write_report(inp, path, gif=gif), table

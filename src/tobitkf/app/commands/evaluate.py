@@ -231,7 +231,7 @@ def _scaled(value: Any, factor: float) -> Any:
 @_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
 def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.app.report import track_report
+    from tobitkf.app.report import methods_for_units, summary_rows, track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -239,10 +239,29 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     _writable_file(output, "the report")  # before seconds of evaluating and drawing
     raw = _load_one(track, "track", input_format)
     mocap = _load_one(truth, "truth", truth_format) if truth else None
-    with console.status("evaluating and drawing..."):
+    notes = []
+    if not methods:  # the defaults, less those that cannot smooth this track's units
+        specs, left_out = methods_for_units(specs, raw)
+        if left_out:
+            notes.append(
+                f"Left out: {', '.join(left_out)} (default parameters in metres; this "
+                f"recording is in {raw.units or 'unknown units'}). To include one, name "
+                "it in --methods with half-widths in the recording's units, e.g. atkf[c=20]."
+            )
+            err_console.print(f"{escape(track)}: {escape(notes[-1])}")
+    # one step per method, then the figures (the slowest part with the animation)
+    with _progress() as progress:
+        task = progress.add_task(Path(track).name, total=len(specs) + 1, now="")
         try:
             path, table = track_report(
-                raw, output, mocap=mocap, methods=specs, pairs=pairs, gif=not no_gif
+                raw,
+                output,
+                mocap=mocap,
+                methods=_ticking(specs, progress, task),
+                pairs=pairs,
+                gif=not no_gif,
+                notes=notes,
+                on_drawing=lambda: progress.update(task, now="drawing figures"),
             )
         except ImportError as exc:
             _fail(str(exc))
@@ -250,7 +269,16 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
             _fail(f"{track}: {exc}")
     for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
         err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
-    console.print(table.to_text(), highlight=False, soft_wrap=True)
+    text = table.to_text()
+    # a pipe or a log file gets the whole table; a narrow terminal a few columns, whole
+    # words, instead of lines wrapped into each other
+    if not console.is_terminal or max(map(len, text.splitlines()), default=0) <= console.width:
+        console.print(text, highlight=False, soft_wrap=True)
+    else:
+        rows = summary_rows(table)
+        columns = list(rows[0])
+        _print_table("summary (every column is in the report)", columns,
+                     [list(r.values()) for r in rows])  # fmt: skip
     console.print(f"report written to {Path(path).resolve()}")
 
 
