@@ -641,3 +641,21 @@ def test_piped_tables_have_no_trailing_spaces(tmp_path):
     ).stdout  # fmt: skip
     assert "tobitkf smooth" in out and "│ a.npy" in out
     assert not [line for line in out.splitlines() if line.endswith(" ")]
+
+
+def test_evaluate_on_pixels_leaves_out_the_methods_in_metres(tmp_path):
+    """Without --methods, evaluate on image keypoints ran atkf with half-widths in metres
+    and stopped; it leaves atkf and atkf2016 out and says so, as report does."""
+    import numpy as np
+
+    import tobitkf as tk
+
+    rng = np.random.default_rng(0)
+    kp = rng.uniform(200, 600, (17, 2))[None] + np.cumsum(rng.normal(0, 1, (60, 17, 2)), 0)
+    seq = tk.SkeletonSequence(kp, tk.get_topology("coco17"), fps=30.0, units="px")
+    tk.save([seq], tmp_path / "px.csv")
+    run = subprocess.run([sys.executable, "-m", "tobitkf", "evaluate", str(tmp_path / "px.csv")],
+                         capture_output=True, text=True, check=False)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "Left out: atkf, atkf2016" in " ".join(run.stderr.split())
+    assert "robust_online" in run.stdout and " atkf " not in run.stdout

@@ -42,6 +42,23 @@ def _method_list(text: str | None) -> list[str] | None:
     return names
 
 
+def _for_units(specs: list[Any], track: Any, path: str) -> tuple[list[Any], str]:
+    """The default methods that can smooth ``track``'s units, and the note saying which
+    were left out (printed; empty when none): ``atkf``'s default half-widths are metres."""
+    from tobitkf.app.report import methods_for_units
+
+    kept, left_out = methods_for_units(specs, track)
+    if not left_out:
+        return kept, ""
+    note = (
+        f"Left out: {', '.join(left_out)} (default parameters in metres; this "
+        f"recording is in {track.units or 'unknown units'}). To include one, name "
+        "it in --methods with half-widths in the recording's units, e.g. atkf[c=20]."
+    )
+    err_console.print(f"{escape(path)}: {escape(note)}")
+    return kept, note
+
+
 @app.command()
 @click.argument("tracks", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option(
@@ -150,8 +167,12 @@ def evaluate(
         task = progress.add_task("evaluating", total=len(tracks) * len(method_specs), now="")
         for i, path in enumerate(tracks):
             progress.update(task, description=f"{Path(path).name} ({i + 1}/{len(tracks)})")
-            specs = _ticking(method_specs, progress, task)
             track = _load_one(path, "track", input_format)
+            run_specs = method_specs
+            if not methods:  # the defaults, less those that cannot smooth this track
+                run_specs, _note = _for_units(method_specs, track, path)
+                progress.advance(task, len(method_specs) - len(run_specs))
+            specs = _ticking(run_specs, progress, task)
             try:
                 if truths:
                     mocap = _load_one(truths[i], "truth", truth_format)
@@ -231,7 +252,7 @@ def _scaled(value: Any, factor: float) -> Any:
 @_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
 def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.app.report import methods_for_units, summary_rows, track_report
+    from tobitkf.app.report import summary_rows, track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -241,14 +262,9 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     mocap = _load_one(truth, "truth", truth_format) if truth else None
     notes = []
     if not methods:  # the defaults, less those that cannot smooth this track's units
-        specs, left_out = methods_for_units(specs, raw)
+        specs, left_out = _for_units(specs, raw, track)
         if left_out:
-            notes.append(
-                f"Left out: {', '.join(left_out)} (default parameters in metres; this "
-                f"recording is in {raw.units or 'unknown units'}). To include one, name "
-                "it in --methods with half-widths in the recording's units, e.g. atkf[c=20]."
-            )
-            err_console.print(f"{escape(track)}: {escape(notes[-1])}")
+            notes.append(left_out)
     # one step per method, then the figures (the slowest part with the animation)
     with _progress() as progress:
         task = progress.add_task(Path(track).name, total=len(specs) + 1, now="")
