@@ -4,7 +4,7 @@ Pipeline (:func:`prepare_truth`, then :func:`evaluate_methods`):
 
 1. **Pairs** — each track joint gets a mocap point or a mean of points
    (:mod:`tobitkf.evaluation.pairs`; KERAAL and UI-PRMD tables built in, detected from the
-   mocap's point names).
+   mocap's point names; else joints of the same name).
 2. **Time** — the mocap clock is fitted to the track's from correlated inter-point
    distances (:func:`~tobitkf.evaluation.alignment.fit_time_alignment`): the offset only
    (KERAAL: verified ≈ 0, then held at the documented common time zero) or offset and rate

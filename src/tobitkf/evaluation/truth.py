@@ -27,6 +27,7 @@ from tobitkf.evaluation.alignment import (
 from tobitkf.evaluation.pairs import (
     KERAAL_PAIRS,
     UIPRMD_PAIRS,
+    Pair,
     PairingTable,
     ResolvedPairs,
     builtin_pairs,
@@ -112,7 +113,10 @@ def _quaternions(mocap: Any) -> tuple[NDArray | None, str | None]:
 
 
 def detect_pairs(track_names: Sequence[str], mocap_names: Sequence[str]) -> PairingTable:
-    """The built-in table whose names match best (KERAAL or UI-PRMD)."""
+    """The built-in table whose names match best (KERAAL or UI-PRMD); else, when the two
+    name at least four of the same joints (a truth in the track's own skeleton: a
+    simulation, a 3-D lifter's joints against mocap reduced to them), each such joint
+    with its namesake."""
     best, score = None, 0
     mset = {normalise_name(n) for n in mocap_names}
     tset = {normalise_name(n) for n in track_names}
@@ -124,12 +128,19 @@ def detect_pairs(track_names: Sequence[str], mocap_names: Sequence[str]) -> Pair
         )
         if s > score:
             best, score = table, s
-    if best is None or score < 4:
-        raise ValueError(
-            "cannot pair the track with the mocap automatically (neither the KERAAL nor the "
-            "UI-PRMD names match); give a pairing table (CSV: track_joint,mocap_point)"
-        )
-    return best
+    if best is not None and score >= 4:
+        return best
+    by_key = {normalise_name(n): n for n in mocap_names}
+    same = [
+        Pair(t, (by_key[normalise_name(t)],)) for t in track_names if normalise_name(t) in by_key
+    ]
+    if len(same) >= 4:
+        return PairingTable("same names", tuple(same))
+    raise ValueError(
+        "cannot pair the track with the mocap automatically (neither the KERAAL nor the "
+        "UI-PRMD names match, nor four joint names of their own); give a pairing table "
+        "with --pairs (CSV: track_joint,mocap_point)"
+    )
 
 
 def _check_metres(name: str, positions: NDArray) -> None:
