@@ -255,3 +255,20 @@ def test_a_skeleton_for_a_file_that_names_none(tmp_path):
     assert read_mmpose(coco)[0].topology.name == "coco17"  # 17 in 2-D: COCO's by default
     (s,) = read_mmpose(coco, topology="h36m17")  # a 2-D Human3.6M model: as given
     assert s.topology.name == "h36m17"
+
+
+def test_the_batch_topology_overrides_a_guess_by_the_count(tmp_path):
+    """17 keypoints in 2-D are taken as COCO's when the file says nothing; a data set of a
+    2-D Human3.6M model says otherwise with --topology (smooth_files(topology=))."""
+    import tobitkf as tk
+
+    src = tmp_path / "in"
+    src.mkdir()
+    kp = _person(20, 400, 16)
+    _write(src / "h36m2d.json", [{"frame_id": t, "instances": [_instance(kp[t], np.ones(17))]}
+                                 for t in range(20)])  # fmt: skip
+    (guess,) = read_mmpose(src / "h36m2d.json")
+    assert guess.topology.name == "coco17" and guess.metadata["topology_guessed"]
+    (res,) = tk.smooth_files(src, tmp_path / "out", topology="h36m17", fps=30)
+    assert res.ok
+    assert json.loads((tmp_path / "out" / "h36m2d.robust.json").read_text())["topology"] == "h36m17"

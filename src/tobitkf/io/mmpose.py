@@ -219,6 +219,7 @@ def read_mmpose(
         bodies = list(range(len(tracks)))
     check_output_size(p, len(tracks) * T * n_joints * (dims + 1) * 8, size, f"{len(tracks)} people")
     topo = _topology(p, meta, n_joints, dims, topology)
+    guessed = topology is None and _names(p, meta, n_joints) is None and topo.name != UNNAMED
     notes = []
     if topo.name == UNNAMED:
         notes.append(
@@ -241,6 +242,8 @@ def read_mmpose(
             "person_ids": "track_id" if tracked else "associated",
             "frame_id_start": first,  # the writer numbers the frames alike
         }
+        if guessed:  # by the count alone: --topology may say otherwise
+            meta_out["topology_guessed"] = True
         if meta is not None:
             meta_out["mmpose_meta"] = meta  # written back by the writer
         if clipped:
