@@ -160,3 +160,21 @@ def test_a_short_pause_changes_nothing():
     a = tk.smooth(seq, method="tkfc").positions
     b = tk.smooth(seq, method="tkfc", q=0.0025 * (1 + 1e-15)).positions  # same model
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("offline", [False, True])
+def test_a_process_noise_far_above_r_still_fills_gaps(offline):
+    """With q >= 100 r one frame's step passed the restart rule (the random walk's
+    variance above 100 R), every frame was a new start, and a joint missing for a frame
+    was left NaN although the filters predict through gaps. A pause is at least 1 s."""
+    seq = _still_feet(-1.46, T=60, seed=5)
+    pos = seq.positions.copy()
+    pos[20:23, 3] = np.nan  # one joint missing for three frames
+    gap = seq.replace(positions=pos)
+    out = tk.smooth(gap, method="kf", q=2.0, r=0.01, offline=offline).positions
+    assert np.isfinite(out[20:23, 3]).all()
+    # and it still follows the measurements (r far below q): within 2 sd of R elsewhere
+    d = np.linalg.norm(
+        np.delete(out, [20, 21, 22], axis=0) - np.delete(pos, [20, 21, 22], 0), axis=-1
+    )
+    assert np.nanmax(d) < 2 * np.sqrt(3 * 0.01)

@@ -18,7 +18,8 @@ reappears after missing frames widen with the time elapsed since its last measur
 back at ``gain · c`` per frame.
 
 Pauses. A time step so long that the random walk's variance would exceed 100 R (13.3 s
-with the paper's Q and R) is a new start: every joint restarts at its next measurement
+with the paper's Q and R), and at least 1 s, is a new start: every joint restarts at its
+next measurement
 (x0 = that measurement, P0 = R) and, offline, nothing is smoothed across the pause; live,
 the stepper restarts alike. (A per-joint gap of missing frames is still predicted
 through.)
@@ -222,12 +223,15 @@ def _vec3(v: Any) -> Array:
 #: Q and R): the Tobit updates are linear in y, and extrapolated from a prior wider than
 #: the device they threw a joint 79 m away after a 10^5 s pause (issue 14 point 5)
 RESTART_VARIANCE_RATIO = 100.0
+#: ... but never a pause shorter than this (s): with Q >= 100 R one frame's step passed
+#: the variance rule, every frame restarted, and a joint's gaps were no longer filled
+MIN_PAUSE_SECONDS = 1.0
 
 
 def pause_seconds(params: Mapping[str, Any]) -> float:
     """The pause after which :func:`run_across_pauses` restarts the filters."""
     ratio = np.min(np.asarray(params["r"], dtype=float) / np.asarray(params["q"], dtype=float))
-    return float(RESTART_VARIANCE_RATIO * ratio * paper.REFERENCE_DT)
+    return max(float(RESTART_VARIANCE_RATIO * ratio * paper.REFERENCE_DT), MIN_PAUSE_SECONDS)
 
 
 def run_across_pauses(
