@@ -285,3 +285,42 @@ def test_the_cli_topology_option(tmp_path):
          str(tmp_path / "o"), "--topology", "nope"], capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert bad.returncode == 2 and "coco17" in bad.stderr  # the known names listed
+
+
+def test_evaluate_and_report_name_what_the_array_does_not(tmp_path):
+    """`evaluate` and `report` take --topology and --fps as `smooth` does: an array so
+    named scores exactly as the same recording saved with its skeleton and rate."""
+    from click.testing import CliRunner
+
+    import tobitkf as tk
+    from tobitkf.app.commands import app
+    from tobitkf.core.jsonable import dumps
+    from tobitkf.evaluation.evaluate import evaluate_paths
+
+    arr = _walk(T=80)
+    np.save(tmp_path / "a.npy", arr)
+    named = tk.SkeletonSequence(arr, tk.get_topology("h36m17"), fps=50.0, units=None)
+    tk.save([named], tmp_path / "named.npz")
+
+    def scores(*args):
+        res = CliRunner().invoke(app, ["evaluate", *args, "--methods", "raw,robust", "--json"])
+        assert res.exit_code == 0, res.output
+        return next(iter(json.loads(res.stdout).values()))
+
+    given = scores(str(tmp_path / "a.npy"), "--topology", "h36m", "--fps", "50")
+    assert given == scores(str(tmp_path / "named.npz"))
+    _, table = evaluate_paths(tmp_path / "a.npy", None, ["raw", "robust"], topology="h36m", fps=50)
+    assert json.loads(dumps(table.to_dict())) == given  # the library, as the CLI
+    assert given != scores(str(tmp_path / "a.npy"), "--fps", "50")  # bones gate the robust
+    assert given != scores(str(tmp_path / "a.npy"), "--topology", "h36m")  # 30 fps
+    bad = CliRunner().invoke(app, ["evaluate", str(tmp_path / "a.npy"), "--topology", "kinect"])
+    assert bad.exit_code == 1 and "17 keypoints, --topology kinect_v2 25" in bad.output
+
+    out = tmp_path / "r.html"
+    run = ["report", str(tmp_path / "a.npy"), "-o", str(out), "--no-gif", "--methods", "raw"]
+    res = CliRunner().invoke(app, [*run, "--topology", "h36m17"])
+    assert res.exit_code == 0, res.output
+    joints = set(tk.get_topology("h36m17").joints)
+    assert any(f" {j} frame " in res.output for j in joints)  # the largest jump's joint
+    res = CliRunner().invoke(app, run)
+    assert not any(f" {j} frame " in res.output for j in joints)

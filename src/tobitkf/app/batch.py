@@ -371,51 +371,34 @@ def _percent(values: Iterable[np.ndarray]) -> float:
 def _with_rate(sequences: list[Any], fps: float | None) -> tuple[list[Any], tuple[str, ...]]:
     """The sequences with ``fps`` where they state no rate (nor timestamps), and what was
     assumed (a warning for the summary) where none was given either."""
-    bare = [s.fps is None and s.timestamps is None for s in sequences]
-    if not any(bare):
+    from tobitkf.io.unstated import states_no_rate, with_unstated
+
+    if not any(states_no_rate(s) for s in sequences):
         return sequences, ()
     if fps is not None:
-        return [s.replace(fps=fps) if b else s for s, b in zip(sequences, bare, strict=True)], ()
+        return with_unstated(sequences, fps=fps), ()
     return sequences, ("the file states no frame rate: smoothed as 30 fps (give --fps)",)
 
 
-def _names_no_skeleton(seq: Any) -> bool:
-    """The reader found no skeleton in the file (joints ``0``, ``1``, ...), or only
-    guessed one from the keypoint count (``metadata["topology_guessed"]``)."""
-    from tobitkf.skeleton.topology import UNNAMED
-
-    return seq.topology.name == UNNAMED or bool(seq.metadata.get("topology_guessed"))
-
-
 def _with_topology(sequences: list[Any], name: str | None) -> list[Any]:
-    """The sequences with topology ``name`` where the file named no skeleton (joints
-    ``0``, ``1``, ..., or one guessed by the count); a file that names its own keeps it."""
-    from tobitkf.skeleton.topology import get_topology
+    """The sequences with topology ``name`` where the file named no skeleton."""
+    from tobitkf.io.unstated import with_unstated
 
-    if name is None:
-        return sequences
-    topo = get_topology(name)
-    out = []
-    for s in sequences:
-        if _names_no_skeleton(s):
-            if s.n_joints != topo.n_joints:
-                raise ValueError(
-                    f"the file has {s.n_joints} keypoints, --topology {topo.name} {topo.n_joints}"
-                )
-            notes = [n for n in s.metadata.get("reader_warnings") or () if "0..J-1" not in n]
-            meta = {k: v for k, v in s.metadata.items() if k != "topology_guessed"}
-            s = s.replace(topology=topo, metadata={**meta, "reader_warnings": notes})
-        out.append(s)
-    return out
+    try:
+        return with_unstated(sequences, topology=name)
+    except ValueError as exc:  # the count: say which option gave the skeleton
+        raise ValueError(str(exc).replace("topology ", "--topology ", 1)) from None
 
 
 def _unused_settings(sequences: list[Any]) -> list[str]:
     """The run settings this file did not use (its own rate, its own skeleton): a re-run
     with other values of them need not redo it (:mod:`tobitkf.app.manifest`)."""
+    from tobitkf.io.unstated import names_no_skeleton, states_no_rate
+
     unused = []
-    if all(s.fps is not None or s.timestamps is not None for s in sequences):
+    if not any(states_no_rate(s) for s in sequences):
         unused.append("input_fps")
-    if not any(_names_no_skeleton(s) for s in sequences):
+    if not any(names_no_skeleton(s) for s in sequences):
         unused.append("input_topology")
     return unused
 

@@ -448,13 +448,17 @@ def evaluate_paths(
     *,
     pairs: PairingTable | str | Path | None = None,
     outputs: dict[str, Any] | None = None,
+    fps: float | None = None,
+    topology: str | None = None,
     **truth_options: Any,
 ) -> tuple[GroundTruth | None, EvaluationTable | NoTruthTable]:
     """``tobitkf evaluate TRACK [--truth MOCAP]`` as a function (for the CLI).
 
     Loads both files with :func:`tobitkf.io.load` (first body of each), then runs
     :func:`prepare_truth` and :func:`evaluate_methods`, or, without ``truth_path``,
-    :func:`evaluate_without_truth`.  ``truth_options`` go to :func:`prepare_truth`
+    :func:`evaluate_without_truth`.  ``fps`` and ``topology`` are the track's frame rate
+    and skeleton where its file states none (:func:`tobitkf.io.unstated.with_unstated`:
+    a ``.npy`` array, a keypoint table).  ``truth_options`` go to :func:`prepare_truth`
     (``offset_mode``, ``time``, ``mocap_rate``, ``fit_rate``, ``rate_range``).
 
     Returns
@@ -462,8 +466,9 @@ def evaluate_paths(
     (GroundTruth or None, EvaluationTable or NoTruthTable)
     """
     from tobitkf.io import load
+    from tobitkf.io.unstated import with_unstated
 
-    tracks = load(track_path)
+    tracks = with_unstated(load(track_path), fps=fps, topology=topology)
     if not tracks:
         raise ValueError(f"{track_path}: no skeleton in the file")
     track = tracks[0]

@@ -131,6 +131,44 @@ def _input_format_option(
     )
 
 
+def _finite(value: float | None, name: str) -> float | None:
+    if value is not None and value != value:  # NaN passes a range check
+        raise click.BadParameter(f"{name} must be a number, got nan")
+    return value
+
+
+def _topology_name(value: str | None) -> str | None:
+    """``--topology``: a known skeleton's canonical name (aliases such as h36m accepted)."""
+    if value is None:
+        return None
+    from tobitkf.skeleton.topology import get_topology
+
+    try:
+        return get_topology(value).name
+    except KeyError as exc:
+        raise click.BadParameter(str(exc.args[0]), param_hint="--topology") from None
+
+
+def _fps_option(help: str) -> Any:
+    """``--fps``: the frame rate of inputs that state none."""
+    return click.option(
+        "--fps",
+        type=click.FloatRange(min=1e-3, max=1e5),  # the readers' plausible rates (io._text)
+        callback=lambda _ctx, _param, v: _finite(v, "--fps"),
+        help=help,
+    )
+
+
+def _topology_option(help: str) -> Any:
+    """``--topology``: the skeleton of inputs that name none."""
+    return click.option(
+        "--topology",
+        metavar="NAME",
+        callback=lambda _ctx, _param, v: _topology_name(v),
+        help=help,
+    )
+
+
 def _os_reason(exc: OSError) -> str:
     if isinstance(exc, PermissionError):
         return "permission denied"
@@ -287,9 +325,19 @@ def app() -> None:
     """Tobit Kalman filtering of censored measurements, and skeleton-track smoothing."""
 
 
-def _load_one(path: str, what: str, input_format: str = "auto"):
+def _load_one(
+    path: str,
+    what: str,
+    input_format: str = "auto",
+    *,
+    fps: float | None = None,
+    topology: str | None = None,
+):
+    """The first body of ``path``, with ``--fps`` / ``--topology`` where the file states
+    no rate / names no skeleton (:func:`tobitkf.io.unstated.with_unstated`)."""
     from tobitkf.app.batch import readable_problem
     from tobitkf.io import load
+    from tobitkf.io.unstated import with_unstated
 
     problem = readable_problem(path)
     if problem:
@@ -298,6 +346,10 @@ def _load_one(path: str, what: str, input_format: str = "auto"):
         seqs = load(path, format=input_format)
     except (ValueError, OSError, ImportError) as exc:
         _fail(f"cannot read {what} {path}: {exc}")
+    try:
+        seqs = with_unstated(seqs, fps=fps, topology=topology)
+    except ValueError as exc:
+        _fail(f"{what} {path}: {str(exc).replace('topology ', '--topology ', 1)}")
     if not seqs:
         _fail(f"{what} {path} holds no skeleton")
     if len(seqs) > 1:

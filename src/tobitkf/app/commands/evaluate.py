@@ -10,12 +10,14 @@ from rich.markup import escape
 
 from tobitkf.app.commands._common import (
     _fail,
+    _fps_option,
     _input_format_option,
     _load_one,
     _need_matplotlib,
     _print_table,
     _progress,
     _ticking,
+    _topology_option,
     _writable_file,
     _writable_folder,
     app,
@@ -114,6 +116,14 @@ def _for_units(specs: list[Any], track: Any, path: str) -> tuple[list[Any], str]
 @_input_format_option(
     "--truth-format", dest="truth_format", help="Input format of every --truth file."
 )
+@_fps_option(
+    "Frame rate (Hz) of each TRACK that states none (keypoint tables, .npy arrays); "
+    "a file with its own rate or timestamps keeps it."
+)
+@_topology_option(
+    "Skeleton of each TRACK that names none (a .npy array's joints 0, 1, ...; MMPose "
+    "output of an unknown model), e.g. h36m17 or coco17; files naming their own keep it."
+)
 def evaluate(
     tracks,
     truths,
@@ -126,6 +136,8 @@ def evaluate(
     outdir,
     input_format,
     truth_format,
+    fps,
+    topology,
 ):
     """Score smoothing methods on TRACK against motion capture (or without it).
 
@@ -167,7 +179,7 @@ def evaluate(
         task = progress.add_task("evaluating", total=len(tracks) * len(method_specs), now="")
         for i, path in enumerate(tracks):
             progress.update(task, description=f"{Path(path).name} ({i + 1}/{len(tracks)})")
-            track = _load_one(path, "track", input_format)
+            track = _load_one(path, "track", input_format, fps=fps, topology=topology)
             run_specs = method_specs
             if not methods:  # the defaults, less those that cannot smooth this track
                 run_specs, _note = _for_units(method_specs, track, path)
@@ -250,7 +262,11 @@ def _scaled(value: Any, factor: float) -> Any:
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
 @_input_format_option("--format", help="Input format of TRACK.")
 @_input_format_option("--truth-format", dest="truth_format", help="Input format of --truth.")
-def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format):
+@_fps_option(
+    "Frame rate (Hz) of TRACK if it states none; a file with its own rate or timestamps keeps it."
+)
+@_topology_option("Skeleton of TRACK if it names none, e.g. h36m17 or coco17.")
+def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format, fps, topology):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
     from tobitkf.app.report import summary_rows, track_report
     from tobitkf.evaluation.evaluate import default_methods
@@ -258,7 +274,7 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     specs = _method_list(methods) or default_methods()
     _need_matplotlib("the report's figures")
     _writable_file(output, "the report")  # before seconds of evaluating and drawing
-    raw = _load_one(track, "track", input_format)
+    raw = _load_one(track, "track", input_format, fps=fps, topology=topology)
     mocap = _load_one(truth, "truth", truth_format) if truth else None
     notes = []
     if not methods:  # the defaults, less those that cannot smooth this track's units

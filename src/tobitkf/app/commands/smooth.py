@@ -12,6 +12,7 @@ from tobitkf.app.commands._common import (
     _check_cluster_options,
     _dask_client,
     _fail,
+    _fps_option,
     _input_format_option,
     _InputPath,
     _ListsChoices,
@@ -21,6 +22,7 @@ from tobitkf.app.commands._common import (
     _progress,
     _RegistryChoice,
     _sigterm_as_interrupt,
+    _topology_option,
     _writable_folder,
     _writable_formats,
     app,
@@ -28,18 +30,6 @@ from tobitkf.app.commands._common import (
     err_console,
 )
 from tobitkf.core.jsonable import dumps
-
-
-def _topology_name(value: str | None) -> str | None:
-    """``--topology``: a known skeleton's canonical name (aliases such as h36m accepted)."""
-    if value is None:
-        return None
-    from tobitkf.skeleton.topology import get_topology
-
-    try:
-        return get_topology(value).name
-    except KeyError as exc:
-        raise click.BadParameter(str(exc.args[0]), param_hint="--topology") from None
 
 
 # --------------------------------------------------------------------------- smooth
@@ -78,21 +68,15 @@ def _topology_name(value: str | None) -> str | None:
 @_input_format_option(
     "-F", "--input-format", help="Input format of every file read (-f is the output's)."
 )
-@click.option(
-    "--fps",
-    type=click.FloatRange(min=1e-3, max=1e5),  # the readers' plausible rates (io._text)
-    callback=lambda _ctx, _param, v: _finite(v, "--fps"),
-    help="Frame rate (Hz) of inputs that state none (pose-estimator tables, keypoint "
+@_fps_option(
+    "Frame rate (Hz) of inputs that state none (pose-estimator tables, keypoint "
     "JSON); files with their own rate or timestamps keep it. Without it such files are "
-    "smoothed as 30 fps, and the summary says so.",
+    "smoothed as 30 fps, and the summary says so."
 )
-@click.option(
-    "--topology",
-    metavar="NAME",
-    callback=lambda _ctx, _param, v: _topology_name(v),
-    help="Skeleton of inputs that name none (a .npy array's joints 0, 1, ...; MMPose "
+@_topology_option(
+    "Skeleton of inputs that name none (a .npy array's joints 0, 1, ...; MMPose "
     "output of an unknown model), e.g. h36m17 or coco17 (an unknown name lists the "
-    "others); files naming their own keep it.",
+    "others); files naming their own keep it."
 )
 @click.option(
     "--overwrite",
@@ -312,12 +296,6 @@ def smooth(
         sys.exit(130)
     if failed:
         sys.exit(1)
-
-
-def _finite(value: float | None, name: str) -> float | None:
-    if value is not None and value != value:  # NaN passes a range check
-        raise click.BadParameter(f"{name} must be a number, got nan")
-    return value
 
 
 def _shown_names(sources: list[str]) -> list[str]:
