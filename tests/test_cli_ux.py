@@ -379,11 +379,15 @@ def test_report_command_runs_on_pixels_without_the_methods_in_metres(tmp_path):
     assert "<tr><td>robust</td>" in page and "<tr><td>atkf</td>" not in page
 
 
-@pytest.mark.parametrize("units", ["m", "mm"])
-def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch, units):
+@pytest.mark.parametrize(
+    ("units", "methods"),
+    [("m", ["raw", "kf", "robust"]), ("mm", ["raw", "kf", "robust"]), ("m", ["raw", "kf"])],
+)
+def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch, units, methods):
     """Without truth the raw track is held against robust, not a filter that follows the
     glitch: the 30 frames a hand sits 40 cm off are the frames shaded, in metres or in
-    millimetres (10 cm = 100 mm, axes labelled in the track's unit)."""
+    millimetres (10 cm = 100 mm, axes labelled in the track's unit), and also when robust
+    is not among the methods shown (it is run for the shading, and the caption says so)."""
     from tobitkf.app.report import track_report
 
     pytest.importorskip("matplotlib")
@@ -396,12 +400,15 @@ def test_report_shades_a_sustained_glitch_without_truth(tmp_path, monkeypatch, u
     track_report(
         seq.replace(positions=scale * pos, units=units),
         tmp_path / "r.html",
-        methods=["raw", "kf", "robust"],
+        methods=methods,
         gif=False,
     )
     traces = {c["kwargs"]["title"]: c for c in calls if c["name"] == "plot_joint_traces"}
     assert traces["HandLeft"]["kwargs"]["shade"] == [(50, 80)]
     assert traces["HandLeft"]["fig"].axes[0].get_ylabel() == f"x [{units}]"
+    assert ("robust" in traces["HandLeft"]["args"][1]) == ("robust" in methods)  # drawn?
+    drawn = "" if "robust" in methods else " (not drawn)"
+    assert f"from the robust output{drawn}." in (tmp_path / "r.html").read_text()
 
 
 def test_report_does_not_claim_glitches_where_there_are_none(tmp_path, monkeypatch):

@@ -57,6 +57,9 @@ class ReportInput:
     figures : extra figures (name -> PNG bytes) to embed
     animate : methods drawn in the animation next to raw (default: the first method)
     traces : methods drawn in the coordinate traces (default: all; tables always show all)
+    reference : without truth, the output the raw track is held against for the glitch
+        shading (``BAND_METHOD``'s, run for this when it is not among ``methods``); None:
+        ``BAND_METHOD`` in ``methods``, else the first method
     """
 
     title: str
@@ -68,6 +71,7 @@ class ReportInput:
     figures: Mapping[str, bytes] = field(default_factory=dict)
     animate: Sequence[str] = ()  # methods shown in the GIF next to raw (default: the first)
     traces: Sequence[str] = ()  # methods drawn in the coordinate traces (default: all)
+    reference: Any = None  # without truth: the output glitches are measured against
 
 
 def glitch_mask(raw: np.ndarray, reference: np.ndarray, threshold: float = GLITCH_THRESHOLD_M):
@@ -160,17 +164,23 @@ def make_figures(
     # without truth, the raw track is held against the default smoother, which rejects
     # glitches (a plain Kalman filter follows a sustained one and lags a fast movement)
     ref_name = BAND_METHOD if BAND_METHOD in names else names[0] if names else ""
-    reference = (
-        inp.truth
-        if inp.truth is not None
-        else (np.asarray(inp.methods[ref_name].positions) if names else raw)
-    )
+    reference = np.asarray(inp.methods[ref_name].positions) if names else raw
+    if inp.reference is not None:
+        ref_name, reference = BAND_METHOD, np.asarray(inp.reference.positions)
+    if inp.truth is not None:
+        reference = inp.truth
     threshold, threshold_text = glitch_threshold(inp.raw)
     mask = glitch_mask(raw, reference, threshold)
     times = np.asarray(inp.raw.times(), dtype=float)
     figures: dict[str, bytes] = dict(inp.figures)
     joint_names = list(inp.raw.joint_names)
-    against = "the truth" if inp.truth is not None else f"the {ref_name} output" if names else ""
+    against = (
+        "the truth"
+        if inp.truth is not None
+        else f"the {ref_name} output" + (" (not drawn)" if ref_name not in names else "")
+        if names or inp.reference is not None
+        else ""
+    )
     shade_label = f"raw > {threshold_text.split(' (')[0]} from {against}"
     image = raw.shape[-1] == 2  # image keypoints: pixels, y pointing down
     unit = inp.raw.units or "units"
@@ -491,6 +501,20 @@ def methods_for_units(specs: Sequence[Any], track: Any) -> tuple[list[Any], list
     return kept, left_out
 
 
+def _band_reference(track: Any) -> Any:
+    """``BAND_METHOD``'s output of ``track``, the glitch shading's reference without truth
+    when the methods shown do not include it (a Kalman filter follows a sustained glitch,
+    so shading against it would miss the glitch); None when it cannot smooth the track."""
+    from tobitkf.smoothing.api import smooth
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return smooth(track, BAND_METHOD)
+    except (ValueError, KeyError):
+        return None
+
+
 def track_report(
     track: Any,
     path: str | Path,
@@ -570,6 +594,9 @@ def track_report(
         rows = no_truth_rows(table)
         tables = [_table_from_rows("Smoothness M (2020 paper eq. 41) and largest jumps", rows)]
     smoothed = {k: v for k, v in outputs.items() if k != "raw" and hasattr(v, "positions")}
+    reference = None
+    if truth_positions is None and smoothed and BAND_METHOD not in smoothed:
+        reference = _band_reference(track)
     inp = ReportInput(
         title=title or _title(track, mocap),
         raw=track,
@@ -579,6 +606,7 @@ def track_report(
         notes=list(notes),
         animate=[m for m in ("atkf", "robust") if m in smoothed],
         traces=[m for m in FOCUS_METHODS if m in smoothed],
+        reference=reference,
     )
     if on_drawing is not None:
         on_drawing()
