@@ -112,6 +112,29 @@ def test_animation_shows_a_marker_set_without_bones(tmp_path):
         assert near.sum() >= 3  # the markers are drawn, not an empty box
 
 
+def test_animation_keeps_white_white_and_each_methods_own_colour(tmp_path):
+    """One palette for every frame (at most GIF_COLOURS colours), holding the page's white
+    and each method's colour exactly: the small dots of a marker set are not merged into
+    another colour, and the background is not tinted."""
+    from matplotlib.colors import to_rgb
+
+    T = 12
+    pos = np.zeros((T, 3, 3))
+    pos[:, :, 0] = [0.0, 0.3, 0.6]
+    pos[:, :, 1] = np.linspace(0, 1, T)[:, None] + [0.0, 1.0, 0.5]
+    names = ("raw", "robust", "kf")
+    out = plots.animate_skeletons(dict.fromkeys(names, pos), [-1, -1, -1], tmp_path / "m.gif")
+    frames, _ = _gif_frames(out)
+    colours = np.unique(np.concatenate([f.reshape(-1, 3) for f in frames]), axis=0)
+    assert len(colours) <= plots.GIF_COLOURS
+    for rgb in frames:
+        values, counts = np.unique(rgb.reshape(-1, 3), axis=0, return_counts=True)
+        assert tuple(values[np.argmax(counts)]) == (255, 255, 255)  # the background
+        for name in names:
+            exact = np.round(255 * np.array(to_rgb(plots._colours(names)[name]))).astype(int)
+            assert np.all(rgb == exact, axis=-1).sum() >= 3, name  # its markers
+
+
 def test_animation_of_a_fast_recording_is_not_played_ten_times_too_slowly(tmp_path):
     """Browsers play a GIF delay under 20 ms as 100 ms: 120 Hz gets 20 ms frames
     (slowed down, every frame shown), 25 Hz keeps its own 40 ms."""

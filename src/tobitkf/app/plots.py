@@ -335,7 +335,6 @@ def animate_skeletons(
     pathlib.Path
     """
     plt = _pyplot()
-    from matplotlib.animation import FuncAnimation, PillowWriter
 
     names = list(frames)
     arrays = [np.asarray(frames[n], dtype=float) for n in names]
@@ -346,6 +345,8 @@ def animate_skeletons(
     else:
         step = max(step, int(np.ceil(T / max_frames)))
         idx = np.arange(0, T, step)
+    if idx.size == 0:
+        raise ValueError(f"animate_skeletons: no frame to draw (window {window}, {T} frames)")
     colours = _colours(names)
     h, v = _view_axes(up_axis)
     # the frames drawn set the view, a few wild samples do not (a spike leaves the box
@@ -373,11 +374,62 @@ def animate_skeletons(
         label.set_text(f"t = {t / fps:5.2f} s   frame {t}")
         return [s for segs in lines for s in segs]
 
-    anim = FuncAnimation(fig, draw, frames=idx, blit=False)
-    path = Path(path)
-    anim.save(path, writer=PillowWriter(fps=gif_playback_fps(fps / step)))
+    images = []
+    for t in idx:
+        draw(int(t))
+        fig.canvas.draw()
+        images.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
+    path = Path(path)
+    _save_gif(images, path, 1000.0 / gif_playback_fps(fps / step), [colours[n] for n in names])
     return path
+
+
+#: colours of an animation's shared palette: the figure has a few flat colours (white,
+#: black, one per method) and their anti-aliased edges; 32 keep the edges smooth
+GIF_COLOURS = 32
+#: a palette colour this close (per channel) to another is left out: Pillow maps a pixel
+#: to a palette colour by a coarse search, which may take (254, 253, 253) for white
+GIF_TWIN = 8
+
+
+def _save_gif(
+    images: Sequence[np.ndarray], path: Path, frame_ms: float, keep: Sequence[Any] = ()
+) -> None:
+    """Write RGB frames as a looping GIF with one palette for all of them and Pillow's
+    frame differencing: a third to a half of the size of a GIF with a palette per frame.
+
+    The palette holds white, black and the colours ``keep`` (each method's: a few small
+    dots of a colour must not be merged into another), then the colours of the first,
+    middle and last frames (median cut) up to :data:`GIF_COLOURS`, less near twins."""
+    from matplotlib.colors import to_rgb
+    from PIL import Image
+
+    fixed = [(255, 255, 255), (0, 0, 0)]
+    fixed += [tuple(round(255 * c) for c in to_rgb(k)) for k in keep]
+    picks = [images[0], images[len(images) // 2], images[-1]]
+    sample = Image.fromarray(np.concatenate(picks, axis=0))
+    n_free = max(GIF_COLOURS - len(fixed), 2)
+    free = sample.quantize(colors=n_free, method=Image.Quantize.MEDIANCUT).getpalette()
+    rgb = list(fixed)
+    for i in range(min(n_free, len(free) // 3)):  # not a near twin of one already in:
+        colour = tuple(free[3 * i : 3 * i + 3])  # Pillow's mapping might take the twin
+        if all(max(abs(a - b) for a, b in zip(colour, c)) > GIF_TWIN for c in rgb):
+            rgb.append(colour)
+    palette = Image.new("P", (1, 1))
+    palette.putpalette([c for colour in rgb for c in colour])
+    frames = [
+        Image.fromarray(a).quantize(palette=palette, dither=Image.Dither.NONE) for a in images
+    ]
+    frames[0].save(
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=frames[1:],
+        duration=int(frame_ms),
+        loop=0,
+        optimize=True,
+    )
 
 
 def plot_bar_table(rows: Mapping[str, float], *, title: str = "", unit: str = "cm"):
