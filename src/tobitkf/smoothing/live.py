@@ -22,9 +22,10 @@ so with ``units``) is converted to metres for the method and back, as :func:`smo
 does. A stream of pixels (a 2-D stream, unless ``units`` says otherwise) or of unknown
 units has no physical scale; the robust methods' gates (speed bound, margins, noise,
 bone tolerance) are then measured on a sample recording of the same set-up
-(``gates_from``, as :func:`smooth` measures them on the recording itself), or all of
-them are given in the stream's units. Without either, the first frame is refused: gates
-in metres on pixels would reject every motion.
+(``gates_from``, as :func:`smooth` measures them on the recording itself), on the
+stream's own frames as they come (``gates_from="stream"``), or all of them are given in
+the stream's units. Without any, the first frame is refused: gates in metres on pixels
+would reject every motion.
 
 Example
 -------
@@ -63,7 +64,12 @@ from tobitkf.smoothing.keypoints import (
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
-from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates
+from tobitkf.smoothing.robust_scale import (
+    GATE_PARAMS,
+    STREAM_FIRST,
+    STREAM_LAST,
+    recording_gates,
+)
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     TRACKED_CODE,
@@ -215,7 +221,11 @@ class LiveSmoother:
         robust methods' gates are measured on it as :func:`smooth` measures them on a
         recording in pixels (``robust_scale.recording_gates``); parameters given here
         override them. Needed, unless those parameters are all given, for a stream in
-        pixels or unknown units.
+        pixels or unknown units. ``"stream"``: measured on the stream's own frames as they
+        come (:func:`~tobitkf.smoothing.robust_scale.stream_gate_frames`: on the first 16
+        frames, then again each time their count doubles, up to 4096; the first 16 are
+        returned as measured), all six of them; what ``smooth(recording,
+        "robust_online", gates="stream")`` gives. Not for streams keyed by body id.
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
@@ -272,7 +282,16 @@ class LiveSmoother:
         self.max_missing = float(max_missing)
         self._gates_dims: int | None = None  # the coordinates of the gates' sample
         self._scale = 1.0  # metres per unit of the stream (set at its first frame)
-        if gates_from is not None:
+        self._stream_gates = isinstance(gates_from, str) and gates_from == "stream"
+        if self._stream_gates:
+            if not self._gated:
+                raise ValueError(f"gates_from: method {self.method!r} has no gates to measure")
+            self.params = check_params(self.method, {**self.params, "gates": "stream"})
+        elif isinstance(gates_from, str):
+            raise ValueError(
+                f"gates_from: a recording of the same set-up or 'stream', got {gates_from!r}"
+            )
+        elif gates_from is not None:
             self._measure_gates(gates_from)
         self.reset()
 
@@ -335,6 +354,10 @@ class LiveSmoother:
 
     def _check_gates(self, dims: int) -> None:
         """At the first frame: the robust gates can apply to a stream of ``dims``."""
+        if self._stream_gates:  # measured on the stream itself, in its own units
+            scale = length_scale(self._stream_units(dims))
+            self._scale = 1.0 if scale is None else scale
+            return
         if self._gates_dims is not None:
             scale = length_scale(self._stream_units(dims))
             self._scale = 1.0 if scale is None else scale
@@ -358,8 +381,9 @@ class LiveSmoother:
             raise ValueError(
                 f"a stream in {units} has no physical scale, and {self.method!r}'s gates are "
                 f"in metres: pass gates_from=<a recording of the same set-up> to measure "
-                f"them (as smooth() does), or give {', '.join(missing)} in the stream's "
-                f"units (or units='m' if it is in metres)"
+                f"them (as smooth() does), gates_from='stream' to measure them on the "
+                f"stream's own frames as they come, or give {', '.join(missing)} in the "
+                f"stream's units (or units='m' if it is in metres)"
             )
 
     def reset(self) -> None:
@@ -377,6 +401,12 @@ class LiveSmoother:
         self._clock = 0.0
         self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
+        # gates_from="stream": the frames so far (as stepped) and their steps, and the
+        # frame at which the gates are measured next
+        self._frames: list[Array] = []
+        self._frame_steps: list[float] = []
+        self._next_gates = STREAM_FIRST
+        self._stream_clock = 0.0
 
     @property
     def clipped(self) -> NDArray[np.bool_] | None:
@@ -479,12 +509,15 @@ class LiveSmoother:
             )
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
-        if self._stepper is None:
-            self._stepper = self._new_stepper()
-            self._shape = shape[:-1]
+        self._shape = shape[:-1]
         self._single = pos.ndim == 2
         self._time = None if timestamp is None else stamp
-        out = self._step(self._stepper, pos, states, dt, conf)
+        if self._stream_gates:
+            out = self._stream_step(pos, states, dt, conf)
+        else:
+            if self._stepper is None:
+                self._stepper = self._new_stepper()
+            out = self._step(self._stepper, pos, states, dt, conf)
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
@@ -503,41 +536,93 @@ class LiveSmoother:
         return conf
 
     def _step(self, stepper: Any, pos: Array, states: Any, dt: float, conf: Any = None) -> Array:
+        ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
+        return self._output(self._step_inputs(stepper, ys, missing, batch_states, dt, conf,
+                                              batch_pos), pos)  # fmt: skip
+
+    def _inputs(self, pos: Array, states: Any, conf: Any) -> tuple[Any, ...]:
+        """A frame as the steppers take it: ``(ys, missing, states, confidence,
+        positions)`` with a body axis, in metres where the stream has a length unit, a
+        third axis of zeros in 2-D, NaN where missing or below ``min_confidence``."""
         single = pos.ndim == 2
         batch_pos = pos[None] if single else pos
         batch_states = None if states is None else (states[None] if single else states)
-        dims = batch_pos.shape[-1]
         if self._scale != 1.0:  # centimetres or millimetres: the method works in metres
             batch_pos = batch_pos * self._scale
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
-        kw: dict[str, Any] = {}
         if conf is not None:  # below the threshold: missing, for every method (as smooth)
             conf = conf[None] if single else conf
             low = low_confidence(conf, self.min_confidence)
             if low is not None and (low & ~missing).any():
                 missing = missing | low
                 ys = np.where(missing[..., None], np.nan, ys)
-            if getattr(stepper, "uses_confidence", False):  # the scores weigh the rest
-                kw["confidence"] = conf
+        return ys, missing, batch_states, conf, batch_pos
+
+    def _step_inputs(self, stepper: Any, ys: Array, missing: Any, batch_states: Any,
+                     dt: float, conf: Any, batch_pos: Array) -> Array:  # fmt: skip
+        """One step of ``stepper`` on a frame from :meth:`_inputs` (with its body axis)."""
+        kw: dict[str, Any] = {}
+        if conf is not None and getattr(stepper, "uses_confidence", False):
+            kw["confidence"] = conf  # the scores weigh the samples kept
         if getattr(stepper, "uses_positions", False):  # the positions as given, too
             kw["positions"] = batch_pos
         if getattr(stepper, "uses_n_dims", False):  # the stream's coordinates (2 or 3)
-            kw["n_dims"] = dims
+            kw["n_dims"] = self._dims
         if getattr(stepper, "uses_time", False):  # the frame's timestamp (None: not given)
             kw["time"] = self._time
-        out = stepper.step(ys, missing, batch_states, dt, **kw)
-        out = drop_third_axis(np.asarray(out), dims)
+        return np.asarray(stepper.step(ys, missing, batch_states, dt, **kw))
+
+    def _output(self, out: Array, pos: Array) -> Array:
+        """A stepper's output ``(B, J, 3)`` in the stream's coordinates, units and shape."""
+        out = drop_third_axis(out, pos.shape[-1])
         if self._scale != 1.0:
             out = out / self._scale
-        return out[0] if single else out
+        return out[0] if pos.ndim == 2 else out
+
+    def _stream_step(self, pos: Array, states: Any, dt: float, conf: Any) -> Array:
+        """``gates_from="stream"``: the gates measured on the frames so far at the frames
+        of :func:`~tobitkf.smoothing.robust_scale.stream_gate_frames` (the stepper starts
+        at the first, and is retuned, its state kept, at the others); before the first,
+        the frame as measured. What ``smooth(..., gates="stream")`` gives."""
+        ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
+        if self.n_frames == self._next_gates:
+            gates = recording_gates(np.stack(self._frames), np.asarray(self._frame_steps),
+                                    self.topology.parents, self._dims)  # fmt: skip
+            params = {**self.params, **{k: gates[k] for k in GATE_PARAMS}}
+            if self._stepper is None:
+                self._stepper = self.spec.live(
+                    self.topology, self.up_axis, self.inferred_noise_factor, **params
+                )
+            else:
+                self._stepper.retune(**params)
+            self._next_gates *= 2
+        # the frame's time as batch has it (the timestamp, else the cumulated steps from
+        # the first frame's): the stepper starts at a later frame than the stream
+        self._stream_clock += dt
+        if self._time is None:
+            self._time = self._stream_clock
+        if self.n_frames < STREAM_LAST:  # what the next measurements read
+            self._frames.append(np.array(ys))  # a copy: ys may be the caller's array
+            self._frame_steps.append(dt)
+        else:
+            self._frames, self._frame_steps = [], []
+        if self._stepper is None:
+            return self._output(np.where(missing[..., None], np.nan, ys), pos)
+        out = self._step_inputs(self._stepper, ys, missing, batch_states, dt, conf, batch_pos)
+        return self._output(out, pos)
 
     def _update_bodies(
         self, frames: Mapping[Any, ArrayLike], states: Any, timestamp: float | None,
         confidence: Any = None,
     ) -> dict[Any, Array]:  # fmt: skip
-        if self._stepper is not None:
+        if self._shape is not None:
             raise ValueError("this stream is not keyed by body id: pass an array of positions")
+        if self._stream_gates:
+            raise ValueError(
+                "gates_from='stream' measures the gates on frames given as arrays; a stream "
+                "keyed by body id needs gates_from=<a recording of the same set-up>"
+            )
         dims = self._dims
         bodies, arr, sts = self._check_bodies(frames, states)
         try:

@@ -141,7 +141,7 @@ from tobitkf.smoothing.params import (
 )
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
 from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
-from tobitkf.smoothing.robust_scale import recording_gates
+from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates, stream_gate_frames
 from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
@@ -187,7 +187,8 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "inferred_bones": True,
     # metric parameters: "physical" (as given, in metres or the data's units), "recording"
     # (taken from the recording: robust_scale), "auto" (physical for lengths, recording
-    # for pixels and unknown units)
+    # for pixels and unknown units); robust_online also "stream" (taken from the frames
+    # so far, re-measured as their count doubles: robust_scale.stream_gate_frames)
     "gates": "auto",
     # offline: "fit" = noise fitted per recording and body region by maximum likelihood
     # (robust_fit.py; speed_sd / noise_sd are then its start and bounds), "fixed" = as given
@@ -232,7 +233,11 @@ MIN_CONFIDENCE_WEIGHT = 0.01
 #: robust_online keeps the given noise (a causal fit is open work, docs/robust.md); its
 #: shared errors come from the frames so far
 ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
-ONLINE_VALIDATORS: dict[str, Any] = {**ROBUST_VALIDATORS, "noise": one_of("fixed")}
+ONLINE_VALIDATORS: dict[str, Any] = {
+    **ROBUST_VALIDATORS,
+    "noise": one_of("fixed"),
+    "gates": one_of("auto", "physical", "recording", "stream"),
+}
 
 
 def _ou_matrices(steps: Array, tau: float) -> tuple[Array, Array]:
@@ -489,6 +494,9 @@ def _robust_bodies(
     diagnostics dict per body and the resolved per-joint parameters.
     """
     T, B, J = missing.shape
+    if params["gates"] == "stream":  # online only (its validator)
+        return _stream_gated(ys, missing, states, times, steps, topo, params, factor,
+                             confidence, n_dims)  # fmt: skip
     derived: dict[str, Any] = {}
     centre = None
     if use_recording_gates(params, units):
@@ -529,22 +537,12 @@ def _robust_bodies(
     # a variance a hair below zero is rounding (a track with almost no noise, whose fit
     # finds next to none): its sd is 0, not NaN
     std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
-    diags = [
-        {
-            "rejected_fraction": rejected[:, b].sum(axis=0) / T,
-            "rejected": rejected[:, b],
-            "bone_lengths": L[b] if L is not None else np.full(J, np.nan),
-        }
-        for b in range(B)
-    ]
+    diags = [_body_diags(rejected, L, b) for b in range(B)]
     if offline:  # robust_shared: NaN without guesses, with too few changes or switched off
         for b in range(B):
             diags[b]["guess_error_sd"] = float(guess_sd[b])
             diags[b]["guess_error_changes"] = int(guess_n[b])
-    resolved = dict(setup.resolved)
-    for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
-        if name in derived:
-            resolved[name] = float(derived[name])
+    resolved = _resolved(setup, derived)
     body_params = None
     if fits is not None:
         arrays, reports = fits
@@ -552,6 +550,79 @@ def _robust_bodies(
         for b in range(B):
             diags[b]["noise_fit"] = reports[b]
     return est, std, diags, resolved, body_params
+
+
+def _stream_gated(
+    ys: Array,
+    missing: NDArray[np.bool_],
+    states: Any,
+    times: Array,
+    steps: Array,
+    topo: Topology,
+    params: dict[str, Any],
+    factor: float,
+    confidence: Any,
+    n_dims: int,
+) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any], None]:
+    """``robust_online`` with ``gates="stream"``: the frames before the first of
+    :func:`stream_gate_frames` as measured (no sd), then the online frame function with
+    the gates measured on the frames so far, re-measured at each of those frames (its
+    state carried across), all bodies in one call: what ``LiveSmoother(gates_from=
+    "stream")`` gives frame by frame. Returns what :func:`_robust_bodies` does."""
+    T, B, J = missing.shape
+    k = kernels()
+    est, var = np.empty((T, B, J, 3)), np.full((T, B, J), np.nan)
+    rejected = np.zeros((T, B, J), dtype=bool)
+    frames = stream_gate_frames(T)
+    first = frames[0] if frames else T
+    est[:first] = np.where(missing[:first, ..., None], np.nan, ys[:first])
+    y_all = readonly(np.ascontiguousarray(ys, dtype=float))
+    missing = np.ascontiguousarray(missing, dtype=bool)
+    times = np.ascontiguousarray(times, dtype=float)
+    steps = np.ascontiguousarray(steps, dtype=float)
+    inferred = _inferred(states, missing.shape)
+    rinf = _inferred_scale(inferred, missing, factor, confidence)
+    guesses = _guesses(inferred, params["inferred_bones"], n_dims)
+    state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
+    work = k.new_work(B, J)
+    guard = step_guard()
+    g_state = guard.new_state(B, J, ys.shape[-1])
+    setup, derived, history = None, {}, []
+    for a, b in zip(frames, [*frames[1:], T], strict=True):
+        derived = recording_gates(ys[:a], steps[:a], topo.parents, n_dims)
+        derived.pop("bone_centre", None)
+        setup = _Setup(topo, {**params, **derived}, n_dims)
+        history.append({"frame": a, **{g: derived[g] for g in GATE_PARAMS}})
+        f = slice(a, b)
+        k.online_frames(y_all[f], missing[f], rinf[f], guesses[f], inferred[f], times[f],
+                        steps[f], *setup.args(), state, *work, est[f], rejected[f], var[f],
+                        0)  # fmt: skip
+        guard.guard_frames(y_all[f], missing[f], est[f], var[f], 0, *g_state)
+    std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
+    if setup is None:  # too short for a first measurement: the frames as measured
+        setup = _Setup(topo, params, n_dims)
+    L = state[3][..., k.S_L_CUR].copy() if params["bones"] and frames else None
+    diags = [{**_body_diags(rejected, L, b), "stream_gates": history} for b in range(B)]
+    return est, std, diags, _resolved(setup, derived), None
+
+
+def _body_diags(rejected: NDArray[np.bool_], L: Array | None, b: int) -> dict[str, Any]:
+    """Body ``b``'s diagnostics: its rejections ``(T, J)``, their share per joint and the
+    bone lengths its gate compared with (NaN without bones)."""
+    return {
+        "rejected_fraction": rejected[:, b].sum(axis=0) / rejected.shape[0],
+        "rejected": rejected[:, b],
+        "bone_lengths": L[b] if L is not None else np.full(rejected.shape[2], np.nan),
+    }
+
+
+def _resolved(setup: _Setup, derived: dict[str, Any]) -> dict[str, Any]:
+    """The per-joint parameters used, with the global ones taken from the recording."""
+    resolved = dict(setup.resolved)
+    for name in ("margin", "bone_tol_abs", "bone_tol_rel"):
+        if name in derived:
+            resolved[name] = float(derived[name])
+    return resolved
 
 
 def _robust_chunk(
@@ -635,11 +706,20 @@ class RobustStepper:
                  **params: Any) -> None:  # fmt: skip
         full = dict(ONLINE_DEFAULTS)
         full.update(params)
+        self.topology = topology
         self.setup = _Setup(topology, full)
         self.factor = inferred_noise_factor
         self.inferred_bones = bool(full["inferred_bones"])
         self._state: Any = None
         self._time = 0.0
+
+    def retune(self, **params: Any) -> None:
+        """New parameters from the next frame on, the state kept (``gates="stream"``: the
+        gates measured anew on the frames so far). ``lookback`` and ``shared_errors``
+        shape the state: they must be those it was made with."""
+        full = dict(ONLINE_DEFAULTS)
+        full.update(params)
+        self.setup = _Setup(self.topology, full)
 
     uses_n_dims = True  # the stream's coordinates: inferred joints keep their bones in 3-D
     uses_confidence = True  # a pose estimator's scores weigh the samples, as in batch

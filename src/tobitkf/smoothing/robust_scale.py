@@ -27,6 +27,14 @@ These statistics read the whole recording, so ``robust_online`` with them is cau
 its estimates but not in its parameters. A live stream (``LiveSmoother``) has them
 measured on a sample recording of the same set-up (``gates_from``), or is given all of
 :data:`GATE_PARAMS` in its own units.
+
+``gates="stream"`` (``robust_online`` only; ``LiveSmoother(gates_from="stream")``) is
+the causal form: the gates are measured on every frame before frame ``n`` at the frames
+``n`` of :func:`stream_gate_frames` (``STREAM_FIRST`` = 16, then each time the count of
+frames doubles, up to ``STREAM_LAST`` = 4096), and hold from there to the next; the
+filter starts at frame ``STREAM_FIRST``, and the frames before it are returned as
+measured (no standard deviation). A stream that starts still has small gates at first,
+which grow as it shows its motion.
 """
 
 from __future__ import annotations
@@ -45,9 +53,12 @@ __all__ = [
     "GATE_PARAMS",
     "MARGIN_SDS",
     "MEDIAN_WINDOW",
+    "STREAM_FIRST",
+    "STREAM_LAST",
     "V_MAX_FACTOR",
     "noise_scale",
     "recording_gates",
+    "stream_gate_frames",
 ]
 
 Array = NDArray[np.float64]
@@ -125,6 +136,25 @@ def noise_scale(ys: Array) -> float:
     dd = np.abs(y[2:] - 2 * y[1:-1] + y[:-2])
     sigma = _MAD * _nanmedian(dd.reshape(-1)) / np.sqrt(6.0)
     return float(sigma) if np.isfinite(sigma) and sigma > 0 else 1e-9
+
+
+#: gates="stream": the frames the gates are first measured on (about half a second at
+#: 30 fps; fewer give no stable median of the second differences)
+STREAM_FIRST = 16
+#: gates="stream": the last measurement reads this many frames (two minutes and more at
+#: 30 fps); the gates then hold, and a live stream keeps no more frames than these
+STREAM_LAST = 4096
+
+
+def stream_gate_frames(n_frames: int) -> list[int]:
+    """The frames ``n < n_frames`` at which ``gates="stream"`` measures the gates on the
+    frames ``0 .. n-1``: ``STREAM_FIRST``, twice that, ... up to ``STREAM_LAST``."""
+    out = []
+    n = STREAM_FIRST
+    while n < n_frames and n <= STREAM_LAST:
+        out.append(n)
+        n *= 2
+    return out
 
 
 def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[str, Any]:

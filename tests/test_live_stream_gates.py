@@ -1,0 +1,144 @@
+"""Gates measured on the stream itself (``gates="stream"``, ``LiveSmoother(gates_from=
+"stream")``): causal, the same live and in batch, and they grow with the motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tobitkf as tk
+from test_live_units import NAMES, TOPO, _pixels  # noqa: F401
+from tobitkf.evaluation.pose2d import Pose2DModel, corrupt_pose2d
+from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.smoothing.robust_scale import STREAM_FIRST, STREAM_LAST, stream_gate_frames
+
+
+def _people(seed: int, still: int = 0, timestamps: bool = True):
+    """Two people's true pixel tracks and what a pose estimator reports for them
+    (the built-in 2-D benchmark's corruption), optionally standing still at first."""
+    from tobitkf.evaluation.pose2d import _truth
+
+    model = Pose2DModel()
+    truth = _truth("mixed", 8.0, seed, model)
+    if still:
+        truth = [t.replace(positions=np.concatenate([np.repeat(t.positions[:1], still, 0),
+                                                     t.positions]), timestamps=None, fps=30.0)
+                 for t in truth]  # fmt: skip
+    noisy, _ = corrupt_pose2d(truth, model, seed=seed)
+    if not timestamps:
+        noisy = [n.replace(timestamps=None, fps=30.0) for n in noisy]
+    return truth, noisy
+
+
+def _live(noisy, **kw):
+    live = tk.LiveSmoother(noisy[0].topology, fps=noisy[0].fps or 30.0, gates_from="stream", **kw)
+    pos = np.stack([n.positions for n in noisy], axis=1)
+    conf = np.stack([n.confidence for n in noisy], axis=1)
+    ts = noisy[0].timestamps
+    return np.array([
+        live.update(pos[t], confidence=conf[t], timestamp=None if ts is None else ts[t])
+        for t in range(len(pos))
+    ])  # fmt: skip
+
+
+def test_the_measurement_frames():
+    assert stream_gate_frames(STREAM_FIRST) == []
+    assert stream_gate_frames(STREAM_FIRST + 1) == [16]
+    assert stream_gate_frames(100) == [16, 32, 64]
+    assert stream_gate_frames(10**6) == [16 * 2**k for k in range(9)]
+    assert stream_gate_frames(10**6)[-1] == STREAM_LAST
+
+
+@pytest.mark.parametrize("timestamps", [True, False])
+def test_live_is_batch_exactly(timestamps):
+    """The stream (two bodies in one array) gives what the batch run gives, bit for bit,
+    with the recording's timestamps or at its frame rate; untangle=False: a stream
+    cannot undo swaps it has not seen the end of."""
+    _, noisy = _people(seed=1, timestamps=timestamps)
+    batch = tk.smooth(noisy, "robust_online", gates="stream", untangle=False)
+    np.testing.assert_array_equal(_live(noisy), np.stack([b.positions for b in batch], 1))
+
+
+def test_the_first_frames_are_returned_as_measured():
+    _, noisy = _people(seed=0)
+    (out,) = tk.smooth(noisy[:1], "robust_online", gates="stream", untangle=False)
+    raw = noisy[0].positions.copy()
+    raw[noisy[0].confidence < 0.1] = np.nan  # below min_confidence: missing
+    np.testing.assert_array_equal(out.positions[:STREAM_FIRST], raw[:STREAM_FIRST])
+    assert np.isnan(out.std[:STREAM_FIRST]).all() and np.isfinite(out.std[STREAM_FIRST:]).any()
+    frames = [h["frame"] for h in out.metadata["diagnostics"]["stream_gates"]]
+    assert frames == stream_gate_frames(noisy[0].n_frames)
+
+
+def _smoothed(noisy):
+    """The stream gates' output with the people's identity swaps undone (which a live
+    stream cannot do; live and batch are otherwise the same, above)."""
+    return np.stack([o.positions for o in tk.smooth(noisy, "robust_online", gates="stream")], 1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_glitches_are_removed(seed):
+    """After the first measurement, the error is a fraction of the pose estimator's (its
+    glitches are 30-200 px, its jitter 2 px)."""
+    truth, noisy = _people(seed)
+    out = _smoothed(noisy)
+    true = np.stack([t.positions for t in truth], 1)
+    raw = np.stack([n.positions for n in noisy], 1)
+
+    def rmse(a):
+        e = np.linalg.norm(a[STREAM_FIRST:] - true[STREAM_FIRST:], axis=-1)
+        return float(np.sqrt(np.nanmean(e**2)))
+
+    assert rmse(out) < 0.5 * rmse(raw)
+
+
+def test_gates_grow_when_a_still_stream_starts_to_move():
+    """A stream that stands still for 3 s: the first measurements describe a still body;
+    measured again as the count of frames doubles, the gates describe its motion (the
+    rms speed more than doubles), and the motion that follows is kept, its glitches
+    removed."""
+    truth, noisy = _people(seed=0, still=90, timestamps=False)
+    out = _smoothed(noisy)
+    (smoothed, _) = tk.smooth(noisy, "robust_online", gates="stream")
+    first, *_, last = smoothed.metadata["diagnostics"]["stream_gates"]
+    assert np.median(last["speed_sd"]) > 2 * np.median(first["speed_sd"])
+    true = np.stack([t.positions for t in truth], 1)
+    raw = np.stack([n.positions for n in noisy], 1)
+    late = slice(150, None)
+
+    def rmse(a):
+        e = np.linalg.norm(a[late] - true[late], axis=-1)
+        return float(np.sqrt(np.nanmean(e**2)))
+
+    assert rmse(out) < 0.1 * rmse(raw)
+
+
+def test_the_stream_keeps_its_own_copy_of_the_frames():
+    """A camera loop that reuses one array for every frame: the gates are measured on
+    the frames as they were, not on the last one repeated."""
+    _, y = _pixels(T=120)
+    y = np.concatenate([y, 0 * y[..., :1] + 500.0], axis=-1)  # 3-D: the frame is used as is
+    seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units=None)
+    batch = tk.smooth(seq, "robust_online", gates="stream").positions
+    live = tk.LiveSmoother(TOPO, fps=30, gates_from="stream", units="m")
+    buf = np.empty_like(y[0])
+    out = []
+    for frame in y:
+        buf[...] = frame
+        out.append(live.update(buf).copy())
+    np.testing.assert_array_equal(np.array(out), batch)
+
+
+def test_what_stream_gates_refuse():
+    _, y = _pixels()
+    with pytest.raises(ValueError, match="keyed by body id"):
+        tk.LiveSmoother(TOPO, gates_from="stream").update({1: y[0]})
+    with pytest.raises(ValueError, match="no gates"):
+        tk.LiveSmoother(TOPO, method="kf", gates_from="stream")
+    with pytest.raises(ValueError, match="'stream'"):
+        tk.LiveSmoother(TOPO, gates_from="streem")
+    seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units="px")
+    with pytest.raises(ValueError, match="gates"):  # offline reads the whole recording
+        tk.smooth(seq, "robust", gates="stream")
+    with pytest.raises(ValueError, match="gates_from='stream'"):  # named as a way out
+        tk.LiveSmoother(TOPO).update(y[0])
