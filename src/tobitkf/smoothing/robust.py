@@ -202,6 +202,17 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "shared_errors": True,
 }
 
+
+def _offline_gates(name: str, value: Any) -> str:
+    """``robust``'s ``gates``: "stream" (the frames so far) is for the causal method."""
+    if value == "stream":
+        raise ValueError(
+            f"{name} 'stream' (measured on the frames so far) is robust_online's; robust "
+            "reads the whole recording: 'recording' (or 'auto') measures them there"
+        )
+    return one_of("auto", "physical", "recording")(name, value)
+
+
 #: parameter validators (name -> check(name, value) -> value)
 ROBUST_VALIDATORS: dict[str, Any] = {
     "v_max": region_value,
@@ -220,7 +231,7 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "min_run": nonneg_float,
     "carry": as_bool,
     "inferred_bones": as_bool,
-    "gates": one_of("auto", "physical", "recording"),
+    "gates": _offline_gates,
     "noise": one_of("fit", "fixed"),
     "fit_seconds": positive_or_inf,
     "shared_errors": as_bool,
