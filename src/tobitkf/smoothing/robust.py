@@ -418,6 +418,11 @@ def _offline(
         guess, shared = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred, yk,
                                        steps, par, order, float(params["max_reject"]))  # fmt: skip
     fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0, shared)
+    if fits is not None:  # the sd is at least what the samples' own noise says
+        from tobitkf.smoothing.robust_fit import sd_floor
+
+        var[:, bs] *= sd_floor(ys, acc & ~inferred, setup.groups, fits[0], fits[1],
+                               int(setup.pi[k.I_NDIMS]))[None]  # fmt: skip
     # no estimate before a joint's first valid sample; joints never accepted stay raw
     first = first_true(~missing)
     for b, j in zip(*np.nonzero(first), strict=True):

@@ -32,6 +32,14 @@ split of ``m²`` into a white and a coloured part is weakly identified when ``er
 nears ``tau`` (the likelihood is flat along it; so is the smoother's output), the speed
 and the total well (tests/test_robust_fit.py).
 
+**A floor for the standard deviation** (:func:`sd_floor`). The samples' white noise can
+also be read without any motion model, from their second differences (``1.4826 ·
+median |Δ²y| / √6``, the statistic the gates in pixels use). Where a region's fitted
+measurement error ``m`` is below it, the model has explained part of the noise as
+motion (a fast joint at a low frame rate: feet in running), the smoother follows that
+noise, and a standard deviation derived from ``m`` is too small; the region's
+posterior variance is then scaled by ``(floor / m)²``. The estimate is unchanged.
+
 The optimiser is L-BFGS-B's algorithm compiled together with the objective
 (:func:`tobitkf.smoothing._minimize.minimize_profile`): one compiled call per region.
 :func:`scipy.optimize.minimize` (L-BFGS-B), the optimiser before, added its own Python
@@ -54,7 +62,14 @@ from numpy.typing import NDArray
 
 from tobitkf.smoothing.timebase import typical_step
 
-__all__ = ["FIT_BLOCK_SECONDS", "GroupFit", "fit_blocks", "fit_group", "fit_noise_bodies"]
+__all__ = [
+    "FIT_BLOCK_SECONDS",
+    "GroupFit",
+    "fit_blocks",
+    "fit_group",
+    "fit_noise_bodies",
+    "sd_floor",
+]
 
 Array = NDArray[np.float64]
 
@@ -259,3 +274,38 @@ def _fit_all(yk: Array, use: NDArray[np.bool_], rscale: Array, steps: Array,
                 out["error_sd"][b, ix] = fit.error_sd
                 out["error_tau"][b, ix] = fit.error_tau
         reports.append(rep)
+
+
+def sd_floor(
+    ys: Array,
+    use: NDArray[np.bool_],
+    groups: dict[str, list[int]],
+    fits: dict[str, Array],
+    reports: list[dict[str, dict[str, Any]]],
+    n_dims: int,
+) -> Array:
+    """The variance scale ``(B, J)`` (>= 1) of the floor for the standard deviation
+    (module docstring): per body and fitted region, ``(floor / m)²`` where the second
+    differences' noise ``floor`` of the samples marked in ``use`` (``(T, B, J)``; at
+    least :data:`MIN_FIT_SAMPLES` differences) exceeds the fitted ``m``, else 1. Adds
+    ``noise_floor`` and ``sd_scale`` to each region's report."""
+    from tobitkf.smoothing.robust_scale import noise_scale
+
+    B, J = use.shape[1:]
+    scale = np.ones((B, J))
+    m = np.sqrt(fits["noise_sd"] ** 2 + fits["error_sd"] ** 2)
+    for b in range(B):
+        for g, idx in groups.items():
+            report = reports[b].get(g)
+            if not idx or report is None or not report.get("fitted"):
+                continue
+            ix = np.asarray(idx)
+            y = np.where(use[:, b, ix, None], ys[:, b, ix, :n_dims], np.nan)
+            dd = y[2:] - 2 * y[1:-1] + y[:-2]
+            if np.count_nonzero(np.isfinite(dd)) < MIN_FIT_SAMPLES:
+                continue
+            floor = noise_scale(y)
+            ratio = max(1.0, floor / float(np.max(m[b, ix])))
+            scale[b, ix] = ratio**2
+            report["noise_floor"], report["sd_scale"] = floor, ratio
+    return scale
