@@ -138,7 +138,7 @@ def test_what_stream_gates_refuse():
     with pytest.raises(ValueError, match="'stream'"):
         tk.LiveSmoother(TOPO, gates_from="streem")
     seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units="px")
-    with pytest.raises(ValueError, match="robust_online.s; robust reads the whole"):
+    with pytest.raises(ValueError, match="is robust_online's; robust reads the whole"):
         tk.smooth(seq, "robust", gates="stream")
     with pytest.raises(ValueError, match="gates_from='stream'"):  # named as a way out
         tk.LiveSmoother(TOPO).update(y[0])
