@@ -129,10 +129,31 @@ def test_the_stream_keeps_its_own_copy_of_the_frames():
     np.testing.assert_array_equal(np.array(out), batch)
 
 
+def test_each_body_of_a_keyed_stream_has_its_own_gates():
+    """Keyed by id, each body is exactly a stream of it alone: bodies 7 and 9 arrive
+    together but their gates are measured each on its own frames; body 5 arrives at
+    frame 30, and its gates are first measured at its own 16th frame."""
+    _, noisy = _people(seed=2)
+    _, more = _people(seed=3)
+    tracks = {7: noisy[0], 9: noisy[1], 5: more[0]}
+    start = {7: 0, 9: 0, 5: 30}
+    ts = noisy[0].timestamps
+    topo = noisy[0].topology
+    keyed = tk.LiveSmoother(topo, fps=30, gates_from="stream")
+    alone = {b: tk.LiveSmoother(topo, fps=30, gates_from="stream") for b in tracks}
+    for t in range(noisy[0].n_frames):
+        ids = [b for b in tracks if t >= start[b]]
+        out = keyed.update({b: tracks[b].positions[t] for b in ids},
+                           confidence={b: tracks[b].confidence[t] for b in ids},
+                           timestamp=ts[t])  # fmt: skip
+        for b in ids:
+            expected = alone[b].update(tracks[b].positions[t], confidence=tracks[b].confidence[t],
+                                       timestamp=ts[t])  # fmt: skip
+            np.testing.assert_array_equal(out[b], expected, err_msg=f"body {b}, frame {t}")
+
+
 def test_what_stream_gates_refuse():
     _, y = _pixels()
-    with pytest.raises(ValueError, match="keyed by body id"):
-        tk.LiveSmoother(TOPO, gates_from="stream").update({1: y[0]})
     with pytest.raises(ValueError, match="no gates"):
         tk.LiveSmoother(TOPO, method="kf", gates_from="stream")
     with pytest.raises(ValueError, match="'stream'"):

@@ -38,7 +38,7 @@ Example
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -134,11 +134,28 @@ class _HistoryStepper:
 
 @dataclass
 class _Group:
-    """Bodies keyed by id that appeared in the same frame: one stepper, one slot each."""
+    """Bodies keyed by id that appeared in the same frame: one stepper, one slot each
+    (``gates_from="stream"``: one body, whose gates and stepper are in ``gates``)."""
 
     stepper: Any
     members: list[Any]  # body id of each slot (None once dropped)
     frames: int = 0
+    gates: _StreamGates | None = None
+
+
+@dataclass
+class _StreamGates:
+    """``gates_from="stream"``, for a stream or one body of a keyed stream: the frames so
+    far (as stepped) and their steps, the frame at which the gates are measured next,
+    the frames' time as batch has it (the cumulated steps), and the stepper (None before
+    the first measurement)."""
+
+    frames: list[Array] = field(default_factory=list)
+    steps: list[float] = field(default_factory=list)
+    n: int = 0
+    next: int = STREAM_FIRST
+    clock: float = 0.0
+    stepper: Any = None
 
 
 @dataclass
@@ -225,7 +242,8 @@ class LiveSmoother:
         come (:func:`~tobitkf.smoothing.robust_scale.stream_gate_frames`: on the first 16
         frames, then again each time their count doubles, up to 4096; the first 16 are
         returned as measured), all six of them; what ``smooth(recording,
-        "robust_online", gates="stream")`` gives. Not for streams keyed by body id.
+        "robust_online", gates="stream")`` gives. In a stream keyed by body id, each body
+        has its own (and its own stepper: the bodies are not stepped as one array).
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
@@ -401,12 +419,7 @@ class LiveSmoother:
         self._clock = 0.0
         self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
-        # gates_from="stream": the frames so far (as stepped) and their steps, and the
-        # frame at which the gates are measured next
-        self._frames: list[Array] = []
-        self._frame_steps: list[float] = []
-        self._next_gates = STREAM_FIRST
-        self._stream_clock = 0.0
+        self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
 
     @property
     def clipped(self) -> NDArray[np.bool_] | None:
@@ -513,7 +526,7 @@ class LiveSmoother:
         self._single = pos.ndim == 2
         self._time = None if timestamp is None else stamp
         if self._stream_gates:
-            out = self._stream_step(pos, states, dt, conf)
+            out = self._stream_step(self._stream, pos, states, dt, conf)
         else:
             if self._stepper is None:
                 self._stepper = self._new_stepper()
@@ -560,8 +573,10 @@ class LiveSmoother:
         return ys, missing, batch_states, conf, batch_pos
 
     def _step_inputs(self, stepper: Any, ys: Array, missing: Any, batch_states: Any,
-                     dt: float, conf: Any, batch_pos: Array) -> Array:  # fmt: skip
-        """One step of ``stepper`` on a frame from :meth:`_inputs` (with its body axis)."""
+                     dt: float, conf: Any, batch_pos: Array,
+                     time: float | None = None) -> Array:  # fmt: skip
+        """One step of ``stepper`` on a frame from :meth:`_inputs` (with its body axis);
+        ``time``: the frame's time when the timestamps give none."""
         kw: dict[str, Any] = {}
         if conf is not None and getattr(stepper, "uses_confidence", False):
             kw["confidence"] = conf  # the scores weigh the samples kept
@@ -570,7 +585,7 @@ class LiveSmoother:
         if getattr(stepper, "uses_n_dims", False):  # the stream's coordinates (2 or 3)
             kw["n_dims"] = self._dims
         if getattr(stepper, "uses_time", False):  # the frame's timestamp (None: not given)
-            kw["time"] = self._time
+            kw["time"] = self._time if self._time is not None else time
         return np.asarray(stepper.step(ys, missing, batch_states, dt, **kw))
 
     def _output(self, out: Array, pos: Array) -> Array:
@@ -580,36 +595,38 @@ class LiveSmoother:
             out = out / self._scale
         return out[0] if pos.ndim == 2 else out
 
-    def _stream_step(self, pos: Array, states: Any, dt: float, conf: Any) -> Array:
+    def _stream_step(
+        self, gates: _StreamGates, pos: Array, states: Any, dt: float, conf: Any
+    ) -> Array:
         """``gates_from="stream"``: the gates measured on the frames so far at the frames
         of :func:`~tobitkf.smoothing.robust_scale.stream_gate_frames` (the stepper starts
         at the first, and is retuned, its state kept, at the others); before the first,
         the frame as measured. What ``smooth(..., gates="stream")`` gives."""
         ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
-        if self.n_frames == self._next_gates:
-            gates = recording_gates(np.stack(self._frames), np.asarray(self._frame_steps),
-                                    self.topology.parents, self._dims)  # fmt: skip
-            params = {**self.params, **{k: gates[k] for k in GATE_PARAMS}}
-            if self._stepper is None:
-                self._stepper = self.spec.live(
+        if gates.n == gates.next:
+            measured = recording_gates(np.stack(gates.frames), np.asarray(gates.steps),
+                                       self.topology.parents, self._dims)  # fmt: skip
+            params = {**self.params, **{k: measured[k] for k in GATE_PARAMS}}
+            if gates.stepper is None:
+                gates.stepper = self.spec.live(
                     self.topology, self.up_axis, self.inferred_noise_factor, **params
                 )
             else:
-                self._stepper.retune(**params)
-            self._next_gates *= 2
-        # the frame's time as batch has it (the timestamp, else the cumulated steps from
+                gates.stepper.retune(**params)
+            gates.next *= 2
+        # the frame's time as batch has it without timestamps (the cumulated steps from
         # the first frame's): the stepper starts at a later frame than the stream
-        self._stream_clock += dt
-        if self._time is None:
-            self._time = self._stream_clock
-        if self.n_frames < STREAM_LAST:  # what the next measurements read
-            self._frames.append(np.array(ys))  # a copy: ys may be the caller's array
-            self._frame_steps.append(dt)
+        gates.clock += dt
+        if gates.n < STREAM_LAST:  # what the next measurements read
+            gates.frames.append(np.array(ys))  # a copy: ys may be the caller's array
+            gates.steps.append(dt)
         else:
-            self._frames, self._frame_steps = [], []
-        if self._stepper is None:
+            gates.frames, gates.steps = [], []
+        gates.n += 1
+        if gates.stepper is None:
             return self._output(np.where(missing[..., None], np.nan, ys), pos)
-        out = self._step_inputs(self._stepper, ys, missing, batch_states, dt, conf, batch_pos)
+        out = self._step_inputs(gates.stepper, ys, missing, batch_states, dt, conf, batch_pos,
+                                gates.clock)  # fmt: skip
         return self._output(out, pos)
 
     def _update_bodies(
@@ -618,11 +635,6 @@ class LiveSmoother:
     ) -> dict[Any, Array]:  # fmt: skip
         if self._shape is not None:
             raise ValueError("this stream is not keyed by body id: pass an array of positions")
-        if self._stream_gates:
-            raise ValueError(
-                "gates_from='stream' measures the gates on frames given as arrays; a stream "
-                "keyed by body id needs gates_from=<a recording of the same set-up>"
-            )
         dims = self._dims
         bodies, arr, sts = self._check_bodies(frames, states)
         try:
@@ -661,12 +673,18 @@ class LiveSmoother:
                 raise ValueError(f"body {body!r}: {exc}") from None
         return out
 
+    def _step_group(self, group: _Group, pos: Array, states: Any, dt: float, conf: Any) -> Array:
+        """One frame of a keyed stream's group: its stepper, or its own stream gates."""
+        if group.gates is not None:
+            return self._stream_step(group.gates, pos, states, dt, conf)
+        return self._step(group.stepper, pos, states, dt, conf)
+
     def _step_same(self, group: _Group, entries: list[_Body], bodies: list[Any], arr: Array,
                    sts: list[Any] | None, dt: float,
                    confs: list[Any] | None = None) -> dict[Any, Array]:  # fmt: skip
         """The usual frame: the bodies of the last one, every slot of its only group."""
         pos, states, conf = _group_frame(arr, sts, range(len(arr)), confs)
-        res = self._step(group.stepper, pos, states, dt, conf)
+        res = self._step_group(group, pos, states, dt, conf)
         group.frames += 1
         for entry in entries:
             entry.last_seen = self._clock
@@ -688,9 +706,15 @@ class LiveSmoother:
         new = [b for b in bodies if b not in self._bodies]
         # new ids start new filters: one group for all of them when the method has a
         # stepper (bodies independent in it), else one each (a history re-run)
-        for members in [new] if self.spec.live is not None else [[b] for b in new]:
+        # (gates_from="stream": one each too, every body its own gates)
+        one_group = self.spec.live is not None and not self._stream_gates
+        for members in [new] if one_group else [[b] for b in new]:
             if members:
-                group = _Group(self._new_stepper(), list(members))
+                group = (
+                    _Group(None, list(members), gates=_StreamGates())
+                    if self._stream_gates
+                    else _Group(self._new_stepper(), list(members))
+                )
                 for slot, body in enumerate(members):
                     self._bodies[body] = _Body(group, slot, self._clock)
         results: dict[Any, Array] = {}
@@ -699,7 +723,7 @@ class LiveSmoother:
             rows = [row.get(b, -1) for b in group.members]
             step = dt if group.frames else 1.0 / self.fps
             pos, states, conf = _group_frame(arr, sts, rows, confs)
-            res = self._step(group.stepper, pos, states, step, conf)
+            res = self._step_group(group, pos, states, step, conf)
             group.frames += 1
             results.update((b, r) for b, r in zip(group.members, res) if b is not None)
         for body in bodies:
