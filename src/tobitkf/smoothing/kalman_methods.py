@@ -424,6 +424,7 @@ class KalmanStepper:
         self._last_valid_time: Array | None = None
         self._time = 0.0
         self.clipped: NDArray[np.bool_] | None = None
+        self.std: Array | None = None  # the last frame's posterior sd (B, J)
 
     def _make_filter(self, ys: Array, valid: NDArray[np.bool_]) -> StreamingFilter:
         from tobitkf.core.streaming import StreamingFilter
@@ -476,6 +477,11 @@ class KalmanStepper:
         self._last_valid_time = np.where(valid, self._time, self._last_valid_time)
         out = np.array(mean, dtype=float)
         out[~self._started] = np.nan
+        # position sd as batch gives it: the rms over the axes of the per-axis sd
+        var = self._filter.variances
+        self.std = None if var is None else np.sqrt(np.mean(var, axis=-1))
+        if self.std is not None:
+            self.std[~self._started] = np.nan
         return out
 
 

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import (
     DEFAULT_LIVE_METHOD,
@@ -420,6 +420,36 @@ class LiveSmoother:
         self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
         self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
+        # the last frame's (std, sample states) (B, J) each, and per body when keyed
+        self._last: tuple[Any, Any] | None = None
+        self._keyed_info: dict[Any, tuple[Any, Any]] | None = None
+
+    @property
+    def std(self) -> Any:
+        """The last frame's posterior standard deviation per sample, in the stream's units
+        (``(J,)``, ``(B, J)``, or ``{body_id: (J,)}`` for a keyed stream, as
+        :meth:`update` returned the positions; NaN where there is no estimate or the
+        frame was returned as measured); None when the method gives none (the 1€ and
+        Kinect filters, the moving average). Batch gives the same (``smooth(...).std``)."""
+        return self._frame_info(0)
+
+    @property
+    def sample_state(self) -> Any:
+        """The last frame's :class:`~tobitkf.skeleton.sequence.SampleState` codes, shaped
+        as :attr:`std`: MEASURED, REJECTED (judged impossible and filled), EXTRAPOLATED
+        (no measurement: predicted from the frames so far) or NONE (no estimate yet); as
+        ``smooth(...).sample_state`` of a causal method."""
+        return self._frame_info(1)
+
+    def _frame_info(self, k: int) -> Any:
+        if self._keyed_info is not None:
+            if k == 0 and all(v[0] is None for v in self._keyed_info.values()):
+                return None
+            return {b: v[k] for b, v in self._keyed_info.items()}
+        if self._last is None or self._last[k] is None:
+            return None
+        value = self._last[k]
+        return value[0] if self._single else value
 
     @property
     def clipped(self) -> NDArray[np.bool_] | None:
@@ -586,7 +616,25 @@ class LiveSmoother:
             kw["n_dims"] = self._dims
         if getattr(stepper, "uses_time", False):  # the frame's timestamp (None: not given)
             kw["time"] = self._time if self._time is not None else time
-        return np.asarray(stepper.step(ys, missing, batch_states, dt, **kw))
+        out = np.asarray(stepper.step(ys, missing, batch_states, dt, **kw))
+        self._note(out, missing, getattr(stepper, "std", None), getattr(stepper, "rejected", None))
+        return out
+
+    def _note(self, out: Array, missing: Any, std: Any, rejected: Any) -> None:
+        """What :attr:`std` and :attr:`sample_state` give of the frame just stepped
+        ``out (B, J, 3)``: its sd (in the stream's units) and its sample states, by the
+        causal rules of :func:`~tobitkf.smoothing.output_states.sample_states`."""
+        finite = ~np.isnan(out).any(axis=-1)
+        rejected = np.zeros(finite.shape, bool) if rejected is None else np.asarray(rejected)
+        state = np.full(finite.shape, int(SampleState.EXTRAPOLATED), dtype=np.int8)
+        state[~missing] = SampleState.MEASURED
+        state[rejected & ~missing] = SampleState.REJECTED
+        state[~finite] = SampleState.NONE
+        if std is not None:
+            std = np.where(finite, np.asarray(std, dtype=float), np.nan)
+            if self._scale != 1.0:
+                std = std / self._scale
+        self._last = (std, state)
 
     def _output(self, out: Array, pos: Array) -> Array:
         """A stepper's output ``(B, J, 3)`` in the stream's coordinates, units and shape."""
@@ -624,7 +672,9 @@ class LiveSmoother:
             gates.frames, gates.steps = [], []
         gates.n += 1
         if gates.stepper is None:
-            return self._output(np.where(missing[..., None], np.nan, ys), pos)
+            raw = np.where(missing[..., None], np.nan, ys)
+            self._note(raw, missing, np.full(missing.shape, np.nan), None)
+            return self._output(raw, pos)
         out = self._step_inputs(gates.stepper, ys, missing, batch_states, dt, conf, batch_pos,
                                 gates.clock)  # fmt: skip
         return self._output(out, pos)
@@ -688,7 +738,13 @@ class LiveSmoother:
         group.frames += 1
         for entry in entries:
             entry.last_seen = self._clock
+        self._keyed_info = {b: self._slot_info(s) for s, b in enumerate(bodies)}
         return dict(zip(bodies, res, strict=True))
+
+    def _slot_info(self, slot: int) -> tuple[Any, Any]:
+        """Slot ``slot``'s (std, sample states) of the group just stepped."""
+        std, state = self._last  # type: ignore[misc]
+        return (None if std is None else std[slot], state[slot])
 
     def _regroup(
         self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float,
@@ -718,6 +774,7 @@ class LiveSmoother:
                 for slot, body in enumerate(members):
                     self._bodies[body] = _Body(group, slot, self._clock)
         results: dict[Any, Array] = {}
+        infos: dict[Any, tuple[Any, Any]] = {}
         groups = {id(e.group): e.group for e in self._bodies.values()}.values()
         for group in groups:  # groups with at least one body tracked
             rows = [row.get(b, -1) for b in group.members]
@@ -726,11 +783,14 @@ class LiveSmoother:
             res = self._step_group(group, pos, states, step, conf)
             group.frames += 1
             results.update((b, r) for b, r in zip(group.members, res) if b is not None)
+            infos.update((b, self._slot_info(s)) for s, b in enumerate(group.members)
+                         if b is not None)  # fmt: skip
         for body in bodies:
             self._bodies[body].last_seen = self._clock
         out = {b: results[b] for b in bodies}
         if len(out) < len(self._bodies):
             out.update({b: results[b] for b in self._bodies if b not in row})
+        self._keyed_info = {b: infos[b] for b in out}
         self._same = None
         if bodies and len(bodies) == len(self._bodies):
             group = self._bodies[bodies[0]].group

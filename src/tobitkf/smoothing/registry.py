@@ -135,7 +135,10 @@ class LiveStepper(Protocol):
     coordinates sets ``uses_n_dims = True`` and receives ``n_dims=`` (2 or 3; a 2-D
     stream reaches ``step`` with a third axis of zeros). One that reads the frames'
     times (as batch reads ``SmoothInput.times``) sets ``uses_time = True`` and receives
-    ``time=``, the frame's timestamp in seconds (None when the stream gives none)."""
+    ``time=``, the frame's timestamp in seconds (None when the stream gives none).
+    After ``step``, a stepper may hold ``std`` ``(B, J)`` (the frame's posterior sd, in
+    the method's units) and ``rejected`` ``(B, J)`` (samples judged impossible):
+    ``LiveSmoother.std`` and ``.sample_state`` read them."""
 
     def step(
         self,
