@@ -97,3 +97,22 @@ def test_stream_gates_first_frames_have_no_sd():
             assert np.isnan(live.std).all()
             assert (live.sample_state == SampleState.MEASURED).all()
     assert np.isfinite(live.std).all()
+
+
+def test_a_method_without_a_stepper_gives_its_own_sd_and_rejections():
+    """A causal method re-run on the history each frame: the sd and the rejections of
+    its batch result's last frame (robust_online made to run so, against its stepper)."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(3)
+    y = np.cumsum(rng.normal(0, 0.005, (50, 25, 3)), axis=0) + 1
+    y[30:33, 7] += 0.5  # rejected
+    step, hist = (tk.LiveSmoother("kinect_v2", fps=30) for _ in range(2))
+    hist.spec = replace(hist.spec, live=None)
+    rejected = 0
+    for t in range(50):
+        np.testing.assert_allclose(hist.update(y[t]), step.update(y[t]), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(hist.std, step.std, rtol=1e-9, atol=1e-15)
+        np.testing.assert_array_equal(hist.sample_state, step.sample_state)
+        rejected += int((step.sample_state == SampleState.REJECTED).sum())
+    assert rejected > 0  # the rejections' path is taken

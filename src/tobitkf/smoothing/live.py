@@ -129,7 +129,17 @@ class _HistoryStepper:
             if all(c is None for c in cf)
             else np.stack([np.full(missing.shape, np.nan) if c is None else c for c in cf]),
         )
-        return np.asarray(run_method(self.spec, inp, self.params).positions[-1], dtype=float)
+        result = run_method(self.spec, inp, self.params)
+        # what LiveSmoother.std / .sample_state read: the method's own, at the last frame
+        self.std = None if result.std is None else np.asarray(result.std[-1], dtype=float)
+        rejected = [d.get("rejected") for d in result.diagnostics or ()]
+        self.rejected = (
+            None
+            if all(r is None for r in rejected)
+            else np.stack([np.zeros(missing.shape[1], bool) if r is None
+                           else np.asarray(r, dtype=bool)[-1] for r in rejected])
+        )  # fmt: skip
+        return np.asarray(result.positions[-1], dtype=float)
 
 
 @dataclass
