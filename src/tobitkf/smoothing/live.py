@@ -212,6 +212,38 @@ def _group_positions(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> 
     return pos, states
 
 
+class _FrameInfo:
+    """One stepped frame ``(B, J)``, for ``LiveSmoother.std`` and ``.sample_state``: its
+    output, missing samples, the stepper's sd and rejections, and the stream's metres
+    per unit; the sd in the stream's units and the sample states, by the causal rules
+    of :func:`~tobitkf.smoothing.output_states.sample_states`, on first use."""
+
+    def __init__(self, out: Array, missing: Any, std: Any, rejected: Any, scale: float) -> None:
+        self._raw = (out, missing, std, rejected, scale)
+        self._std: Any = None
+        self._state: Any = None
+
+    def std(self) -> Array | None:
+        out, _, std, _, scale = self._raw
+        if std is not None and self._std is None:
+            self._std = np.where(np.isnan(out).any(axis=-1), np.nan, np.asarray(std, float))
+            if scale != 1.0:
+                self._std /= scale
+        return self._std
+
+    def state(self) -> NDArray[np.int8]:
+        if self._state is None:
+            out, missing, _, rejected, _ = self._raw
+            finite = ~np.isnan(out).any(axis=-1)
+            state = np.full(finite.shape, int(SampleState.EXTRAPOLATED), dtype=np.int8)
+            state[~missing] = SampleState.MEASURED
+            if rejected is not None:
+                state[np.asarray(rejected) & ~missing] = SampleState.REJECTED
+            state[~finite] = SampleState.NONE
+            self._state = state
+        return self._state
+
+
 class LiveSmoother:
     """Smooth a live skeleton stream frame by frame.
 
@@ -430,9 +462,10 @@ class LiveSmoother:
         self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
         self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
-        # the last frame's (std, sample states) (B, J) each, and per body when keyed
-        self._last: tuple[Any, Any] | None = None
-        self._keyed_info: dict[Any, tuple[Any, Any]] | None = None
+        # the last frame, for .std and .sample_state (per body when keyed: its group's
+        # frame and its slot there)
+        self._last: _FrameInfo | None = None
+        self._keyed_info: dict[Any, tuple[_FrameInfo, int]] | None = None
 
     @property
     def std(self) -> Any:
@@ -452,14 +485,18 @@ class LiveSmoother:
         return self._frame_info(1)
 
     def _frame_info(self, k: int) -> Any:
+        def value(info: _FrameInfo) -> Any:
+            return info.std() if k == 0 else info.state()
+
         if self._keyed_info is not None:
-            if k == 0 and all(v[0] is None for v in self._keyed_info.values()):
+            rows = {b: value(info) for b, (info, _) in self._keyed_info.items()}
+            if k == 0 and all(v is None for v in rows.values()):
                 return None
-            return {b: v[k] for b, v in self._keyed_info.items()}
-        if self._last is None or self._last[k] is None:
+            return {b: rows[b][self._keyed_info[b][1]] for b in rows}
+        if self._last is None:
             return None
-        value = self._last[k]
-        return value[0] if self._single else value
+        v = value(self._last)
+        return v if v is None or not self._single else v[0]
 
     @property
     def clipped(self) -> NDArray[np.bool_] | None:
@@ -631,20 +668,10 @@ class LiveSmoother:
         return out
 
     def _note(self, out: Array, missing: Any, std: Any, rejected: Any) -> None:
-        """What :attr:`std` and :attr:`sample_state` give of the frame just stepped
-        ``out (B, J, 3)``: its sd (in the stream's units) and its sample states, by the
-        causal rules of :func:`~tobitkf.smoothing.output_states.sample_states`."""
-        finite = ~np.isnan(out).any(axis=-1)
-        rejected = np.zeros(finite.shape, bool) if rejected is None else np.asarray(rejected)
-        state = np.full(finite.shape, int(SampleState.EXTRAPOLATED), dtype=np.int8)
-        state[~missing] = SampleState.MEASURED
-        state[rejected & ~missing] = SampleState.REJECTED
-        state[~finite] = SampleState.NONE
-        if std is not None:
-            std = np.where(finite, np.asarray(std, dtype=float), np.nan)
-            if self._scale != 1.0:
-                std = std / self._scale
-        self._last = (std, state)
+        """Keep what :attr:`std` and :attr:`sample_state` give of the frame just stepped
+        (worked out only when they are read: a stream that never reads them pays
+        nothing for them)."""
+        self._last = _FrameInfo(out.copy(), missing, std, rejected, self._scale)
 
     def _output(self, out: Array, pos: Array) -> Array:
         """A stepper's output ``(B, J, 3)`` in the stream's coordinates, units and shape."""
@@ -751,10 +778,9 @@ class LiveSmoother:
         self._keyed_info = {b: self._slot_info(s) for s, b in enumerate(bodies)}
         return dict(zip(bodies, res, strict=True))
 
-    def _slot_info(self, slot: int) -> tuple[Any, Any]:
-        """Slot ``slot``'s (std, sample states) of the group just stepped."""
-        std, state = self._last  # type: ignore[misc]
-        return (None if std is None else std[slot], state[slot])
+    def _slot_info(self, slot: int) -> tuple[_FrameInfo, int]:
+        """The group just stepped's frame, and a body's slot in it."""
+        return self._last, slot  # type: ignore[return-value]
 
     def _regroup(
         self, bodies: list[Any], arr: Array, sts: list[Any] | None, dt: float,
@@ -784,7 +810,7 @@ class LiveSmoother:
                 for slot, body in enumerate(members):
                     self._bodies[body] = _Body(group, slot, self._clock)
         results: dict[Any, Array] = {}
-        infos: dict[Any, tuple[Any, Any]] = {}
+        infos: dict[Any, tuple[_FrameInfo, int]] = {}
         groups = {id(e.group): e.group for e in self._bodies.values()}.values()
         for group in groups:  # groups with at least one body tracked
             rows = [row.get(b, -1) for b in group.members]
