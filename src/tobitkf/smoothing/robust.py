@@ -344,6 +344,18 @@ def _guesses(inferred: NDArray[np.bool_], inferred_bones: bool, n_dims: int) -> 
     return inferred if inferred_bones and n_dims == 3 else np.zeros(inferred.shape, dtype=bool)
 
 
+def _sample_inputs(
+    states: Any, missing: NDArray[np.bool_], factor: float, confidence: Any,
+    inferred_bones: bool, n_dims: int,
+) -> tuple[NDArray[np.bool_], Array, NDArray[np.bool_]]:  # fmt: skip
+    """What the kernels take of the samples ``missing (T, B, J)``: the INFERRED ones, their
+    variance multipliers (:func:`_inferred_scale`) and the guesses put back at their
+    bone's length (:func:`_guesses`); the same for batch, stream gates and live."""
+    inferred = _inferred(states, missing.shape)
+    rinf = _inferred_scale(inferred, missing, factor, confidence)
+    return inferred, rinf, _guesses(inferred, inferred_bones, n_dims)
+
+
 def use_recording_gates(params: dict[str, Any], units: str | None) -> bool:
     """Whether the metric parameters come from the recording (``gates``, ``units``)."""
     gates = params.get("gates", "auto")
@@ -596,9 +608,9 @@ def _stream_gated(
     missing = np.ascontiguousarray(missing, dtype=bool)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
-    inferred = _inferred(states, missing.shape)
-    rinf = _inferred_scale(inferred, missing, factor, confidence)
-    guesses = _guesses(inferred, params["inferred_bones"], n_dims)
+    inferred, rinf, guesses = _sample_inputs(
+        states, missing, factor, confidence, params["inferred_bones"], n_dims
+    )
     state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
     work = k.new_work(B, J)
     guard = step_guard()
@@ -667,9 +679,9 @@ def _robust_chunk(
     ys = readonly(np.ascontiguousarray(ys, dtype=float))  # one compiled version
     k = kernels()
     missing = np.ascontiguousarray(missing, dtype=bool)
-    inferred = _inferred(states, missing.shape)
-    rinf = _inferred_scale(inferred, missing, factor, confidence)
-    guesses = _guesses(inferred, params["inferred_bones"], n_dims)
+    inferred, rinf, guesses = _sample_inputs(
+        states, missing, factor, confidence, params["inferred_bones"], n_dims
+    )
     fits = guess = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
     est, rejected, var = out
@@ -767,14 +779,15 @@ class RobustStepper:
         self.setup.pi[k.I_NDIMS] = n_dims
         y1 = readonly(np.ascontiguousarray(ys, dtype=float)[None])
         m1 = np.ascontiguousarray(missing, dtype=bool)[None]
-        inferred = _inferred(None if states is None else np.asarray(states)[None], m1.shape)
+        inferred, rinf, guesses = _sample_inputs(
+            None if states is None else np.asarray(states)[None], m1, self.factor,
+            None if confidence is None else np.asarray(confidence)[None], self.inferred_bones,
+            n_dims,
+        )  # fmt: skip
         k.online_frames(
-            y1, m1,
-            _inferred_scale(inferred, m1, self.factor,
-                            None if confidence is None else np.asarray(confidence)[None]),
-            _guesses(inferred, self.inferred_bones, n_dims), inferred, np.array([self._time]),
-            np.array([float(dt)]), *self.setup.args(), self._state, *self._scratch, out,
-            self.rejected[None], self.std[None], 0,
+            y1, m1, rinf, guesses, inferred, np.array([self._time]), np.array([float(dt)]),
+            *self.setup.args(), self._state, *self._scratch, out, self.rejected[None],
+            self.std[None], 0,
         )  # fmt: skip
         step_guard().guard_frames(y1, m1, out, self.std[None], 0, *self._guard)
         np.sqrt(np.maximum(self.std, 0.0, out=self.std), out=self.std)
