@@ -384,10 +384,7 @@ def _with_topology(sequences: list[Any], name: str | None) -> list[Any]:
     """The sequences with topology ``name`` where the file named no skeleton."""
     from tobitkf.io.unstated import with_unstated
 
-    try:
-        return with_unstated(sequences, topology=name)
-    except ValueError as exc:  # the count: say which option gave the skeleton
-        raise ValueError(str(exc).replace("topology ", "--topology ", 1)) from None
+    return with_unstated(sequences, topology=name, option="--topology")
 
 
 def _unused_settings(sequences: list[Any]) -> list[str]:

@@ -33,10 +33,12 @@ def with_unstated(
     *,
     fps: float | None = None,
     topology: str | None = None,
+    option: str = "topology",
 ) -> list[SkeletonSequence]:
     """The sequences with frame rate ``fps`` where they state none (nor timestamps) and
     skeleton ``topology`` (a name, :func:`~tobitkf.skeleton.topology.get_topology`) where
-    they name none; what a file states itself is kept.
+    they name none; what a file states itself is kept. ``option``: how an error names
+    the skeleton's setting (``"--topology"`` on the command line).
 
     Raises
     ------
@@ -51,7 +53,7 @@ def with_unstated(
         if topo is not None and names_no_skeleton(s):
             if s.n_joints != topo.n_joints:
                 raise ValueError(
-                    f"the file has {s.n_joints} keypoints, topology {topo.name} {topo.n_joints}"
+                    f"the file has {s.n_joints} keypoints, {option} {topo.name} {topo.n_joints}"
                 )
             notes = [n for n in s.metadata.get("reader_warnings") or () if "0..J-1" not in n]
             meta = {k: v for k, v in s.metadata.items() if k != "topology_guessed"}

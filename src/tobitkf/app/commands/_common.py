@@ -347,9 +347,9 @@ def _load_one(
     except (ValueError, OSError, ImportError) as exc:
         _fail(f"cannot read {what} {path}: {exc}")
     try:
-        seqs = with_unstated(seqs, fps=fps, topology=topology)
+        seqs = with_unstated(seqs, fps=fps, topology=topology, option="--topology")
     except ValueError as exc:
-        _fail(f"{what} {path}: {str(exc).replace('topology ', '--topology ', 1)}")
+        _fail(f"{what} {path}: {exc}")
     if not seqs:
         _fail(f"{what} {path} holds no skeleton")
     if len(seqs) > 1:
