@@ -289,7 +289,7 @@ def sd_floor(
     differences' noise ``floor`` of the samples marked in ``use`` (``(T, B, J)``; at
     least :data:`MIN_FIT_SAMPLES` differences) exceeds the fitted ``m``, else 1. Adds
     ``noise_floor`` and ``sd_scale`` to each region's report."""
-    from tobitkf.smoothing.robust_scale import noise_scale
+    from tobitkf.smoothing.robust_scale import second_difference_noise
 
     B, J = use.shape[1:]
     scale = np.ones((B, J))
@@ -301,10 +301,9 @@ def sd_floor(
                 continue
             ix = np.asarray(idx)
             y = np.where(use[:, b, ix, None], ys[:, b, ix, :n_dims], np.nan)
-            dd = y[2:] - 2 * y[1:-1] + y[:-2]
-            if np.count_nonzero(np.isfinite(dd)) < MIN_FIT_SAMPLES:
+            floor, n = second_difference_noise(y)
+            if n < MIN_FIT_SAMPLES:
                 continue
-            floor = noise_scale(y)
             ratio = max(1.0, floor / float(np.max(m[b, ix])))
             scale[b, ix] = ratio**2
             report["noise_floor"], report["sd_scale"] = floor, ratio

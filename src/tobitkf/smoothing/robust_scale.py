@@ -39,6 +39,7 @@ which grow as it shows its motion.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -58,6 +59,7 @@ __all__ = [
     "V_MAX_FACTOR",
     "noise_scale",
     "recording_gates",
+    "second_difference_noise",
     "stream_gate_frames",
 ]
 
@@ -127,15 +129,22 @@ def _projected_bone_centres(y: Array, parents: Any) -> Array:
     return out
 
 
-def noise_scale(ys: Array) -> float:
-    """The recording's measurement noise standard deviation per axis: the median over
-    joints of ``noise_sd`` (``1.4826 · median |Δ²y| / √6``), > 0."""
+def second_difference_noise(ys: Array) -> tuple[float, int]:
+    """White noise per axis read from the samples' second differences over time (axis 0),
+    ``1.4826 · median |Δ²y| / √6`` (NaN without any), and how many differences it read."""
     y = np.asarray(ys, dtype=float)
     if y.shape[0] < 3:
-        return 1e-9
-    dd = np.abs(y[2:] - 2 * y[1:-1] + y[:-2])
-    sigma = _MAD * _nanmedian(dd.reshape(-1)) / np.sqrt(6.0)
-    return float(sigma) if np.isfinite(sigma) and sigma > 0 else 1e-9
+        return math.nan, 0
+    dd = np.abs(y[2:] - 2 * y[1:-1] + y[:-2]).reshape(-1)
+    n = int(np.count_nonzero(np.isfinite(dd)))
+    return (float(_MAD * _nanmedian(dd) / np.sqrt(6.0)) if n else math.nan), n
+
+
+def noise_scale(ys: Array) -> float:
+    """The recording's measurement noise standard deviation per axis: the median over
+    joints of ``noise_sd`` (:func:`second_difference_noise`), > 0."""
+    sigma, _ = second_difference_noise(ys)
+    return sigma if np.isfinite(sigma) and sigma > 0 else 1e-9
 
 
 #: gates="stream": the frames the gates are first measured on (about half a second at
