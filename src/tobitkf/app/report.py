@@ -164,11 +164,12 @@ def make_figures(
     # without truth, the raw track is held against the default smoother, which rejects
     # glitches (a plain Kalman filter follows a sustained one and lags a fast movement)
     ref_name = BAND_METHOD if BAND_METHOD in names else names[0] if names else ""
-    reference = np.asarray(inp.methods[ref_name].positions) if names else raw
-    if inp.reference is not None:
-        ref_name, reference = BAND_METHOD, np.asarray(inp.reference.positions)
     if inp.truth is not None:
         reference = inp.truth
+    elif inp.reference is not None:
+        ref_name, reference = BAND_METHOD, np.asarray(inp.reference.positions)
+    else:
+        reference = np.asarray(inp.methods[ref_name].positions) if names else raw
     threshold, threshold_text = glitch_threshold(inp.raw)
     mask = glitch_mask(raw, reference, threshold)
     times = np.asarray(inp.raw.times(), dtype=float)
