@@ -190,6 +190,20 @@ def breakdown(track: str, truth: str, method: str, threshold: float,
     return res
 
 
+def parse_with_truth_replace(
+    ap: argparse.ArgumentParser, argv: list[str] | None
+) -> tuple[argparse.Namespace, tuple[str, str]]:
+    """``ap``'s arguments and the required ``--truth-replace OLD NEW`` (truth = track path
+    with OLD replaced by NEW), which argparse cannot take: OLD may look like an option
+    ("-Kinect-")."""
+    ap.epilog = "--truth-replace OLD NEW (required): truth = track path with OLD replaced by NEW"
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--truth-replace" not in argv or len(argv) < argv.index("--truth-replace") + 3:
+        ap.error("--truth-replace OLD NEW is required")
+    i = argv.index("--truth-replace")
+    return ap.parse_args(argv[:i] + argv[i + 3 :]), (argv[i + 1], argv[i + 2])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("tracks", nargs="+")
@@ -204,13 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         default=0.05,
         help="--truth-check: distance to another limb's joint counted, m",
     )
-    ap.epilog = "--truth-replace OLD NEW (required): truth = track path with OLD replaced by NEW"
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if "--truth-replace" not in argv or len(argv) < argv.index("--truth-replace") + 3:
-        ap.error("--truth-replace OLD NEW is required")
-    i = argv.index("--truth-replace")  # OLD / NEW may look like options ("-Kinect-")
-    old, new = argv[i + 1], argv[i + 2]
-    args = ap.parse_args(argv[:i] + argv[i + 3 :])
+    args, (old, new) = parse_with_truth_replace(ap, argv)
     print(f"| recording | class | samples | raw RMSE cm | {args.method} RMSE cm "
           f"| share of {args.method}'s squared error | swap-like samples |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")

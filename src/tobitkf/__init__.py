@@ -60,6 +60,8 @@ _EXPORTS: dict[str, str] = {
     "SmoothInput": "tobitkf.smoothing.registry",
     "SmoothOutput": "tobitkf.smoothing.registry",
     "LiveSmoother": "tobitkf.smoothing.live",
+    "DelayedSmoother": "tobitkf.smoothing.delayed",
+    "smooth_delayed": "tobitkf.smoothing.delayed",
     "live_methods": "tobitkf.smoothing.live",
     "warmup": "tobitkf.smoothing.warmup",
     # evaluation against ground truth, synthetic benchmark

@@ -1,0 +1,74 @@
+"""Per-frame cost of live smoothing with a delay (``DelayedSmoother``; run by hand).
+
+    .venv/bin/python benchmarks/bench_delayed.py [--frames 900] [--markdown]
+
+One synthetic Kinect V2 body (25 joints, the benchmark's corruption) is streamed frame by
+frame through ``DelayedSmoother`` (``robust``, 0.5 s late) with windows of 2, 5 and 10 s,
+next to the causal live default (``LiveSmoother``, ``robust_online``) and a minimal numpy
+Kalman update of one body, in the same run. Latencies are taken once the window is
+full (the work per frame is then constant), median and 99th percentile in ms, with the
+ratio of the median to the live default's and the share of a 30 fps frame interval
+(33.3 ms) one stream uses. ``--markdown`` prints the README's table (``make bench``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from bench_filters import machine  # benchmarks/ is on the path when this script runs
+from bench_smooth import minimal_kf_latency, synthetic_recordings
+
+import tobitkf as tk
+
+WINDOWS = (2.0, 5.0, 10.0)
+
+
+def latencies(live, frames: np.ndarray, states: np.ndarray, skip: int) -> np.ndarray:
+    """Milliseconds per ``update`` after the first ``skip`` frames."""
+    lat = np.empty(len(frames))
+    for k, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        live.update(frame, states[k])
+        lat[k] = time.perf_counter() - t0
+    return lat[skip:] * 1e3
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=900)
+    ap.add_argument("--markdown", action="store_true")
+    args = ap.parse_args(argv)
+    seq = synthetic_recordings(1, args.frames)[0]
+    P, S = seq.positions, seq.tracking_state
+    skip = round(max(WINDOWS) * 30)
+    if args.frames <= skip + 10:
+        ap.error(f"--frames must exceed {skip + 10} (the largest window, full)")
+    rows = {
+        "minimal numpy KF update": minimal_kf_latency(args.frames)[skip:] * 1e-3,
+        "LiveSmoother (robust_online), causal": latencies(
+            tk.LiveSmoother(seq.topology, fps=30.0), P, S, skip
+        ),
+    }
+    for w in WINDOWS:
+        live = tk.DelayedSmoother(seq.topology, delay=0.5, window=w, fps=30.0)
+        rows[f"DelayedSmoother (robust), 0.5 s late, {w:g} s window"] = latencies(live, P, S, skip)
+    ref = float(np.median(rows["LiveSmoother (robust_online), causal"]))
+    if not args.markdown:
+        for name, lat in rows.items():
+            print(f"{name:55s} median {np.median(lat):8.3f} ms  p99 {np.percentile(lat, 99):8.3f}")
+        return
+    print(f"Measured {machine()}; one body, 25 joints, {args.frames} frames streamed, "
+          f"timed from frame {skip} on.\n")  # fmt: skip
+    print("| live, 1 body, 25 joints | median ms / frame | p99 ms / frame | "
+          "/ robust_online | share of 33.3 ms |")  # fmt: skip
+    print("|---|---|---|---|---|")
+    for name, lat in rows.items():
+        med = float(np.median(lat))
+        print(f"| {name} | {med:.3g} | {np.percentile(lat, 99):.3g} | {med / ref:.3g}× | "
+              f"{100 * med / (1000 / 30):.2g} % |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
