@@ -175,7 +175,7 @@ def test_bad_frames_are_refused_and_change_nothing():
         ({"positions": P[1, :5]}, "5 joints"),
         ({"positions": P[1, :, :2]}, "differs from the stream's"),
         ({"positions": np.where(np.arange(25)[:, None] == 3, np.inf, P[1])}, "infinite"),
-        ({"positions": {1: P[1]}}, "one DelayedSmoother per id"),
+        ({"positions": {1: P[1]}}, "not keyed by body id"),
         ({"positions": P[1], "timestamp": -1.0}, "comes before"),
         ({"positions": P[1]}, "timestamp: give it with every frame"),
         (
@@ -210,3 +210,74 @@ def test_bad_frames_are_refused_and_change_nothing():
 )
 def test_delay_and_window_in_frames(delay, window, fps, frames):
     assert tk.smoothing.delayed.delay_frames(delay, window, fps) == frames
+
+
+def test_keyed_bodies_each_as_a_stream_of_its_own():
+    """Bodies keyed by id: 1 throughout (absent for 3 frames, fewer than D = 6: kept,
+    missing there), 2 from frame 20, 3 in frames 0-40 and again from 50 (absent for
+    more than D: forgotten once its frame 40 is returned, then a new track), 4 up to 2
+    frames before the end (its flush stops at its last frame). Each body's
+    frames are smooth_delayed of its own track from its first frame to D frames after
+    its last (NaN where absent); nothing of any body is lost, the flush included."""
+    T, D, kw = 70, 6, {"delay": 0.2, "window": 1.0}
+    recs = [_recording(s, 3.0)[0] for s in (8, 9, 10, 12)]
+    stamps = recs[0].timestamps[:T]
+    present = {1: np.ones(T, bool), 2: np.arange(T) >= 20,
+               3: (np.arange(T) <= 40) | (np.arange(T) >= 50),
+               4: np.arange(T) <= T - 3}  # fmt: skip
+    present[1][30:33] = False
+    live = tk.DelayedSmoother(recs[0].topology, fps=30.0, **kw)
+    got: dict = {}
+    for t in range(T):
+        frame = {b: recs[b - 1].positions[t] for b in present if present[b][t]}
+        out = live.update(frame, timestamp=stamps[t])
+        assert (out == {}) if t < D else set(out) <= {1, 2, 3, 4}
+        for b, pos in out.items():
+            got.setdefault((b, t - D), (pos, live.std[b]))
+    start = live.frame_index + 1
+    rest = live.flush()
+    assert {b: len(r) for b, r in rest.items()} == {1: D, 2: D, 3: D, 4: D - 2}
+    for b, rows in rest.items():
+        for k, row in enumerate(rows):
+            got[(b, start + k)] = (row, live.std[b][k])
+    tracks = [(1, 0, T - 1), (2, 20, T - 1), (3, 0, 40), (3, 50, T - 1), (4, 0, T - 3)]
+    for b, first, last in tracks:
+        stop = min(last + D, T - 1) + 1
+        pos = recs[b - 1].positions[first:stop].copy()
+        pos[~present[b][first:stop]] = np.nan
+        seq = tk.SkeletonSequence(pos, recs[0].topology, timestamps=stamps[first:stop], fps=30.0)
+        twin = tk.smooth_delayed(seq, **kw)
+        for t in range(first, last + 1):
+            frame, sd = got.pop((b, t))
+            np.testing.assert_array_equal(frame, twin.positions[t - first])
+            np.testing.assert_array_equal(sd, twin.std[t - first])
+    assert not got  # no frame of a body outside its tracks
+
+
+def test_keyed_frames_are_checked_whole():
+    seq, _ = _recording(11, 1.0)
+    P = seq.positions
+    live = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0)
+    live.update({1: P[0], 2: P[0] + 1}, timestamp=0.0)
+    bad = [
+        ({"positions": {1: P[1], 2: P[1, :5]}, "timestamp": 0.1}, "body 2: positions: 5 joints"),
+        (
+            {"positions": {1: P[1], 2: np.stack([P[1]] * 2)}, "timestamp": 0.1},
+            r"body 2: .*\(J, D\)",
+        ),
+        (
+            {"positions": {1: P[1]}, "timestamp": 0.1, "tracking_state": {2: [2] * 25}},
+            "same body ids",
+        ),
+        ({"positions": {7: P[1]}}, "timestamp: give it with every frame"),  # a new body
+        ({"positions": {7: P[1]}, "timestamp": -1.0}, "comes before"),
+        ({"positions": P[1], "timestamp": 0.1}, "keyed by body id"),
+    ]
+    for args, message in bad:
+        with pytest.raises(ValueError, match=message):
+            live.update(**args)
+    assert live.n_frames == 1 and set(live._bodies) == {1, 2}
+    plain = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0)
+    plain.update(P[0])
+    with pytest.raises(ValueError, match="not keyed"):
+        plain.update({1: P[1]})

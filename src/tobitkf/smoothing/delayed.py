@@ -57,6 +57,26 @@ def _seconds(name: str, value: Any, positive: bool) -> float:
     return v
 
 
+def _stamp(timestamp: Any) -> float | None:
+    """A frame's timestamp in seconds (None: not given), refused unless finite."""
+    if timestamp is None:
+        return None
+    try:
+        ts = float(timestamp)
+    except (TypeError, ValueError):
+        ts = math.nan
+    if not math.isfinite(ts):
+        raise ValueError(f"timestamp must be a finite number of seconds, got {timestamp!r}")
+    return ts
+
+
+def _presence(before: tuple[bool, ...], now: tuple[bool, ...]) -> str:
+    """The error for a frame that gives other inputs than the stream's first frame."""
+    what = [n for n, b, h in zip(("tracking_state", "timestamp", "confidence"), before, now,
+                                 strict=True) if b != h]  # fmt: skip
+    return f"{', '.join(what)}: give it with every frame of a stream or with none"
+
+
 def delay_frames(delay: float, window: float, fps: float) -> tuple[int, int]:
     """``(D, W)``: the delay and the window in frames at ``fps`` (the delay rounded up,
     so a frame is never returned earlier than asked; the window rounded, and at least
@@ -166,8 +186,8 @@ class DelayedSmoother:
         ``min_confidence``, ``inferred_noise_factor``).
 
     Frames are ``(J, D)`` or ``(B, J, D)`` (D = 3 or 2; the first frame fixes it), NaN
-    for a missing joint. A stream keyed by body id is not taken: use one smoother per
-    id. A frame that is refused (``ValueError``) leaves the stream unchanged.
+    for a missing joint, or ``{body_id: (J, D)}`` (:meth:`update`). A frame that is
+    refused (``ValueError``) leaves the stream unchanged.
     """
 
     def __init__(
@@ -196,6 +216,7 @@ class DelayedSmoother:
         if not isinstance(self.topology, Topology):
             raise TypeError(f"topology must be a Topology or a name, got {type(topology).__name__}")
         self.method, self.units, self._options = method, units, options
+        self._given = kwargs  # the method parameters as given (each keyed body's smoother)
         self.reset()
 
     def reset(self) -> None:
@@ -215,39 +236,53 @@ class DelayedSmoother:
         self.std: Array | None = None
         #: SampleState codes of the frame(s) last returned
         self.sample_state: NDArray[np.int8] | None = None
+        # a stream keyed by body id: each body's own smoother, its first frame in the
+        # stream, its last frame in which it was seen (None: not keyed, or no frame yet)
+        self._bodies: dict[Any, DelayedSmoother] | None = None
+        self._seen: dict[Any, tuple[int, int]] = {}
+        self._stamps: deque[float | None] = deque(maxlen=self.D + 1)
 
     def update(
         self,
-        positions: ArrayLike,
-        tracking_state: ArrayLike | None = None,
+        positions: ArrayLike | Mapping[Any, ArrayLike],
+        tracking_state: ArrayLike | Mapping[Any, ArrayLike] | None = None,
         timestamp: float | None = None,
-        confidence: ArrayLike | None = None,
-    ) -> Array | None:
+        confidence: ArrayLike | Mapping[Any, ArrayLike] | None = None,
+    ) -> Any:
         """Take one frame; return the frame ``delay`` back, smoothed (shaped as
         ``positions``), or None while fewer than ``delay`` frames have followed the first.
         :attr:`frame_index`, :attr:`timestamp`, :attr:`std` and :attr:`sample_state`
-        describe the frame returned. Arguments as for ``LiveSmoother.update`` (no
-        mapping of body ids)."""
+        describe the frame returned. Arguments as for ``LiveSmoother.update``.
+
+        Keyed by body id (``positions`` a mapping ``{body_id: (J, D)}``, and
+        ``tracking_state`` and ``confidence`` mappings of the same ids, or None): returns
+        ``{body_id: (J, D)}`` for the bodies that were in the stream at the frame
+        returned (``std`` and ``sample_state`` are such mappings too). Each body is
+        smoothed alone, as a stream of its own from its first frame, missing in the
+        frames it is absent from; a body is forgotten once its last frame has been
+        returned (absent for more than ``delay``), so nothing of it is lost, and an id
+        that comes back after that starts a new track. A stream is keyed or not from its
+        first frame on."""
         if self._flushed:
             raise ValueError("this stream was flushed (it has ended); reset() starts a new one")
-        frame = self._checked(positions, tracking_state, timestamp, confidence)
-        self._buffer.append(frame)
-        self.n_frames += 1
-        t = self.n_frames - 1 - self.D
-        if t < 0:
-            return None
-        first = self.n_frames - len(self._buffer)
-        pos, std, states = self._give(self._run(), [t - first], t)
-        self.std = None if std is None else std[0]
-        self.sample_state = None if states is None else states[0]
-        return pos[0]
+        keyed = isinstance(positions, Mapping)
+        if self.n_frames and keyed != (self._bodies is not None):
+            raise ValueError("this stream is keyed by body id: pass {body_id: positions}"
+                             if self._bodies is not None else
+                             "this stream is not keyed by body id: pass an array")  # fmt: skip
+        if keyed:
+            return self._update_keyed(positions, tracking_state, timestamp, confidence)
+        return self._push(self._checked(positions, tracking_state, timestamp, confidence))
 
-    def flush(self) -> Array:
+    def flush(self) -> Any:
         """End the stream: return the frames not returned yet (the last ``delay``), from
-        one run on the final window, stacked ``(n, J, D)`` (``(n, B, J, D)``); ``std`` and
+        one run on the final window, stacked ``(n, J, D)`` (``(n, B, J, D)``; keyed:
+        ``{body_id: (n_b, J, D)}``, each body up to its last frame); ``std`` and
         ``sample_state`` then have one row per frame. Afterwards :meth:`update` refuses
         frames until :meth:`reset`."""
         self._flushed = True
+        if self._bodies is not None:
+            return self._flush_keyed()
         start = self.frame_index + 1
         if start >= self.n_frames:
             shape = (0, *self._shape) if self._shape is not None else (0, 0, 0)
@@ -257,6 +292,99 @@ class DelayedSmoother:
         rows = list(range(start - first, self.n_frames - first))
         pos, self.std, self.sample_state = self._give(self._run(), rows, self.n_frames - 1)
         return pos
+
+    # ------------------------------------------------------------------ keyed by body id
+    def _update_keyed(self, frames: Mapping[Any, Any], states: Any, timestamp: Any,
+                      confidence: Any) -> dict[Any, Array]:  # fmt: skip
+        for name, m in (("tracking_state", states), ("confidence", confidence)):
+            if m is not None and (not isinstance(m, Mapping) or set(m) != set(frames)):
+                raise ValueError(f"{name}: a mapping of the same body ids as positions")
+        has = (states is not None, timestamp is not None, confidence is not None)
+        if self._has is not None and has != self._has:
+            raise ValueError(_presence(self._has, has))
+        stamp = _stamp(timestamp)
+        prev = self._stamps[-1] if self._stamps else None
+        if stamp is not None and prev is not None and stamp < prev:
+            raise ValueError(f"timestamp {stamp} comes before the previous frame's ({prev})")
+        bodies = self._bodies if self._bodies is not None else {}
+        new = {b: self._body() for b in frames if b not in bodies}
+        checked = {}
+        for b, frame in frames.items():  # every body checked before any is changed
+            body = bodies.get(b) or new[b]
+            try:
+                if np.ndim(frame) != 2:
+                    raise ValueError(f"positions: expected shape (J, D), found {np.shape(frame)}")
+                sb = None if states is None else states[b]
+                cb = None if confidence is None else confidence[b]
+                checked[b] = body._checked(frame, sb, stamp, cb)
+            except ValueError as exc:
+                raise ValueError(f"body {b!r}: {exc}") from None
+        # the frame is good: from here on it is part of the stream
+        self._bodies, self._has = bodies, has
+        bodies.update(new)
+        n = self.n_frames
+        for b in frames:
+            self._seen[b] = (self._seen.get(b, (n, n))[0], n)
+        self.n_frames += 1
+        self._stamps.append(stamp)
+        t = n - self.D
+        out, std, st = {}, {}, {}
+        for b, body in list(bodies.items()):
+            res = body._push(checked[b] if b in checked else body._absent(stamp))
+            if res is not None:
+                out[b], std[b], st[b] = res, body.std, body.sample_state
+            if self._seen[b][1] <= t:  # its last frame has just been returned
+                del bodies[b], self._seen[b]
+        self.frame_index = max(t, -1)
+        self.timestamp = self._stamps[0] if t >= 0 else None
+        self.std = std if any(v is not None for v in std.values()) else None
+        self.sample_state = st or None
+        return out
+
+    def _body(self) -> DelayedSmoother:
+        """A smoother of the same settings for one body of a keyed stream."""
+        return DelayedSmoother(self.topology, self.method, delay=self.delay,
+                               window=self.window, fps=self.fps, units=self.units,
+                               **self._options, **self._given)  # fmt: skip
+
+    def _absent(self, stamp: float | None) -> tuple:
+        """This body's frame when the stream's frame does not have it: every joint
+        missing (NOT_TRACKED, no confidence)."""
+        pos = np.full((1, *self._shape), np.nan)
+        has_states, _, has_conf = self._has or (False, False, False)
+        st = np.zeros(pos.shape[:-1], np.int8) if has_states else None
+        cf = np.full(pos.shape[:-1], np.nan) if has_conf else None
+        return pos, st, stamp, cf
+
+    def _flush_keyed(self) -> dict[Any, Array]:
+        out, std, st = {}, {}, {}
+        for b, body in (self._bodies or {}).items():
+            first, last = self._seen[b]
+            start = first + body.frame_index + 1  # its first frame not returned yet
+            rows = body.flush()
+            keep = max(0, min(len(rows), last - start + 1))  # up to its last frame
+            out[b] = rows[:keep]
+            std[b] = None if body.std is None else body.std[:keep]
+            st[b] = None if body.sample_state is None else body.sample_state[:keep]
+        self.std = std if any(v is not None for v in std.values()) else None
+        self.sample_state = st or None
+        self.frame_index = self.n_frames - 1
+        return out
+
+    # ------------------------------------------------------------------ one array stream
+    def _push(self, frame: tuple) -> Array | None:
+        """Take a checked frame (:meth:`_checked`); the frame ``delay`` back, or None."""
+        self._buffer.append(frame)
+        self._stamps.append(frame[2])
+        self.n_frames += 1
+        t = self.n_frames - 1 - self.D
+        if t < 0:
+            return None
+        first = self.n_frames - len(self._buffer)
+        pos, std, states = self._give(self._run(), [t - first], t)
+        self.std = None if std is None else std[0]
+        self.sample_state = None if states is None else states[0]
+        return pos[0]
 
     # ------------------------------------------------------------------ internals
     def _run(self) -> list[SkeletonSequence]:
@@ -303,9 +431,6 @@ class DelayedSmoother:
     def _checked(self, positions: Any, states: Any, timestamp: Any, confidence: Any) -> tuple:
         """A frame checked against the stream, with a body axis; nothing is changed when
         it is refused."""
-        if isinstance(positions, Mapping):
-            raise ValueError("positions: a stream keyed by body id needs one DelayedSmoother "
-                             "per id (or LiveSmoother, which takes them together)")  # fmt: skip
         try:
             pos = np.array(positions, dtype=float)
         except (TypeError, ValueError):
@@ -338,24 +463,14 @@ class DelayedSmoother:
                 raise ValueError("confidence: expected numbers in [0, 1]") from None
             if cf.shape != body or np.any((cf < 0) | (cf > 1)):
                 raise ValueError(f"confidence: expected scores in [0, 1] of shape {body}")
-        ts = None
-        if timestamp is not None:
-            try:
-                ts = float(timestamp)
-            except (TypeError, ValueError):
-                ts = math.nan
-            if not math.isfinite(ts):
-                raise ValueError(f"timestamp must be a finite number of seconds, got {timestamp!r}")
+        ts = _stamp(timestamp)
+        if ts is not None:
             prev = self._buffer[-1][2] if self._buffer else None
             if prev is not None and ts < prev:
                 raise ValueError(f"timestamp {ts} comes before the previous frame's ({prev})")
         has = (st is not None, ts is not None, cf is not None)
         if self._has is not None and has != self._has:
-            what = [n for n, h0, h1 in zip(("tracking_state", "timestamp", "confidence"),
-                                           self._has, has, strict=True) if h0 != h1]  # fmt: skip
-            raise ValueError(
-                f"{', '.join(what)}: give it with every frame of a stream or with none"
-            )
+            raise ValueError(_presence(self._has, has))
         self._shape, self._has = pos.shape, has
         if pos.ndim == 2:
             pos = pos[None]
