@@ -49,14 +49,14 @@ def test_the_stream_gives_the_batch_twins_frames():
     ones too), its sd and its states are smooth_delayed's, and each returned frame is the
     one 15 frames back."""
     seq = load(data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt"))[0]
-    pos, std, states, index = _stream(seq, delay=0.5, window=3.0)
-    batch = tk.smooth_delayed(seq, delay=0.5, window=3.0)
+    pos, std, states, index = _stream(seq, delay=0.5, window=4.0)
+    batch = tk.smooth_delayed(seq, delay=0.5, window=4.0)
     np.testing.assert_array_equal(pos, batch.positions)
     np.testing.assert_array_equal(std, batch.std)
     np.testing.assert_array_equal(states, batch.sample_state)
     assert index == list(range(seq.n_frames - 15))
     assert (states == SampleState.REJECTED).any()
-    assert batch.metadata["provenance"]["delayed"]["window_frames"] == 90
+    assert batch.metadata["provenance"]["delayed"]["window_frames"] == 120
 
 
 def test_bodies_and_timestamps_each_as_alone():
@@ -70,9 +70,9 @@ def test_bodies_and_timestamps_each_as_alone():
     bodies = [s.replace(positions=s.positions[:T], tracking_state=None, timestamps=stamps,
                         fps=30.0) for s in (a, b)]  # fmt: skip
     pos, std, _, _ = _stream(bodies[0], positions=np.stack([s.positions for s in bodies], 1),
-                             delay=0.2, window=1.0)  # fmt: skip
+                             delay=0.2, window=1.0, max_reject=0.5)  # fmt: skip
     for k, body in enumerate(bodies):
-        alone = tk.smooth_delayed(body, delay=0.2, window=1.0)
+        alone = tk.smooth_delayed(body, delay=0.2, window=1.0, max_reject=0.5)
         np.testing.assert_array_equal(pos[:, k], alone.positions)
         np.testing.assert_array_equal(std[:, k], alone.std)
 
@@ -107,7 +107,7 @@ def test_frame_t_reads_only_its_window(t):
     t + D + 1 - W, is replaced by garbage; it changes when frame t + D, or t + D + 1 - W,
     is (the noise fit reads the whole window)."""
     seq, _ = _recording(5, 4.0)
-    kw = {"delay": 0.2, "window": 1.0}
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
     base = tk.smooth_delayed(seq, **kw).positions[t]
     rng = np.random.default_rng(t)
 
@@ -127,9 +127,11 @@ def test_a_pixel_stream_needs_no_gates():
     first frame on (a window of one frame too), as smooth() does on a recording."""
     seq, _ = _recording(6, 2.0)
     px = tk.SkeletonSequence(seq.positions[:, :, :2] * 500, seq.topology, fps=30.0, units=None)
-    pos, _, _, _ = _stream(px, delay=0.1, window=1.0)
+    pos, _, _, _ = _stream(px, delay=0.1, window=1.0, max_reject=0.5)
     assert pos.shape == px.positions.shape
-    np.testing.assert_array_equal(pos, tk.smooth_delayed(px, delay=0.1, window=1.0).positions)
+    np.testing.assert_array_equal(
+        pos, tk.smooth_delayed(px, delay=0.1, window=1.0, max_reject=0.5).positions
+    )
     assert np.isfinite(pos[5:]).mean() > 0.95
 
 
@@ -168,7 +170,7 @@ def test_bad_settings_are_refused(kw, message):
 
 def test_bad_frames_are_refused_and_change_nothing():
     seq, _ = _recording(7, 1.0)
-    live = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0)
+    live = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0, max_reject=0.5)
     P = seq.positions
     live.update(P[0], timestamp=0.0)
     bad = [
@@ -219,7 +221,7 @@ def test_keyed_bodies_each_as_a_stream_of_its_own():
     frames before the end (its flush stops at its last frame). Each body's
     frames are smooth_delayed of its own track from its first frame to D frames after
     its last (NaN where absent); nothing of any body is lost, the flush included."""
-    T, D, kw = 70, 6, {"delay": 0.2, "window": 1.0}
+    T, D, kw = 70, 6, {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
     recs = [_recording(s, 3.0)[0] for s in (8, 9, 10, 12)]
     stamps = recs[0].timestamps[:T]
     present = {1: np.ones(T, bool), 2: np.arange(T) >= 20,
@@ -257,7 +259,7 @@ def test_keyed_bodies_each_as_a_stream_of_its_own():
 def test_keyed_frames_are_checked_whole():
     seq, _ = _recording(11, 1.0)
     P = seq.positions
-    live = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0)
+    live = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0, max_reject=0.5)
     live.update({1: P[0], 2: P[0] + 1}, timestamp=0.0)
     bad = [
         ({"positions": {1: P[1], 2: P[1, :5]}, "timestamp": 0.1}, "body 2: positions: 5 joints"),
@@ -277,7 +279,19 @@ def test_keyed_frames_are_checked_whole():
         with pytest.raises(ValueError, match=message):
             live.update(**args)
     assert live.n_frames == 1 and set(live._bodies) == {1, 2}
-    plain = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0)
+    plain = tk.DelayedSmoother(seq.topology, delay=0.1, window=1.0, max_reject=0.5)
     plain.update(P[0])
     with pytest.raises(ValueError, match="not keyed"):
         plain.update({1: P[1]})
+
+
+def test_the_window_holds_twice_the_longest_rejection():
+    """robust gives a joint up after max_reject (2 s): a 3 s window is refused, a 3 s
+    window with max_reject 1.5 s is not; kf has no such limit."""
+    with pytest.raises(ValueError, match="twice max_reject"):
+        tk.DelayedSmoother("kinect_v2", window=3.0)
+    seq, _ = _recording(13, 1.0)
+    with pytest.raises(ValueError, match="twice max_reject"):
+        tk.smooth_delayed(seq, window=3.0)
+    tk.DelayedSmoother("kinect_v2", window=3.0, max_reject=1.5)
+    tk.DelayedSmoother("kinect_v2", "kf", window=1.0)

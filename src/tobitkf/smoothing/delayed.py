@@ -89,6 +89,20 @@ def delay_frames(delay: float, window: float, fps: float) -> tuple[int, int]:
     return D, W
 
 
+def _check_window(params: Mapping[str, Any], window: float) -> None:
+    """A method that gives a joint up after ``max_reject`` seconds of rejection (robust)
+    judges a failure by the rest of the window (its median bone lengths, its noise fit),
+    so a failure it may still reject must be less than half the window: on KERAAL a 2 s
+    window gave results worse than the raw track (docs/robust.md)."""
+    mr = params.get("max_reject")
+    if mr is not None and math.isfinite(float(mr)) and window < 2 * float(mr):
+        raise ValueError(
+            f"window {window:g} s is shorter than twice max_reject ({float(mr):g} s): a "
+            f"failure the method may reject would be half the window or more; give "
+            f"window >= {2 * float(mr):g} (or a smaller max_reject)"
+        )
+
+
 def _bounds(t: int, n: int, D: int, W: int) -> tuple[int, int]:
     """The frames ``a .. b - 1`` whose run gives frame ``t`` when ``n`` frames exist."""
     b = min(n, t + D + 1)
@@ -130,6 +144,7 @@ def smooth_delayed(
     if not isinstance(sequence, SkeletonSequence):
         raise TypeError(f"smooth_delayed expects a SkeletonSequence, got {type(sequence).__name__}")
     D, W = delay_frames(delay, window, sequence.fps or 30.0)
+    _check_window(check_params(method, kwargs), float(window))
     T = sequence.n_frames
     pos = np.full(sequence.positions.shape, np.nan)
     std = np.full(sequence.positions.shape[:2], np.nan)
@@ -172,7 +187,8 @@ class DelayedSmoother:
         0 makes the method causal (the frame is judged on the past only).
     window : float
         Seconds of the stream the method sees at each frame (default 10; at least the
-        delay and one frame). The work per frame grows with it.
+        delay and one frame, and twice the method's ``max_reject``, 4 s for ``robust``).
+        The work per frame grows with it.
     fps : float
         Frame rate: turns ``delay`` and ``window`` into frames, and times the frames
         when no timestamps are given.
@@ -211,6 +227,7 @@ class DelayedSmoother:
         if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
         self.D, self.W = delay_frames(delay, window, fps)
+        _check_window(self.params, float(window))
         self.delay, self.window, self.fps = float(delay), float(window), float(fps)
         self.topology = get_topology(topology) if isinstance(topology, str) else topology
         if not isinstance(self.topology, Topology):
