@@ -27,10 +27,11 @@ from tobitkf.evaluation.evaluate import evaluate_paths, pool_scores
 from tobitkf.smoothing.delayed import delay_frames, smooth_delayed
 
 
-def specs(delays: list[float], window: float) -> list:
-    late = [(f"delayed {d:g} s", lambda s, d=d: smooth_delayed(s, delay=d, window=window))
-            for d in delays]  # fmt: skip
-    return ["raw", "robust_online", *late, "robust"]
+def specs(delays: list[float], window: float, **params: float) -> list:
+    def late(d: float) -> tuple:
+        return (f"delayed {d:g} s", lambda s: smooth_delayed(s, delay=d, window=window, **params))
+
+    return ["raw", "robust_online", *(late(d) for d in delays), "robust"]
 
 
 def late_frames(name: str, window: float) -> str:
@@ -43,13 +44,15 @@ def vs_raw(value: float, raw: float, name: str) -> str:
     return "" if name == "raw" else f"{100 * (value / raw - 1):+.0f} %"
 
 
-def real(tracks: list[str], replace: tuple[str, str], delays: list[float], window: float) -> None:
-    methods = specs(delays, window)
+def real(tracks: list[str], replace: tuple[str, str], delays: list[float], window: float,
+         **params: float) -> None:  # fmt: skip
+    methods = specs(delays, window, **params)
     tables = [evaluate_paths(p, p.replace(*replace), methods)[1] for p in tracks]
     pooled = pool_scores(tables)
     n = sum(t.scores[0].counts["all"] for t in tables)
+    given = "".join(f", delayed rows with {k} {v:g}" for k, v in params.items())
     print(f"RMSE against motion capture, cm ({len(tables)} recordings, {n:,} samples; "
-          f"pooled; window {window:g} s):\n")  # fmt: skip
+          f"pooled; window {window:g} s{given}):\n")  # fmt: skip
     print("| method | frames late at 30 fps | RMSE | vs raw | sustained | in 95% ball |")
     print("|---|---|---|---|---|---|")
     raw = pooled[0]["rmse_cm"]
@@ -81,6 +84,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--benchmark", type=int, metavar="SEEDS")
     parser.add_argument("--delays", default="0,0.1,0.2,0.33,0.5,1,2")
     parser.add_argument("--window", type=float, default=10.0)
+    parser.add_argument("--fit-seconds", type=float, help="robust's fit_seconds, delayed rows")
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--benchmark" in argv:
         args = parser.parse_args(argv)
@@ -91,7 +95,8 @@ def main(argv: list[str] | None = None) -> None:
         benchmark(args.benchmark, delays, args.window)
     else:
         tracks = sorted(p for pattern in args.tracks for p in glob.glob(pattern) or [pattern])
-        real(tracks, replace, delays, args.window)
+        extra = {} if args.fit_seconds is None else {"fit_seconds": args.fit_seconds}
+        real(tracks, replace, delays, args.window, **extra)
 
 
 if __name__ == "__main__":
