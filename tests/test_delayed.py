@@ -295,3 +295,22 @@ def test_the_window_holds_twice_the_longest_rejection():
         tk.smooth_delayed(seq, window=3.0)
     tk.DelayedSmoother("kinect_v2", window=3.0, max_reject=1.5)
     tk.DelayedSmoother("kinect_v2", "kf", window=1.0)
+
+
+def test_confidence_and_tracking_states_reach_the_method():
+    """A stream with a pose estimator's scores and tracking states gives what
+    smooth_delayed gives of the recording carrying them; the scores change the result
+    (the robust methods weigh samples by them)."""
+    seq, _ = _recording(14, 2.0)
+    rng = np.random.default_rng(14)
+    conf = rng.uniform(0.05, 1.0, seq.positions.shape[:2])
+    scored = seq.replace(confidence=conf)
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
+    live = tk.DelayedSmoother(seq.topology, fps=30.0, **kw)
+    out = [live.update(seq.positions[t], seq.tracking_state[t], seq.timestamps[t], conf[t])
+           for t in range(seq.n_frames)]  # fmt: skip
+    pos = np.concatenate([np.array([o for o in out if o is not None]), live.flush()])
+    twin = tk.smooth_delayed(scored, **kw)
+    np.testing.assert_array_equal(pos, twin.positions)
+    assert not np.array_equal(twin.positions, tk.smooth_delayed(seq, **kw).positions,
+                              equal_nan=True)  # fmt: skip
