@@ -161,6 +161,8 @@ def test_a_delay_beats_the_causal_default_on_the_benchmark():
         ({"units": "inch"}, "units must be one of"),
         ({"offline": True}, "offline"),
         ({"tau": -1}, "tau"),
+        ({"min_confidence": 2}, "min_confidence"),
+        ({"untangle": "sometimes"}, "untangle"),
     ],
 )
 def test_bad_settings_are_refused(kw, message):

@@ -46,14 +46,14 @@ Array = NDArray[np.float64]
 _STATES = tuple(int(s) for s in TrackingState)
 
 
-def _seconds(name: str, value: Any, positive: bool) -> float:
+def _number(name: str, value: Any, positive: bool, unit: str = "seconds") -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
         v = math.nan
     if not math.isfinite(v) or v < 0 or (positive and v == 0):
         kind = "a positive number" if positive else "a number >= 0"
-        raise ValueError(f"{name} must be {kind} of seconds, got {value!r}")
+        raise ValueError(f"{name} must be {kind} of {unit}, got {value!r}")
     return v
 
 
@@ -81,9 +81,9 @@ def delay_frames(delay: float, window: float, fps: float) -> tuple[int, int]:
     """``(D, W)``: the delay and the window in frames at ``fps`` (the delay rounded up,
     so a frame is never returned earlier than asked; the window rounded, and at least
     ``D + 1`` frames: the frame returned and the ``D`` after it)."""
-    delay = _seconds("delay", delay, False)
-    window = _seconds("window", window, True)
-    fps = _seconds("fps", fps, True)
+    delay = _number("delay", delay, False)
+    window = _number("window", window, True)
+    fps = _number("fps", fps, True, "frames per second")
     D = math.ceil(delay * fps - 1e-9)
     W = max(round(window * fps), D + 1)
     return D, W
@@ -223,7 +223,7 @@ class DelayedSmoother:
         if "offline" in kwargs:
             raise ValueError("offline: DelayedSmoother runs the method as smooth() does; "
                              "give the method's own parameters")  # fmt: skip
-        self.params = check_params(method, kwargs)
+        self.params = check_params(method, {**kwargs, **options})  # the options checked too
         if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
         self.D, self.W = delay_frames(delay, window, fps)
