@@ -23,6 +23,7 @@ import os
 import re
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,6 +78,21 @@ def render(command: str, output: str) -> str:
 _CACHE: dict[str, str] = {}  # a command shown in several files runs once
 
 
+def prefetch(paths: list[Path], *, only: str | None, jobs: int | None = None) -> None:
+    """Run the result blocks' commands of ``paths`` (not the timings: they run alone)
+    ``jobs`` at a time (default: the CPUs), into the cache :func:`update` reads: each
+    is its own process, so the results are those of a run one by one, sooner."""
+    cmds = []
+    for path in paths:
+        for b in blocks(path):
+            if not b.bench and (not only or only in b.command) and b.command not in _CACHE:
+                cmds.append(b.command)
+    cmds = list(dict.fromkeys(cmds))
+    with ThreadPoolExecutor(max_workers=jobs or os.cpu_count() or 1) as pool:
+        for cmd, out in zip(cmds, pool.map(run, cmds), strict=True):
+            _CACHE[cmd] = out
+
+
 def update(path: Path, *, only: str | None, bench: bool, check: bool) -> list[str]:
     """Rewrite (or, with ``check``, compare) the blocks of one file; returns the stale ones."""
     text = path.read_text(encoding="utf-8")
@@ -105,6 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="only blocks whose command contains this text")
     ap.add_argument("--bench", action="store_true", help="the timing blocks instead")
     args = ap.parse_args(argv)
+    if not args.bench:
+        prefetch(documents(), only=args.only)
     stale = []
     for path in documents():
         stale += update(path, only=args.only, bench=args.bench, check=args.check)
