@@ -186,7 +186,10 @@ def test_bad_frames_are_refused_and_change_nothing():
             {"positions": P[1], "timestamp": 0.1, "tracking_state": [2] * 25},
             "tracking_state: give it with every frame",
         ),
-        ({"positions": P[1], "timestamp": 0.1, "tracking_state": [5] * 25}, "codes"),
+        (
+            {"positions": P[1], "timestamp": 0.1, "tracking_state": [5] * 25},
+            "tracking_state: expected integers",
+        ),
         ({"positions": P[1], "timestamp": 0.1, "confidence": [2.0] * 25}, r"in \[0, 1\]"),
     ]
     for args, message in bad:
@@ -316,3 +319,20 @@ def test_confidence_and_tracking_states_reach_the_method():
     np.testing.assert_array_equal(pos, twin.positions)
     assert not np.array_equal(twin.positions, tk.smooth_delayed(seq, **kw).positions,
                               equal_nan=True)  # fmt: skip
+
+
+def test_a_reused_frame_buffer_is_copied():
+    """A camera loop writes every frame into one buffer (positions and scores): the
+    window keeps what each frame was, as with fresh arrays."""
+    seq, _ = _recording(15, 1.0)
+    conf = np.random.default_rng(15).uniform(0.2, 1.0, seq.positions.shape[:2])
+    kw = {"delay": 0.1, "window": 1.0, "max_reject": 0.5}
+    fresh = tk.DelayedSmoother(seq.topology, **kw)
+    reused = tk.DelayedSmoother(seq.topology, **kw)
+    pos_buf, conf_buf = np.empty(seq.positions.shape[1:]), np.empty(conf.shape[1:])
+    for t in range(seq.n_frames):
+        a = fresh.update(seq.positions[t].copy(), confidence=conf[t].copy())
+        pos_buf[:], conf_buf[:] = seq.positions[t], conf[t]
+        b = reused.update(pos_buf, confidence=conf_buf)
+        assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True)
+    np.testing.assert_array_equal(fresh.flush(), reused.flush())

@@ -36,14 +36,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import DEFAULT_METHOD, check_params, get_method, smooth
+from tobitkf.smoothing.stream_frames import (
+    INFINITE,
+    check_confidence,
+    check_positions,
+    check_states,
+    timestamp_seconds,
+)
 
 __all__ = ["DelayedSmoother", "delay_frames", "smooth_delayed"]
 
 Array = NDArray[np.float64]
-_STATES = tuple(int(s) for s in TrackingState)
 
 
 def _number(name: str, value: Any, positive: bool, unit: str = "seconds") -> float:
@@ -55,19 +61,6 @@ def _number(name: str, value: Any, positive: bool, unit: str = "seconds") -> flo
         kind = "a positive number" if positive else "a number >= 0"
         raise ValueError(f"{name} must be {kind} of {unit}, got {value!r}")
     return v
-
-
-def _stamp(timestamp: Any) -> float | None:
-    """A frame's timestamp in seconds (None: not given), refused unless finite."""
-    if timestamp is None:
-        return None
-    try:
-        ts = float(timestamp)
-    except (TypeError, ValueError):
-        ts = math.nan
-    if not math.isfinite(ts):
-        raise ValueError(f"timestamp must be a finite number of seconds, got {timestamp!r}")
-    return ts
 
 
 def _presence(before: tuple[bool, ...], now: tuple[bool, ...]) -> str:
@@ -319,7 +312,7 @@ class DelayedSmoother:
         has = (states is not None, timestamp is not None, confidence is not None)
         if self._has is not None and has != self._has:
             raise ValueError(_presence(self._has, has))
-        stamp = _stamp(timestamp)
+        stamp = timestamp_seconds(timestamp)
         prev = self._stamps[-1] if self._stamps else None
         if stamp is not None and prev is not None and stamp < prev:
             raise ValueError(f"timestamp {stamp} comes before the previous frame's ({prev})")
@@ -392,7 +385,6 @@ class DelayedSmoother:
     def _push(self, frame: tuple) -> Array | None:
         """Take a checked frame (:meth:`_checked`); the frame ``delay`` back, or None."""
         self._buffer.append(frame)
-        self._stamps.append(frame[2])
         self.n_frames += 1
         t = self.n_frames - 1 - self.D
         if t < 0:
@@ -448,39 +440,19 @@ class DelayedSmoother:
     def _checked(self, positions: Any, states: Any, timestamp: Any, confidence: Any) -> tuple:
         """A frame checked against the stream, with a body axis; nothing is changed when
         it is refused."""
-        try:
-            pos = np.array(positions, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError("positions: expected numbers of shape (J, D) or (B, J, D)") from None
-        if pos.ndim not in (2, 3) or pos.shape[-1] not in (2, 3):
-            raise ValueError(
-                f"positions: expected shape (J, D) or (B, J, D) with D = 3 or 2, found {pos.shape}"
-            )
-        if pos.shape[-2] != self.topology.n_joints:
-            raise ValueError(f"positions: {pos.shape[-2]} joints, but topology "
-                             f"{self.topology.name!r} has {self.topology.n_joints}")  # fmt: skip
+        pos = check_positions(positions, self.topology)
         if self._shape is not None and pos.shape != self._shape:
             raise ValueError(
                 f"positions: shape {pos.shape} differs from the stream's {self._shape}"
             )
         if np.isinf(pos).any():
-            raise ValueError("positions: infinite values (use NaN for a missing joint)")
+            raise ValueError(INFINITE)
         body = pos.shape[:-1]
-        st = None
-        if states is not None:
-            st = np.asarray(states)
-            if st.shape != body or not np.isin(st, _STATES).all():
-                raise ValueError(f"tracking_state: expected codes {_STATES} of shape {body}")
-            st = st.astype(np.int8)
-        cf = None
-        if confidence is not None:
-            try:
-                cf = np.array(confidence, dtype=float)
-            except (TypeError, ValueError):
-                raise ValueError("confidence: expected numbers in [0, 1]") from None
-            if cf.shape != body or np.any((cf < 0) | (cf > 1)):
-                raise ValueError(f"confidence: expected scores in [0, 1] of shape {body}")
-        ts = _stamp(timestamp)
+        st = check_states(states, body)
+        cf = check_confidence(confidence, body)
+        # copies: the window keeps them, and a caller may reuse its frame buffers
+        pos, cf = np.array(pos), None if cf is None else np.array(cf)
+        ts = timestamp_seconds(timestamp)
         if ts is not None:
             prev = self._buffer[-1][2] if self._buffer else None
             if prev is not None and ts < prev:

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence, TrackingState
+from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import (
     DEFAULT_LIVE_METHOD,
@@ -70,6 +70,13 @@ from tobitkf.smoothing.robust_scale import (
     STREAM_LAST,
     recording_gates,
 )
+from tobitkf.smoothing.stream_frames import (
+    INFINITE,
+    check_confidence,
+    check_positions,
+    check_states,
+    timestamp_seconds,
+)
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     TRACKED_CODE,
@@ -80,8 +87,6 @@ from tobitkf.smoothing.timebase import (
 __all__ = ["LiveSmoother", "live_methods"]
 
 Array = NDArray[np.float64]
-_STATES = tuple(int(s) for s in TrackingState)
-_INFINITE = "positions: infinite values (use NaN for a missing joint)"
 
 
 def live_methods() -> list[str]:
@@ -391,7 +396,7 @@ class LiveSmoother:
                 f"J = {J} and D = 2 or 3, found {pos.shape}"
             )
         if np.isinf(pos).any():
-            raise ValueError(f"gates_from: {_INFINITE}")
+            raise ValueError(f"gates_from: {INFINITE}")
         dims = pos.shape[-1]
         scale = length_scale(self._stream_units(dims))
         if scale is not None and scale != 1.0:
@@ -517,34 +522,14 @@ class LiveSmoother:
 
     def _step_seconds(self, timestamp: float | None) -> tuple[float, float | None]:
         nominal = 1.0 / self.fps
-        if timestamp is None:
+        t = timestamp_seconds(timestamp)
+        if t is None:
             return nominal, self._last_timestamp
-        try:
-            t = float(timestamp)
-        except (TypeError, ValueError):
-            raise ValueError(f"timestamp must be a number of seconds, got {timestamp!r}") from None
-        if not np.isfinite(t):
-            raise ValueError(f"timestamp must be finite, got {timestamp!r}")
         if self._last_timestamp is None:
             return nominal, t
         if t < self._last_timestamp:
             raise ValueError(f"timestamps must not decrease: {t} after {self._last_timestamp}")
         return max(t - self._last_timestamp, 0.1 * nominal), t
-
-    def _check_states(self, tracking_state: ArrayLike | None, shape: tuple[int, ...]) -> Any:
-        if tracking_state is None:
-            return None
-        raw = np.asarray(tracking_state)
-        if raw.shape != shape:
-            raise ValueError(f"tracking_state: expected shape {shape}, found {raw.shape}")
-        if raw.dtype.kind not in "iu" or not np.isin(raw, _STATES).all():
-            raise ValueError(
-                "tracking_state: expected integers 0 (not tracked), 1 (inferred) or "
-                f"2 (tracked), found {raw.ravel()[~np.isin(raw.ravel(), _STATES)][:3].tolist()}"
-                if raw.dtype.kind in "iuf"
-                else f"tracking_state: expected integers 0, 1 or 2, found dtype {raw.dtype}"
-            )
-        return raw.astype(np.int8)
 
     def update(
         self,
@@ -588,7 +573,7 @@ class LiveSmoother:
         dims = self._dims
         pos, states = self._check_frame(positions, tracking_state)
         try:
-            conf = self._check_confidence(confidence, pos.shape[:-1])
+            conf = check_confidence(confidence, pos.shape[:-1])
         except ValueError:
             self._dims = dims
             raise
@@ -611,19 +596,6 @@ class LiveSmoother:
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
-
-    def _check_confidence(self, confidence: Any, shape: tuple[int, ...]) -> Array | None:
-        if confidence is None:
-            return None
-        try:
-            conf = np.asarray(confidence, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError("confidence: expected numbers in [0, 1]") from None
-        if conf.shape != shape:
-            raise ValueError(f"confidence: expected shape {shape}, found {conf.shape}")
-        if np.any((conf < 0) | (conf > 1)):
-            raise ValueError("confidence: expected scores in [0, 1] (NaN: none)")
-        return conf
 
     def _step(self, stepper: Any, pos: Array, states: Any, dt: float, conf: Any = None) -> Array:
         ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
@@ -755,7 +727,7 @@ class LiveSmoother:
         out = []
         for body in bodies:
             try:
-                out.append(self._check_confidence(confidence.get(body), (J,)))
+                out.append(check_confidence(confidence.get(body), (J,)))
             except ValueError as exc:
                 raise ValueError(f"body {body!r}: {exc}") from None
         return out
@@ -885,7 +857,7 @@ class LiveSmoother:
         arr = np.stack([p for p, _ in checked]) if checked else np.empty(0)
         if checked and np.isinf(arr).any():
             body = next(b for b, (p, _) in zip(bodies, checked) if np.isinf(p).any())
-            raise ValueError(f"body {body!r}: {_INFINITE}")
+            raise ValueError(f"body {body!r}: {INFINITE}")
         unknown = [] if states is None else [b for b in states if b not in frames]
         if unknown:
             raise ValueError(f"tracking_state for bodies not in the frame: {unknown}")
@@ -894,27 +866,12 @@ class LiveSmoother:
     def _check_frame(
         self, positions: ArrayLike, tracking_state: Any, check_inf: bool = True
     ) -> tuple[Array, Any]:
-        try:
-            pos = np.asarray(positions, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError("positions: expected numbers of shape (J, 3) or (B, J, 3)") from None
+        pos = check_positions(positions, self.topology, self._dims)
         shape = pos.shape
-        if len(shape) not in (2, 3) or shape[-1] not in (2, 3):
-            raise ValueError(
-                f"positions: expected shape (J, D) or (B, J, D) with D = 3 or 2, found {shape}"
-            )
-        dims = self._dims
-        if dims is not None and shape[-1] != dims:
-            raise ValueError(f"positions: this stream has {dims} coordinates, found {shape[-1]}")
-        if shape[-2] != self.topology.n_joints:
-            raise ValueError(
-                f"positions: {shape[-2]} joints, but topology {self.topology.name!r} has "
-                f"{self.topology.n_joints}"
-            )
-        if dims is None:
+        if self._dims is None:
             self._check_gates(shape[-1])
         if check_inf and np.isinf(pos).any():
-            raise ValueError(_INFINITE)
-        states = self._check_states(tracking_state, shape[:-1])
+            raise ValueError(INFINITE)
+        states = check_states(tracking_state, shape[:-1])
         self._dims = shape[-1]  # the frame is good: its coordinates are the stream's
         return pos, states
