@@ -611,21 +611,15 @@ def _stream_gated(
     inferred, rinf, guesses = _sample_inputs(
         states, missing, factor, confidence, params["inferred_bones"], n_dims
     )
-    state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
-    work = k.new_work(B, J)
-    guard = step_guard()
-    g_state = guard.new_state(B, J, ys.shape[-1])
-    setup, derived, history = None, {}, []
+    setup, derived, history, segments = None, {}, [], []
     for a, b in zip(frames, [*frames[1:], T], strict=True):
         derived = recording_gates(ys[:a], steps[:a], topo.parents, n_dims)
         derived.pop("bone_centre", None)
         setup = _Setup(topo, {**params, **derived}, n_dims)
         history.append({"frame": a, **{g: derived[g] for g in GATE_PARAMS}})
-        f = slice(a, b)
-        k.online_frames(y_all[f], missing[f], rinf[f], guesses[f], inferred[f], times[f],
-                        steps[f], *setup.args(), state, *work, est[f], rejected[f], var[f],
-                        0)  # fmt: skip
-        guard.guard_frames(y_all[f], missing[f], est[f], var[f], 0, *g_state)
+        segments.append((a, b, setup))
+    state = _online_run(y_all, missing, (inferred, rinf, guesses), times, steps, segments,
+                        params, (est, rejected, var), 0)  # fmt: skip
     std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
     if setup is None:  # too short for a first measurement: the frames as measured
         setup = _Setup(topo, params, n_dims)
@@ -684,9 +678,6 @@ def _robust_chunk(
     )
     fits = guess = None
     L = None  # (B, J): the bone lengths the gate compared with at the end (reported)
-    est, rejected, var = out
-    guard = step_guard()
-    g_state = guard.new_state(B, J, ys.shape[-1])
     if offline:
         # the recording's median bone lengths (2-D from the recording: the gate compares
         # with the centre of the one-sided range)
@@ -698,16 +689,45 @@ def _robust_chunk(
             projected = readonly(k.project_run(ys, guesses, setup.parents, setup.order, L_fixed))
         fits, guess = _offline(projected, missing, times, steps, rinf, setup, params, L_fixed,
                                inferred, out, b0)  # fmt: skip
-        guard.largest_steps(ys, missing, g_state[1])  # offline: the whole recording's limit
+        # no output step larger than the input's largest (offline: the whole recording's)
+        guard = step_guard()
+        g_state = guard.new_state(B, J, ys.shape[-1])
+        guard.largest_steps(ys, missing, g_state[1])
+        guard.guard_frames(ys, missing, out[0], out[2], b0, *g_state)
     else:
-        state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
-        k.online_frames(ys, missing, rinf, guesses, inferred, times, steps, *setup.args(),
-                        state, *k.new_work(B, J), est, rejected, var, b0)  # fmt: skip
+        state = _online_run(ys, missing, (inferred, rinf, guesses), times, steps,
+                            [(0, ys.shape[0], setup)], params, out, b0)  # fmt: skip
         if params["bones"]:  # the lengths learnt by the end of the recording
             L = state[3][..., k.S_L_CUR].copy()
-    # no output step larger than the input's largest (so far online)
-    guard.guard_frames(ys, missing, est, var, b0, *g_state)
     return L, fits, guess
+
+
+def _online_run(
+    ys: Array, missing: NDArray[np.bool_], inputs: tuple[Any, Any, Any], times: Array,
+    steps: Array, segments: list[tuple[int, int, _Setup]], params: dict[str, Any],
+    out: tuple[Array, NDArray[np.bool_], Array], b0: int,
+) -> Any:  # fmt: skip
+    """``robust_online`` over frames ``segments`` ``(a, b, setup)`` (one for the whole
+    recording; ``gates="stream"``: one per gate measurement), the filter's state carried
+    from one to the next, each followed by the step guard (no output step larger than
+    the input's largest so far): the online frame function, as the live stepper runs it.
+    ``inputs`` are :func:`_sample_inputs`' ``(inferred, rinf, guesses)``; writes bodies
+    ``b0 ..`` of ``out``; returns the filter's state."""
+    k = kernels()
+    B, J = missing.shape[1:]
+    inferred, rinf, guesses = inputs
+    est, rejected, var = out
+    state = k.new_state(B, J, int(params["lookback"]), bool(params["shared_errors"]))
+    work = k.new_work(B, J)
+    guard = step_guard()
+    g_state = guard.new_state(B, J, ys.shape[-1])
+    for a, b, setup in segments:
+        f = slice(a, b)
+        k.online_frames(ys[f], missing[f], rinf[f], guesses[f], inferred[f], times[f],
+                        steps[f], *setup.args(), state, *work, est[f], rejected[f], var[f],
+                        b0)  # fmt: skip
+        guard.guard_frames(ys[f], missing[f], est[f], var[f], b0, *g_state)
+    return state
 
 
 def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutput:
