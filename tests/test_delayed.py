@@ -1,9 +1,12 @@
 """Live smoothing with a fixed delay (``DelayedSmoother``, ``smooth_delayed``): the
 stream gives its batch twin's frames; frame t depends on frames t - W + D + 1 .. t + D
-only; with the whole recording in view it is ``smooth()``; a causal method at delay 0
-is itself; what a delay buys on the synthetic benchmark."""
+only (and on its held noise fit's window, itself built here with ``smooth()``); with
+the whole recording in view it is ``smooth()``; a causal method at delay 0 is itself;
+what a delay buys on the synthetic benchmark."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
@@ -19,6 +22,12 @@ def _recording(seed=0, seconds=5.0, kind="mixed"):
     and its clean truth at the kept frames."""
     bad = tk.corrupt(tk.generate_motion(kind, duration=seconds, seed=seed), seed=seed)
     return bad.sequence, bad.truth
+
+
+def _window(seq, a, b):
+    """Frames ``a .. b - 1`` of ``seq`` as a recording of their own."""
+    return seq.replace(positions=seq.positions[a:b], tracking_state=seq.tracking_state[a:b],
+                       timestamps=seq.timestamps[a:b])  # fmt: skip
 
 
 def _stream(seq, method="robust", positions=None, **kw):
@@ -103,11 +112,12 @@ def test_a_causal_method_at_delay_zero_is_itself():
 
 @pytest.mark.parametrize("t", [40, 75])
 def test_frame_t_reads_only_its_window(t):
-    """D = 6, W = 30 frames: frame t is unchanged when every frame after t + D, or before
-    t + D + 1 - W, is replaced by garbage; it changes when frame t + D, or t + D + 1 - W,
-    is (the noise fit reads the whole window)."""
+    """D = 6, W = 30 frames, the noise fitted at every frame (refit 0): frame t is
+    unchanged when every frame after t + D, or before t + D + 1 - W, is replaced by
+    garbage; it changes when frame t + D, or t + D + 1 - W, is (the noise fit reads the
+    whole window)."""
     seq, _ = _recording(5, 4.0)
-    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5, "refit": 0.0}
     base = tk.smooth_delayed(seq, **kw).positions[t]
     rng = np.random.default_rng(t)
 
@@ -120,6 +130,49 @@ def test_frame_t_reads_only_its_window(t):
     np.testing.assert_array_equal(spoilt(slice(0, t + 7 - 30)), base)
     assert not np.array_equal(spoilt(slice(t + 6, t + 7)), base, equal_nan=True)
     assert not np.array_equal(spoilt(slice(t + 7 - 30, t + 8 - 30)), base, equal_nan=True)
+
+
+@pytest.mark.parametrize("t", [45, 50, 59])
+def test_a_held_fit_is_the_fit_of_its_run(t):
+    """refit 0.5 s (R = 15 runs), D = 6, W = 30 frames: frame t is the method's output on
+    its own window with the noise given as the fit of run k0 = 15 * (t // 15) (its window
+    frames k0 + D + 1 - W .. k0 + D), built here with smooth() alone."""
+    seq, _ = _recording(7, 4.0)
+    kw = {"max_reject": 0.5}
+    out = tk.smooth_delayed(seq, delay=0.2, window=1.0, refit=0.5, **kw)
+    k0 = 15 * (t // 15)
+    fit = tk.smooth(_window(seq, k0 + 7 - 30, k0 + 7), **kw).metadata["diagnostics"]["noise_fit"]
+    own = tk.smooth(_window(seq, t + 7 - 30, t + 7), noise=fit, **kw)
+    np.testing.assert_array_equal(out.positions[t], own.positions[-7])
+    np.testing.assert_array_equal(out.std[t], own.std[-7])
+    every = tk.smooth_delayed(seq, delay=0.2, window=1.0, refit=0.0, **kw)
+    assert np.array_equal(out.positions[t], every.positions[t]) == (t == k0)
+
+
+def test_a_held_fit_reads_the_fit_runs_window():
+    """Frame 50 (R = 15: its fit is run 45's, read on frames 22 .. 51) changes with a
+    small shift of frame 22, before its own window (27 .. 56), and not with garbage in
+    frames 0 .. 21."""
+    seq, _ = _recording(8, 4.0)
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5, "refit": 0.5}
+    base = tk.smooth_delayed(seq, **kw).positions[50]
+
+    def spoilt(frames, sd):
+        pos = seq.positions.copy()
+        pos[frames] += np.random.default_rng(1).normal(0, sd, pos[frames].shape)
+        return tk.smooth_delayed(seq.replace(positions=pos), **kw).positions[50]
+
+    np.testing.assert_array_equal(spoilt(slice(0, 22), 0.5), base)
+    assert not np.array_equal(spoilt(slice(22, 23), 0.005), base, equal_nan=True)
+
+
+def test_refit_is_checked():
+    seq, _ = _recording(9, 1.0)
+    for bad in (-1.0, math.nan, "often"):
+        with pytest.raises(ValueError, match="refit must be a number >= 0"):
+            tk.DelayedSmoother(seq.topology, refit=bad)
+        with pytest.raises(ValueError, match="refit must be a number >= 0"):
+            tk.smooth_delayed(seq, refit=bad)
 
 
 def test_a_pixel_stream_needs_no_gates():

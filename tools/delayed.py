@@ -63,14 +63,15 @@ def real(tracks: list[str], replace: tuple[str, str], delays: list[float], windo
               f"{'–' if ball is None else f'{ball:.1f}'} |")  # fmt: skip
 
 
-def benchmark(seeds: int, delays: list[float], window: float) -> None:
-    methods = specs(delays, window)
+def benchmark(seeds: int, delays: list[float], window: float, **params: float) -> None:
+    methods = specs(delays, window, **params)
     rmse = np.array([[r.rmse for r in run_benchmark(seed, methods).rows]
                      for seed in range(seeds)]) * 100  # fmt: skip
     names = [m if isinstance(m, str) else m[0] for m in methods]
     mean, sd = rmse.mean(axis=0), rmse.std(axis=0, ddof=1)
+    given = "".join(f", delayed rows with {k} {v:g}" for k, v in params.items())
     print(f"RMSE against the truth, cm (built-in synthetic benchmark, mean ± sd over seeds "
-          f"0–{seeds - 1}; window {window:g} s):\n")  # fmt: skip
+          f"0–{seeds - 1}; window {window:g} s{given}):\n")  # fmt: skip
     print("| method | frames late at 30 fps | RMSE | vs raw |")
     print("|---|---|---|---|")
     for name, m, s in zip(names, mean, sd, strict=True):
@@ -85,17 +86,20 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--delays", default="0,0.1,0.2,0.33,0.5,1,2")
     parser.add_argument("--window", type=float, default=10.0)
     parser.add_argument("--fit-seconds", type=float, help="robust's fit_seconds, delayed rows")
+    parser.add_argument("--refit", type=float, help="seconds between noise fits, delayed rows")
     argv = list(sys.argv[1:] if argv is None else argv)
     if "--benchmark" in argv:
         args = parser.parse_args(argv)
     else:
         args, replace = parse_with_truth_replace(parser, argv)
     delays = [float(d) for d in args.delays.split(",")]
+    extra = {} if args.fit_seconds is None else {"fit_seconds": args.fit_seconds}
+    if args.refit is not None:
+        extra["refit"] = args.refit
     if args.benchmark:
-        benchmark(args.benchmark, delays, args.window)
+        benchmark(args.benchmark, delays, args.window, **extra)
     else:
         tracks = sorted(p for pattern in args.tracks for p in glob.glob(pattern) or [pattern])
-        extra = {} if args.fit_seconds is None else {"fit_seconds": args.fit_seconds}
         real(tracks, replace, delays, args.window, **extra)
 
 

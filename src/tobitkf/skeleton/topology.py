@@ -12,6 +12,7 @@ y axis points *down*; their up axis is still the y axis (``1``), the sign is not
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -206,10 +207,7 @@ class Topology:
         and leg segments; ``torso`` = everything else (spine, pelvis, neck, head, face).
         Every joint is in exactly one group.
         """
-        groups: dict[str, list[int]] = {g: [] for g in GROUP_NAMES}
-        for i, j in enumerate(self.joints):
-            groups[_classify(j)].append(i)
-        return groups
+        return {g: list(idx) for g, idx in _groups_of(self.joints).items()}
 
     def subset(self, names: Sequence[str], name: str | None = None) -> Topology:
         """Topology restricted to ``names`` (in that order).
@@ -328,6 +326,16 @@ _LEG = re.compile(
     r"hip|knee|ankle|foot|toe|heel|leg|thigh|shin|tibia|kne$|ank$|hee$|thi$|tib$|^[lr](fe|ti)[oalp]$",
     re.I,
 )
+
+
+@functools.lru_cache(maxsize=64)
+def _groups_of(joints: tuple[str, ...]) -> dict[str, tuple[int, ...]]:
+    """The regions of :meth:`Topology.joint_groups` (cached: a live smoother asks at
+    every frame, and the names' patterns cost a few hundred searches)."""
+    groups: dict[str, list[int]] = {g: [] for g in GROUP_NAMES}
+    for i, j in enumerate(joints):
+        groups[_classify(j)].append(i)
+    return {g: tuple(idx) for g, idx in groups.items()}
 
 
 def _classify(joint: str) -> str:

@@ -82,6 +82,53 @@ def delay_frames(delay: float, window: float, fps: float) -> tuple[int, int]:
     return D, W
 
 
+def refit_frames(refit: float, fps: float) -> int:
+    """Runs between two noise fits: ``refit`` seconds at ``fps``, at least 1 (every run
+    fits)."""
+    refit = _number("refit", refit, False)
+    return max(1, round(refit * _number("fps", fps, True, "frames per second")))
+
+
+class _HeldFit:
+    """When a method fits its noise to each window (``robust``'s ``noise="fit"``), the
+    fit of one run in every ``R`` is held for the runs until the next: run ``k`` (the
+    one that gives frame ``k``) fits when ``k % R == 0`` and otherwise takes the held
+    fit as its ``noise`` (a body whose fit run gave no fit fits its own). The fit is
+    most of a run's work (docs/robust.md), and a window moves by a few frames of many
+    between two fits. The stream and :func:`smooth_delayed` share this schedule."""
+
+    def __init__(self, params: Mapping[str, Any], R: int) -> None:
+        self.active = R > 1 and isinstance(params.get("noise"), str) and params["noise"] == "fit"
+        self.R = R
+        self.fits: list[Any] = []
+
+    def noise(self, k: int, b: int) -> Any:
+        """The ``noise`` of body ``b`` in run ``k``: a held fit, or None (fit)."""
+        if not self.active or k % self.R == 0 or b >= len(self.fits):
+            return None
+        return self.fits[b]
+
+    def keep(self, k: int, outs: list[SkeletonSequence]) -> None:
+        """Hold the fits of run ``k`` when it was a fit run."""
+        if self.active and k % self.R == 0:
+            self.fits = [o.metadata.get("diagnostics", {}).get("noise_fit") for o in outs]
+
+    def run(self, k: int, seqs: list[SkeletonSequence], method: str,
+            kwargs: Mapping[str, Any]) -> list[SkeletonSequence]:  # fmt: skip
+        """Run ``k`` of the method on ``seqs`` (one per body): together without a held
+        fit; with one, each body alone (its own fit: in pixels its gates are then its
+        own too, as :func:`smooth_delayed` of that body gives)."""
+        if not self.active:
+            return list(smooth(seqs, method, **kwargs))
+        out = []
+        for b, seq in enumerate(seqs):
+            given = self.noise(k, b)
+            held = {} if given is None else {"noise": given}
+            out.append(smooth(seq, method, **{**kwargs, **held}))
+        self.keep(k, out)
+        return out
+
+
 def _check_window(params: Mapping[str, Any], window: float) -> None:
     """A method that gives a joint up after ``max_reject`` seconds of rejection (robust)
     judges a failure by the rest of the window (its median bone lengths, its noise fit),
@@ -113,9 +160,11 @@ def _frames(seq: SkeletonSequence, a: int, b: int) -> SkeletonSequence:
                        std=None, sample_state=None)  # fmt: skip
 
 
-def _delay_meta(out: SkeletonSequence, delay: float, window: float, D: int, W: int) -> None:
+def _delay_meta(out: SkeletonSequence, delay: float, window: float, D: int, W: int,
+                R: int) -> None:  # fmt: skip
     prov = out.metadata.setdefault("provenance", {})
-    prov["delayed"] = {"delay": delay, "window": window, "delay_frames": D, "window_frames": W}
+    prov["delayed"] = {"delay": delay, "window": window, "delay_frames": D, "window_frames": W,
+                       "refit_frames": R}  # fmt: skip
 
 
 def smooth_delayed(
@@ -124,20 +173,23 @@ def smooth_delayed(
     *,
     delay: float = 0.5,
     window: float = 10.0,
+    refit: float = 1.0,
     **kwargs: Any,
 ) -> SkeletonSequence:
     """What :class:`DelayedSmoother` returns for a stream of ``sequence``, frame by frame
     (its positions, ``std`` and ``sample_state``; module docstring).
 
     ``delay`` and ``window`` are in seconds, turned into frames with the sequence's
-    ``fps`` (30 when it has none) by :func:`delay_frames`; ``kwargs`` go to
-    :func:`~tobitkf.smooth` (method parameters, ``untangle``, ...). The metadata are
-    those of the last run, with ``provenance["delayed"]`` added. Costs one run of the
-    method per frame."""
+    ``fps`` (30 when it has none) by :func:`delay_frames`; ``refit`` as for
+    :class:`DelayedSmoother`; ``kwargs`` go to :func:`~tobitkf.smooth` (method
+    parameters, ``untangle``, ...). The metadata are those of the last run, with
+    ``provenance["delayed"]`` added. Costs one run of the method per frame."""
     if not isinstance(sequence, SkeletonSequence):
         raise TypeError(f"smooth_delayed expects a SkeletonSequence, got {type(sequence).__name__}")
     D, W = delay_frames(delay, window, sequence.fps or 30.0)
-    _check_window(check_params(method, kwargs), float(window))
+    full = check_params(method, kwargs)
+    _check_window(full, float(window))
+    hold = _HeldFit(full, refit_frames(refit, sequence.fps or 30.0))
     T = sequence.n_frames
     pos = np.full(sequence.positions.shape, np.nan)
     std = np.full(sequence.positions.shape[:2], np.nan)
@@ -147,7 +199,7 @@ def smooth_delayed(
     for t in range(T):
         a, b = _bounds(t, T, D, W)
         if (a, b) not in runs:  # the last D frames share one run (the stream's flush)
-            runs = {(a, b): smooth(_frames(sequence, a, b), method, **kwargs)}
+            runs = {(a, b): hold.run(t, [_frames(sequence, a, b)], method, kwargs)[0]}
         last = runs[(a, b)]
         pos[t] = last.positions[t - a]
         if last.std is not None:
@@ -161,7 +213,7 @@ def smooth_delayed(
                        std=None if last.std is None else std,
                        sample_state=None if last.sample_state is None else states,
                        metadata=dict(last.metadata))  # fmt: skip
-    _delay_meta(out, float(delay), float(window), D, W)
+    _delay_meta(out, float(delay), float(window), D, W, hold.R)
     return out
 
 
@@ -182,6 +234,11 @@ class DelayedSmoother:
         Seconds of the stream the method sees at each frame (default 10; at least the
         delay and one frame, and twice the method's ``max_reject``, 4 s for ``robust``).
         The work per frame grows with it.
+    refit : float
+        Seconds between two fits of the noise (default 1), when the method fits it to
+        each window (``robust``'s default ``noise="fit"``): the fit is most of a run's
+        work, so in between the runs take the last fit as given (``noise=`` that fit;
+        each body of the frame alone). 0 fits at every frame.
     fps : float
         Frame rate: turns ``delay`` and ``window`` into frames, and times the frames
         when no timestamps are given.
@@ -206,6 +263,7 @@ class DelayedSmoother:
         *,
         delay: float = 0.5,
         window: float = 10.0,
+        refit: float = 1.0,
         fps: float = 30.0,
         units: str | None = None,
         **kwargs: Any,
@@ -220,8 +278,10 @@ class DelayedSmoother:
         if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
         self.D, self.W = delay_frames(delay, window, fps)
+        self.R = refit_frames(refit, fps)
         _check_window(self.params, float(window))
         self.delay, self.window, self.fps = float(delay), float(window), float(fps)
+        self.refit = float(refit)
         self.topology = get_topology(topology) if isinstance(topology, str) else topology
         if not isinstance(self.topology, Topology):
             raise TypeError(f"topology must be a Topology or a name, got {type(topology).__name__}")
@@ -233,6 +293,9 @@ class DelayedSmoother:
         """Forget the stream; the next frame starts a new one."""
         # (positions (B, J, D), tracking state or None, timestamp or None, confidence or None)
         self._buffer: deque[tuple[Array, Any, float | None, Any]] = deque(maxlen=self.W)
+        # the same window stacked (positions, states, timestamps, confidence; None for
+        # what the stream does not give): one copy per frame, not a stack of W frames
+        self._stacked: list[Any] = [None] * 4
         self._shape: tuple[int, ...] | None = None
         self._has: tuple[bool, bool, bool] | None = None  # states, timestamps, confidence
         self._flushed = False
@@ -251,6 +314,8 @@ class DelayedSmoother:
         self._bodies: dict[Any, DelayedSmoother] | None = None
         self._seen: dict[Any, tuple[int, int]] = {}
         self._stamps: deque[float | None] = deque(maxlen=self.D + 1)
+        self._hold = _HeldFit(self.params, self.R)
+        self._last: list[SkeletonSequence] | None = None  # the run on the buffer as it is
 
     def update(
         self,
@@ -300,7 +365,9 @@ class DelayedSmoother:
             return np.empty(shape)
         first = self.n_frames - len(self._buffer)
         rows = list(range(start - first, self.n_frames - first))
-        pos, self.std, self.sample_state = self._give(self._run(), rows, self.n_frames - 1)
+        # the last frame's run (the window has not changed since), or the first run
+        out = self._last if self._last is not None else self._run(0)
+        pos, self.std, self.sample_state = self._give(out, rows, self.n_frames - 1)
         return pos
 
     # ------------------------------------------------------------------ keyed by body id
@@ -354,8 +421,8 @@ class DelayedSmoother:
     def _body(self) -> DelayedSmoother:
         """A smoother of the same settings for one body of a keyed stream."""
         return DelayedSmoother(self.topology, self.method, delay=self.delay,
-                               window=self.window, fps=self.fps, units=self.units,
-                               **self._options, **self._given)  # fmt: skip
+                               window=self.window, refit=self.refit, fps=self.fps,
+                               units=self.units, **self._options, **self._given)  # fmt: skip
 
     def _absent(self, stamp: float | None) -> tuple:
         """This body's frame when the stream's frame does not have it: every joint
@@ -385,24 +452,29 @@ class DelayedSmoother:
     def _push(self, frame: tuple) -> Array | None:
         """Take a checked frame (:meth:`_checked`); the frame ``delay`` back, or None."""
         self._buffer.append(frame)
+        for i, x in enumerate(frame):
+            if x is not None:
+                x = np.asarray(x, dtype=float if i == 2 else None)[None]
+                old = self._stacked[i]
+                if old is not None:  # the last W - 1 frames, then this one
+                    x = np.concatenate([old[max(0, len(old) - self.W + 1) :], x])
+                self._stacked[i] = x
         self.n_frames += 1
         t = self.n_frames - 1 - self.D
         if t < 0:
             return None
         first = self.n_frames - len(self._buffer)
-        pos, std, states = self._give(self._run(), [t - first], t)
+        self._last = self._run(t)
+        pos, std, states = self._give(self._last, [t - first], t)
         self.std = None if std is None else std[0]
         self.sample_state = None if states is None else states[0]
         return pos[0]
 
     # ------------------------------------------------------------------ internals
-    def _run(self) -> list[SkeletonSequence]:
-        """The method on the buffered frames, one sequence per body."""
-        pos, states, stamps, conf = zip(*self._buffer, strict=True)
-        P = np.stack(pos)  # (n, B, J, D)
-        S = None if states[0] is None else np.stack(states)
-        C = None if conf[0] is None else np.stack(conf)
-        ts = None if stamps[0] is None else np.asarray(stamps, dtype=float)
+    def _run(self, k: int) -> list[SkeletonSequence]:
+        """Run ``k`` (the one giving frame ``k``) of the method on the buffered frames,
+        one sequence per body."""
+        P, S, ts, C = self._stacked  # (n, B, J, D), (n, B, J), (n,), (n, B, J)
         units = {} if self.units is None else {"units": self.units}
         seqs = [
             SkeletonSequence(
@@ -417,7 +489,7 @@ class DelayedSmoother:
             )
             for b in range(P.shape[1])
         ]
-        return list(smooth(seqs, self.method, **self._options, **self.params))
+        return self._hold.run(k, seqs, self.method, {**self._options, **self.params})
 
     def _give(
         self, out: list[SkeletonSequence], rows: list[int], last: int

@@ -114,6 +114,7 @@ The physical reasoning for every default is in ``docs/robust.md``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -191,7 +192,8 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     # so far, re-measured as their count doubles: robust_scale.stream_gate_frames)
     "gates": "auto",
     # offline: "fit" = noise fitted per recording and body region by maximum likelihood
-    # (robust_fit.py; speed_sd / noise_sd are then its start and bounds), "fixed" = as given
+    # (robust_fit.py; speed_sd / noise_sd are then its start and bounds), "fixed" = as given;
+    # or a fit made before, {region: {speed_sd, noise_sd, error_sd, error_tau, fitted}}
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
@@ -213,6 +215,16 @@ def _offline_gates(name: str, value: Any) -> str:
     return one_of("auto", "physical", "recording")(name, value)
 
 
+def _noise_choice(name: str, value: Any) -> Any:
+    """``robust``'s ``noise``: "fit", "fixed" or a fit given per body region
+    (:func:`tobitkf.smoothing.robust_fit.check_given_noise`)."""
+    if isinstance(value, str) and value in ("fit", "fixed"):
+        return value
+    from tobitkf.smoothing.robust_fit import check_given_noise
+
+    return check_given_noise(name, value)
+
+
 #: parameter validators (name -> check(name, value) -> value)
 ROBUST_VALIDATORS: dict[str, Any] = {
     "v_max": region_value,
@@ -232,7 +244,7 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "carry": as_bool,
     "inferred_bones": as_bool,
     "gates": _offline_gates,
-    "noise": one_of("fit", "fixed"),
+    "noise": _noise_choice,
     "fit_seconds": positive_or_inf,
     "shared_errors": as_bool,
 }
@@ -404,6 +416,12 @@ def _offline(
     if params["noise"] == "fit":
         # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
         fits = _fit_noise(ys, acc & ~inferred, rinf, steps, setup, params)
+        sd = fits[0]["noise_sd"]
+    elif isinstance(params["noise"], Mapping):  # a fit made before, used as the fit's
+        from tobitkf.smoothing.robust_fit import given_noise_bodies
+
+        fits = given_noise_bodies(params["noise"], B, setup.groups, tau=float(params["tau"]),
+                                  speed_sd=setup.spd, noise_sd=setup.sd)  # fmt: skip
         sd = fits[0]["noise_sd"]
     rvar = sd**2 * rinf  # a new (T, B, J) array: the carried samples' are written in
     tau = float(params["tau"])
@@ -867,7 +885,10 @@ def robust_smooth(
         values: the start and bounds) and a coloured error (``error_sd``, ``error_tau``)
         to the recording per body region (:mod:`tobitkf.smoothing.robust_fit`; the
         fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
-        uses the values as given (online always).
+        uses the values as given (online always); a fit made before (a
+        ``diagnostics["noise_fit"]`` mapping, every region of the skeleton) is used as
+        the fit would be, without fitting
+        (:func:`~tobitkf.smoothing.robust_fit.check_given_noise`).
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
     shared_errors : True (default) adds the errors that the INFERRED guesses of one
         occlusion and the carried samples of one stretch share, estimated from the

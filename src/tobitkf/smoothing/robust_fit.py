@@ -49,11 +49,22 @@ line a noticeable part of its start-up. The stopping rule is scipy's (``ftol`` =
 model sees no larger decrease ahead), so that in the flat valleys of this likelihood it
 stops closer to the maximum than scipy's did, for 15–20 % more evaluations of the
 objective (tests/test_robust_fit.py).
+
+**A fit given** (:func:`check_given_noise`, :func:`given_noise_bodies`): ``noise`` may
+also be a fit made before, in the form of ``metadata["diagnostics"]["noise_fit"]`` (per
+region ``speed_sd``, ``noise_sd``, ``error_sd``, ``error_tau`` and ``fitted``; other
+keys are ignored). The smoother then uses it as the fit would have been used, with no
+optimisation: a region marked not fitted keeps the constants, and the floor of the
+standard deviation is measured on the samples at hand. A live smoother that re-runs
+``robust`` on a sliding window (:class:`~tobitkf.smoothing.delayed.DelayedSmoother`)
+holds one fit for a while this way, and a recording can be smoothed with the noise
+fitted on a longer one of the same sensor.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,9 +76,11 @@ from tobitkf.smoothing.timebase import typical_step
 __all__ = [
     "FIT_BLOCK_SECONDS",
     "GroupFit",
+    "check_given_noise",
     "fit_blocks",
     "fit_group",
     "fit_noise_bodies",
+    "given_noise_bodies",
     "sd_floor",
 ]
 
@@ -142,6 +155,107 @@ def fit_blocks(steps: Array, max_seconds: float) -> tuple[NDArray[np.int64], NDA
     restart[::blen] = True
     keep = np.concatenate([[True], np.diff(frames) > 0])  # overlapping blocks: once
     return np.ascontiguousarray(frames[keep]), np.ascontiguousarray(restart[keep])
+
+
+#: the values of one region of a fit given (the rest of a report is ignored)
+NOISE_KEYS = ("speed_sd", "noise_sd", "error_sd", "error_tau")
+
+
+def _given_number(where: str, value: Any, positive: bool) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if isinstance(value, bool) or not math.isfinite(v) or v < 0 or (positive and v == 0):
+        kind = "a positive finite number" if positive else "a finite number >= 0"
+        raise ValueError(f"{where} must be {kind}, got {value!r}")
+    return v
+
+
+def check_given_noise(name: str, value: Any) -> dict[str, dict[str, Any]]:
+    """A noise fit given for ``noise``: ``{region: {speed_sd, noise_sd, error_sd,
+    error_tau, fitted}}`` for some of the body regions (hands, arms, torso, legs; the
+    form of ``metadata["diagnostics"]["noise_fit"]``, whose other keys are ignored).
+
+    A region with ``fitted`` false keeps the constants (its values are not read, as the
+    fit's report of a region with too few samples has none that count). Otherwise
+    ``speed_sd`` and ``error_tau`` must be positive, ``noise_sd`` and ``error_sd`` at
+    least 0 and not both 0. Returns plain floats and bools (JSON for the provenance)."""
+    from tobitkf.skeleton.topology import GROUP_NAMES
+
+    if not isinstance(value, Mapping) or not value:
+        raise ValueError(
+            f"{name} must be 'fit', 'fixed' or a noise fit given per body region "
+            f"(metadata['diagnostics']['noise_fit']), got {value!r}"
+        )
+    unknown = sorted(map(str, set(value) - set(GROUP_NAMES)))
+    if unknown:
+        raise ValueError(f"{name}: unknown body regions {unknown}; the regions are {GROUP_NAMES}")
+    out: dict[str, dict[str, Any]] = {}
+    for g, region in value.items():
+        where = f"{name}[{g!r}]"
+        if not isinstance(region, Mapping):
+            raise ValueError(f"{where} must be a mapping of {NOISE_KEYS}, got {region!r}")
+        fitted = region.get("fitted", True)
+        if not isinstance(fitted, (bool, np.bool_)):
+            raise ValueError(f"{where}['fitted'] must be true or false, got {fitted!r}")
+        if not fitted:
+            out[g] = {"fitted": False}
+            continue
+        missing = [key for key in NOISE_KEYS if key not in region]
+        if missing:
+            raise ValueError(f"{where} lacks {missing}: give {NOISE_KEYS}")
+        positive = ("speed_sd", "error_tau")
+        vals = {k: _given_number(f"{where}[{k!r}]", region[k], k in positive) for k in NOISE_KEYS}
+        if vals["noise_sd"] == 0 and vals["error_sd"] == 0:
+            raise ValueError(f"{where}: noise_sd and error_sd are both 0 (no measurement noise)")
+        out[g] = {**vals, "fitted": True}
+    return out
+
+
+def _default_fits(B: int, J: int, speed_sd: Array, noise_sd: Array, tau: float) -> dict[str, Array]:
+    """Per-joint arrays ``(B, J)`` of a region left at the constants (no coloured error)."""
+    return {
+        "speed_sd": np.broadcast_to(speed_sd, (B, J)).copy(),
+        "noise_sd": np.broadcast_to(noise_sd, (B, J)).copy(),
+        "error_sd": np.zeros((B, J)),
+        "error_tau": np.full((B, J), tau if math.isfinite(tau) else 1.0),
+    }
+
+
+def given_noise_bodies(
+    given: Mapping[str, Mapping[str, Any]],
+    B: int,
+    groups: dict[str, list[int]],
+    *,
+    tau: float,
+    speed_sd: Array,
+    noise_sd: Array,
+) -> tuple[dict[str, Array], list[dict[str, dict[str, Any]]]]:
+    """What :func:`fit_noise_bodies` returns, from a fit given (:func:`check_given_noise`)
+    for every body: the per-joint arrays ``(B, J)`` and, per body, the region reports
+    (the values used, ``given`` true). Every region with joints must be in ``given``."""
+    absent = [g for g, idx in groups.items() if idx and g not in given]
+    if absent:
+        raise ValueError(f"noise: the fit given has no values for the body regions {absent}; "
+                         "give every region of the skeleton")  # fmt: skip
+    J = sum(len(idx) for idx in groups.values())
+    out = _default_fits(B, J, speed_sd, noise_sd, tau)
+    report: dict[str, dict[str, Any]] = {}
+    for g, idx in groups.items():
+        if not idx:
+            continue
+        region = given[g]
+        if region.get("fitted"):
+            for key in NOISE_KEYS:
+                out[key][:, idx] = region[key]
+            report[g] = {key: float(region[key]) for key in NOISE_KEYS}
+        else:
+            ix = idx[0]
+            report[g] = {"speed_sd": float(speed_sd[ix]), "noise_sd": float(noise_sd[ix]),
+                         "error_sd": 0.0, "error_tau": math.nan}  # fmt: skip
+        report[g].update(fitted=bool(region.get("fitted")), given=True)
+    return out, [{g: dict(r) for g, r in report.items()} for _ in range(B)]
 
 
 def _steps_info(steps: Array, tau: float) -> tuple[float, Array]:
@@ -237,12 +351,7 @@ def fit_noise_bodies(
     # only the fitted frames: the step before each stays its own
     yk, use, rscale, steps = yk[frames], use[frames], rscale[frames], steps[frames]
     frames = np.arange(frames.size, dtype=np.int64)
-    out = {
-        "speed_sd": np.broadcast_to(speed_sd, (B, J)).copy(),
-        "noise_sd": np.broadcast_to(noise_sd, (B, J)).copy(),
-        "error_sd": np.zeros((B, J)),
-        "error_tau": np.full((B, J), tau if math.isfinite(tau) else 1.0),
-    }
+    out = _default_fits(B, J, speed_sd, noise_sd, tau)
     reports: list[dict[str, dict[str, Any]]] = []
     _fit_all(yk, use, rscale, steps, groups, tau, speed_sd, noise_sd, v_max, frames, restart,
              out, reports)  # fmt: skip

@@ -16,6 +16,7 @@ tobitkf does not import numba); the functions here are their one-body forms.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from typing import Any
 
@@ -41,6 +42,12 @@ Array = NDArray[np.float64]
 
 def joint_levels(parents: tuple[int, ...] | list[int]) -> list[NDArray[np.intp]]:
     """Joint indices grouped by depth in the tree (roots first)."""
+    return [level.copy() for level in _levels(tuple(int(p) for p in parents))]
+
+
+@functools.lru_cache(maxsize=64)
+def _levels(parents: tuple[int, ...]) -> list[NDArray[np.intp]]:
+    """:func:`joint_levels`, cached (a live smoother asks at every frame)."""
     J = len(parents)
     depth = np.full(J, -1)
     for _ in range(J + 1):

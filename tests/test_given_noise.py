@@ -1,0 +1,143 @@
+"""``robust`` with a noise fit given (``noise={region: {...}}``, the form of
+``metadata["diagnostics"]["noise_fit"]``): a fit given back is the fit itself; a region
+given at the constants, or marked not fitted, is the fixed smoother; the values given
+are the ones used; bad fits are refused with the reason."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import tobitkf as tk
+from tobitkf.skeleton.sequence import SampleState
+from tobitkf.smoothing.robust_fit import check_given_noise
+
+REGIONS = ("hands", "arms", "torso", "legs")
+
+
+def _recording(seed=0, seconds=4.0):
+    bad = tk.corrupt(tk.generate_motion("mixed", duration=seconds, seed=seed), seed=seed)
+    return bad.sequence
+
+
+def _constants(fitted=True):
+    """The default constants of every region as a given fit (no coloured error)."""
+    d = tk.method_defaults("robust")
+    return {g: {"speed_sd": d["speed_sd"][g], "noise_sd": d["noise_sd"][g], "error_sd": 0.0,
+                "error_tau": d["tau"], "fitted": fitted} for g in REGIONS}  # fmt: skip
+
+
+def test_a_fit_given_back_is_the_fit():
+    """The fit of a recording, given back as ``noise``, gives the fitted smoother's
+    positions, sd and states bit for bit, through JSON too (NaN written as null)."""
+    seq = _recording(1)
+    fitted = tk.smooth(seq)
+    fit = fitted.metadata["diagnostics"]["noise_fit"]
+    assert all(fit[g]["fitted"] for g in REGIONS)
+    for given in (fit, json.loads(json.dumps(fit).replace("NaN", "null"))):
+        out = tk.smooth(seq, noise=given)
+        np.testing.assert_array_equal(out.positions, fitted.positions)
+        np.testing.assert_array_equal(out.std, fitted.std)
+        np.testing.assert_array_equal(out.sample_state, fitted.sample_state)
+        report = out.metadata["diagnostics"]["noise_fit"]
+        assert all(report[g]["given"] for g in REGIONS)
+        for g in REGIONS:
+            for key in ("speed_sd", "noise_sd", "error_sd", "error_tau"):
+                assert report[g][key] == fit[g][key]
+
+
+@pytest.mark.parametrize("fitted", [True, False])
+def test_the_constants_given_are_the_fixed_smoother(fitted):
+    """Every region given at the constants (or marked not fitted, whose values are then
+    the constants) runs the fixed model: noise="fixed"'s positions. The sd is at least
+    the fixed one's (the floor of the samples' own noise may widen it)."""
+    seq = _recording(2)
+    fixed = tk.smooth(seq, noise="fixed")
+    out = tk.smooth(seq, noise=_constants(fitted))
+    np.testing.assert_allclose(out.positions, fixed.positions, rtol=0, atol=1e-12)
+    ok = np.isfinite(fixed.std)
+    assert (out.std[ok] >= fixed.std[ok] * (1 - 1e-12)).all()
+    if not fitted:
+        np.testing.assert_allclose(out.std, fixed.std, rtol=1e-12)
+
+
+def test_the_values_given_are_used():
+    """A track of white noise of 2 cm about a still point: given that noise and a slow
+    joint it comes out far closer to the point than the samples are; given a noise a
+    hundred times smaller and a fast joint it follows every sample it used."""
+    rng = np.random.default_rng(3)
+    seq = _recording(3)
+    still = np.broadcast_to(seq.positions[:1], seq.positions.shape)
+    noisy = still + rng.normal(0, 0.02, still.shape)
+    seq = seq.replace(positions=noisy, tracking_state=None)
+    region = {"speed_sd": 0.01, "error_sd": 0.0, "error_tau": 0.15, "fitted": True}
+    right = tk.smooth(seq, noise={g: {**region, "noise_sd": 0.02} for g in REGIONS})
+    fast = {**region, "speed_sd": 3.0, "noise_sd": 0.0002}
+    small = tk.smooth(seq, noise={g: fast for g in REGIONS})
+    assert np.sqrt(np.nanmean((right.positions - still) ** 2)) < 0.5 * 0.02
+    used = small.sample_state == SampleState.MEASURED
+    assert used.mean() > 0.5
+    assert np.abs(small.positions - noisy)[used].max() < 0.1 * 0.02
+    # its sd is at least the samples' own noise (the floor of a fit, applied to a given one)
+    assert small.metadata["diagnostics"]["noise_fit"]["torso"]["sd_scale"] > 10
+    assert np.nanmedian(small.std[used]) > 0.25 * 0.02
+    assert right.metadata["provenance"]["params"]["noise"]["torso"]["noise_sd"] == 0.02
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        ("guess", "must be .fit., .fixed. or a noise fit"),
+        ({}, "noise fit given per body region"),
+        ([1, 2], "noise fit given per body region"),
+        ({"head": {}}, "unknown body regions"),
+        ({"hands": 0.1}, "must be a mapping"),
+        ({"hands": {"speed_sd": 1.0}}, "lacks"),
+        (
+            {"hands": {"speed_sd": 0.0, "noise_sd": 0.01, "error_sd": 0, "error_tau": 0.1}},
+            r"\['speed_sd'\] must be a positive",
+        ),
+        (
+            {"hands": {"speed_sd": 1.0, "noise_sd": -0.01, "error_sd": 0, "error_tau": 0.1}},
+            r"\['noise_sd'\] must be a finite number >= 0",
+        ),
+        (
+            {"hands": {"speed_sd": 1.0, "noise_sd": 0.01, "error_sd": 0, "error_tau": math.nan}},
+            r"\['error_tau'\] must be a positive",
+        ),
+        ({"hands": {"speed_sd": 1.0, "noise_sd": 0, "error_sd": 0, "error_tau": 0.1}}, "both 0"),
+        (
+            {
+                "hands": {
+                    "speed_sd": 1.0,
+                    "noise_sd": 0.01,
+                    "error_sd": 0,
+                    "error_tau": 0.1,
+                    "fitted": "yes",
+                }
+            },
+            "true or false",
+        ),
+    ],
+)
+def test_a_bad_fit_is_refused(given, message):
+    seq = _recording(4, 1.0)
+    with pytest.raises(ValueError, match=message):
+        tk.smooth(seq, noise=given)
+
+
+def test_every_region_of_the_skeleton_must_be_given():
+    seq = _recording(5, 1.0)
+    given = _constants()
+    del given["legs"]
+    check_given_noise("noise", given)  # a fit of some regions is a valid value ...
+    with pytest.raises(ValueError, match=r"no values for the body regions \['legs'\]"):
+        tk.smooth(seq, noise=given)  # ... but this skeleton has legs
+
+
+def test_the_causal_method_keeps_its_constants():
+    with pytest.raises(ValueError, match="noise"):
+        tk.smooth(_recording(6, 1.0), "robust_online", noise=_constants())
