@@ -166,6 +166,29 @@ def test_a_held_fit_reads_the_fit_runs_window():
     assert not np.array_equal(spoilt(slice(22, 23), 0.005), base, equal_nan=True)
 
 
+def test_bodies_a_run_couples_are_fitted_together_at_every_frame():
+    """Two people in one pixel array, their identities exchanged for a stretch: one run
+    untangles them (and measures the gates on both), so they are smoothed together and
+    fitted at every frame, the default refit giving refit 0's frames; in metres each
+    body is its own and the fit is held."""
+    a, _ = _recording(10, 3.0)
+    b, _ = _recording(11, 3.0, "walk")
+    T = min(a.n_frames, b.n_frames, 80)
+    pos = np.stack([a.positions[:T, :, :2] * 500, b.positions[:T, :, :2] * 500 + 300], 1)
+    pos[30:45] = pos[30:45, ::-1]  # an identity switch of half a second
+    px = tk.SkeletonSequence(pos[:, 0], a.topology, fps=30.0, units=None)
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
+    held, _, _, _ = _stream(px, positions=pos, **kw)
+    every, _, _, _ = _stream(px, positions=pos, refit=0.0, **kw)
+    np.testing.assert_array_equal(held, every)
+    m = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
+    metres = np.stack([a.positions[:T], b.positions[:T]], 1)
+    plain = a.replace(positions=a.positions[:T], tracking_state=None, timestamps=None)
+    held_m, _, _, _ = _stream(plain, positions=metres, **m)
+    every_m, _, _, _ = _stream(plain, positions=metres, refit=0.0, **m)
+    assert not np.array_equal(held_m, every_m, equal_nan=True)
+
+
 def test_refit_is_checked():
     seq, _ = _recording(9, 1.0)
     for bad in (-1.0, math.nan, "often"):

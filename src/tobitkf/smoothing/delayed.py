@@ -39,6 +39,8 @@ from numpy.typing import ArrayLike, NDArray
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import DEFAULT_METHOD, check_params, get_method, smooth
+from tobitkf.smoothing.keypoints import length_scale
+from tobitkf.smoothing.robust import use_recording_gates
 from tobitkf.smoothing.stream_frames import (
     INFINITE,
     check_confidence,
@@ -115,10 +117,11 @@ class _HeldFit:
 
     def run(self, k: int, seqs: list[SkeletonSequence], method: str,
             kwargs: Mapping[str, Any]) -> list[SkeletonSequence]:  # fmt: skip
-        """Run ``k`` of the method on ``seqs`` (one per body): together without a held
-        fit; with one, each body alone (its own fit: in pixels its gates are then its
-        own too, as :func:`smooth_delayed` of that body gives)."""
-        if not self.active:
+        """Run ``k`` of the method on ``seqs`` (one per body): with a held fit, each
+        body alone with its own (what :func:`smooth_delayed` of that body gives);
+        together, fitting at every run, where one call couples the bodies
+        (:func:`_coupled`) or nothing is held."""
+        if not self.active or (len(seqs) > 1 and _coupled(seqs[0].units, kwargs)):
             return list(smooth(seqs, method, **kwargs))
         out = []
         for b, seq in enumerate(seqs):
@@ -127,6 +130,17 @@ class _HeldFit:
             out.append(smooth(seq, method, **{**kwargs, **held}))
         self.keep(k, out)
         return out
+
+
+def _coupled(units: str | None, params: Mapping[str, Any]) -> bool:
+    """Whether :func:`smooth` couples the bodies it gets in one call: it undoes identity
+    swaps between them (``untangle``: True, or "auto" in pixels and unknown units) or
+    ``robust`` measures its gates on all of them (pixels and unknown units, or
+    ``gates="recording"``). Otherwise each body's output is that of the body alone."""
+    untangle = params.get("untangle", "auto")
+    metric = length_scale(units) is not None
+    return (untangle is True or (untangle == "auto" and not metric)
+            or use_recording_gates(dict(params), "m" if metric else None))  # fmt: skip
 
 
 def _check_window(params: Mapping[str, Any], window: float) -> None:
@@ -237,8 +251,10 @@ class DelayedSmoother:
     refit : float
         Seconds between two fits of the noise (default 1), when the method fits it to
         each window (``robust``'s default ``noise="fit"``): the fit is most of a run's
-        work, so in between the runs take the last fit as given (``noise=`` that fit;
-        each body of the frame alone). 0 fits at every frame.
+        work, so in between the runs take the last fit as given (``noise=`` that fit,
+        each body alone). 0 fits at every frame, and so do several bodies in one array
+        that one run couples (pixels: identity swaps undone between them, gates
+        measured on all of them); keyed bodies are each their own stream anyway.
     fps : float
         Frame rate: turns ``delay`` and ``window`` into frames, and times the frames
         when no timestamps are given.
