@@ -1,6 +1,6 @@
 """Per-frame cost of live smoothing with a delay (``DelayedSmoother``; run by hand).
 
-    .venv/bin/python benchmarks/bench_delayed.py [--frames 900] [--markdown]
+    .venv/bin/python benchmarks/bench_delayed.py [--frames 900] [--rounds 3] [--markdown]
 
 One synthetic Kinect V2 body (25 joints, the benchmark's corruption) is streamed frame by
 frame through ``DelayedSmoother`` (``robust``, 0.5 s late) with windows of 4, 6 and 10 s
@@ -41,6 +41,7 @@ def latencies(live, frames: np.ndarray, states: np.ndarray, skip: int) -> np.nda
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=900)
+    ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--markdown", action="store_true")
     args = ap.parse_args(argv)
     seq = synthetic_recordings(1, args.frames)[0]
@@ -48,28 +49,35 @@ def main(argv: list[str] | None = None) -> None:
     skip = round(max(WINDOWS) * 30)
     if args.frames <= skip + 10:
         ap.error(f"--frames must exceed {skip + 10} (the largest window, full)")
-    rows = {
-        "minimal numpy KF update": minimal_kf_latency(args.frames)[skip:] * 1e-3,
-        "LiveSmoother (robust_online), causal": latencies(
-            tk.LiveSmoother(seq.topology, fps=30.0), P, S, skip
-        ),
-    }
-    for w in WINDOWS:
-        live = tk.DelayedSmoother(seq.topology, delay=0.5, window=w, fps=30.0)
-        rows[f"DelayedSmoother (robust), 0.5 s late, {w:g} s window"] = latencies(live, P, S, skip)
-    for name, kw in (("refit=0", {"refit": 0.0}), ("refit=0, fit_seconds=2",
-                                                 {"refit": 0.0, "fit_seconds": 2.0})):  # fmt: skip
-        live = tk.DelayedSmoother(seq.topology, delay=0.5, window=10.0, fps=30.0, **kw)
-        rows[f"DelayedSmoother (robust, {name}), 0.5 s late, 10 s window"] = latencies(
-            live, P, S, skip
-        )
+    topo = seq.topology
+    configs = {
+        "minimal numpy KF update": None,
+        "LiveSmoother (robust_online), causal": lambda: tk.LiveSmoother(topo, fps=30.0),
+        **{f"DelayedSmoother (robust), 0.5 s late, {w:g} s window":
+           (lambda w=w: tk.DelayedSmoother(topo, delay=0.5, window=w, fps=30.0))
+           for w in WINDOWS},
+        **{f"DelayedSmoother (robust, {name}), 0.5 s late, 10 s window":
+           (lambda kw=kw: tk.DelayedSmoother(topo, delay=0.5, window=10.0, fps=30.0, **kw))
+           for name, kw in (("refit=0", {"refit": 0.0}),
+                            ("refit=0, fit_seconds=2", {"refit": 0.0, "fit_seconds": 2.0}))},
+    }  # fmt: skip
+    # the configurations take turns, ROUNDS times; each keeps its round of lowest median
+    # (a burst of the shared machine's noise then spoils one round, not one configuration)
+    rows: dict[str, np.ndarray] = {}
+    for _ in range(args.rounds):
+        for name, make in configs.items():
+            lat = (minimal_kf_latency(args.frames)[skip:] * 1e-3 if make is None
+                   else latencies(make(), P, S, skip))  # fmt: skip
+            if name not in rows or np.median(lat) < np.median(rows[name]):
+                rows[name] = lat
     ref = float(np.median(rows["LiveSmoother (robust_online), causal"]))
     if not args.markdown:
         for name, lat in rows.items():
             print(f"{name:55s} median {np.median(lat):8.3f} ms  p99 {np.percentile(lat, 99):8.3f}")
         return
     print(f"Measured {machine()}; one body, 25 joints, {args.frames} frames streamed, "
-          f"timed from frame {skip} on.\n")  # fmt: skip
+          f"timed from frame {skip} on; each configuration streamed {args.rounds} times, the "
+          "configurations taking turns, the round with the lowest median shown.\n")  # fmt: skip
     print("| live, 1 body, 25 joints | median ms / frame | mean | p99 | "
           "median / robust_online's | mean's share of 33.3 ms |")  # fmt: skip
     print("|---|---|---|---|---|---|")

@@ -15,8 +15,9 @@ package's Kalman core, ``tk.kalman_filter`` (3-D random walk per joint, A = H = 
 same positions, all joints of all recordings as one batch), measured in the same run.
 The first call of each method is not timed (it loads, or compiles, the robust kernels).
 Live: the per-frame latency of the live default (``robust_online``) and of ``atkf``
-through ``LiveSmoother`` for one body, six bodies in one array, and one and six bodies
-keyed by id (the keyed stream's own one-body cost beside the array's), next to a minimal
+through ``LiveSmoother`` for one body (without and with the Kinect's tracking states), six
+bodies in one array, and one and six bodies keyed by id (the keyed stream's own one-body
+cost beside the array's), next to a minimal
 numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
 method) over a folder of small recordings, start-up included, with 1 and 2 processes, and
 over the KIMORE folder (best of 3 runs).
@@ -214,10 +215,11 @@ LIVE_ROUNDS = 3
 def live_latency(
     n: int, methods: tuple[str, ...] = ("robust_online", "atkf"), rounds: int = LIVE_ROUNDS
 ) -> dict:
-    """Per-frame latency (us) of live methods (the live default first): one body, six in
-    an array, one and six keyed by id. Each is streamed ``rounds`` times, the rounds of all of
-    them taking turns, and the round with the lowest median is kept: a burst of the
-    shared machine's noise then spoils one round, not one configuration."""
+    """Per-frame latency (us) of live methods (the live default first): one body (also with
+    tracking states), six in an array, one and six keyed by id. Each is streamed
+    ``rounds`` times, the rounds of all of them taking turns, and the round with the
+    lowest median is kept: a burst of the shared machine's noise then spoils one round,
+    not one configuration."""
     if n < 2:
         return {}
     seqs = synthetic_recordings(6, n)
@@ -230,11 +232,15 @@ def live_latency(
     for _ in range(rounds):
         runs["minimal numpy KF update, 1 body"].append(minimal_kf_latency(n))
         for method in methods:
-            for label, frames in (("1 body", list(one)), ("6 bodies in one array", list(six)),
-                                  ("1 body keyed by id", one_keyed),
-                                  ("6 bodies keyed by id", keyed)):  # fmt: skip
+            for label, frames, states in (
+                ("1 body", list(one), None),
+                ("1 body with tracking states", list(one), list(seqs[0].tracking_state)),
+                ("6 bodies in one array", list(six), None),
+                ("1 body keyed by id", one_keyed, None),
+                ("6 bodies keyed by id", keyed, None),
+            ):
                 live = tk.LiveSmoother(topo, method, fps=30.0)
-                lat = _latencies(live, frames, None)
+                lat = _latencies(live, frames, states)
                 runs.setdefault(f"LiveSmoother ({method}), {label}", []).append(lat)
     return best_rounds([{name: lat} for name, lats in runs.items() for lat in lats])
 
@@ -337,15 +343,20 @@ def print_markdown(
         print("|---|---|---|")
         for name, lat in live.items():
             print(f"| {name} | {np.median(lat):.0f} | {np.percentile(lat, 99):.0f} |")
-        names = list(live)
-        ratios = []
-        for k in range(1, len(names), 4):  # per method: 1 body, 6 in an array, 1 and 6 keyed
-            one, arr, one_keyed, keyed = (np.median(live[names[k + i]]) for i in range(4))
-            method = names[k].split("(")[1].split(")")[0]
+        ratios, states = [], []
+        methods = dict.fromkeys(n.split("(")[1].split(")")[0] for n in live if "(" in n)
+        for method in methods:
+            one, arr, one_keyed, keyed, with_states = (
+                float(np.median(live[f"LiveSmoother ({method}), {label}"]))
+                for label in ("1 body", "6 bodies in one array", "1 body keyed by id",
+                              "6 bodies keyed by id", "1 body with tracking states")
+            )  # fmt: skip
             ratios.append(f"{method} {arr / one:.1f}× in one array, {keyed / one:.1f}× keyed by "
                           f"id ({keyed / one_keyed:.1f}× one body keyed by id)")  # fmt: skip
+            states.append(f"{method} {with_states / one:.1f}×")
         print()
-        print("Median per frame, six bodies / one body: " + "; ".join(ratios) + ".")
+        print("Median per frame, six bodies / one body: " + "; ".join(ratios) + ". One body "
+              "with tracking states / without: " + "; ".join(states) + ".")  # fmt: skip
     if files:
         print()
         rates = ", ".join(f"{v:.0f} files/s with -j {k}" for k, v in files.items())
