@@ -10,10 +10,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import tobitkf as tk
 from tobitkf.skeleton.sequence import SampleState
-from tobitkf.smoothing.robust_fit import check_given_noise
+from tobitkf.smoothing.robust_fit import NOISE_KEYS, check_given_noise
 
 REGIONS = ("hands", "arms", "torso", "legs")
 
@@ -37,8 +39,8 @@ def test_a_fit_given_back_is_the_fit():
     fitted = tk.smooth(seq)
     fit = fitted.metadata["diagnostics"]["noise_fit"]
     assert all(fit[g]["fitted"] for g in REGIONS)
-    for given in (fit, json.loads(json.dumps(fit).replace("NaN", "null"))):
-        out = tk.smooth(seq, noise=given)
+    for back in (fit, json.loads(json.dumps(fit).replace("NaN", "null"))):
+        out = tk.smooth(seq, noise=back)
         np.testing.assert_array_equal(out.positions, fitted.positions)
         np.testing.assert_array_equal(out.std, fitted.std)
         np.testing.assert_array_equal(out.sample_state, fitted.sample_state)
@@ -141,3 +143,27 @@ def test_every_region_of_the_skeleton_must_be_given():
 def test_the_causal_method_keeps_its_constants():
     with pytest.raises(ValueError, match="noise"):
         tk.smooth(_recording(6, 1.0), "robust_online", noise=_constants())
+
+
+_positive = st.floats(1e-6, 1e3, allow_nan=False, allow_infinity=False)
+_region = st.fixed_dictionaries(
+    {"speed_sd": _positive, "noise_sd": _positive, "error_sd": _positive, "error_tau": _positive},
+    optional={"fitted": st.just(True), "loglik": st.floats(), "at_bound": st.just([])},
+)
+_fit = st.dictionaries(st.sampled_from(REGIONS), st.one_of(_region, st.just({"fitted": False})),
+                       min_size=1)  # fmt: skip
+
+
+@settings(max_examples=200, deadline=None)
+@given(_fit)
+def test_a_valid_fit_is_read_as_given(fit):
+    """Any fit of positive values is read back as the same numbers (the report's other
+    keys dropped), survives JSON, and reading it again changes nothing."""
+    out = check_given_noise("noise", fit)
+    assert set(out) == set(fit)
+    for g, region in fit.items():
+        if region.get("fitted", True):
+            assert out[g] == {**{k: region[k] for k in NOISE_KEYS}, "fitted": True}
+        else:
+            assert out[g] == {"fitted": False}
+    assert check_given_noise("noise", json.loads(json.dumps(out))) == out
