@@ -68,6 +68,23 @@ def test_the_stream_gives_the_batch_twins_frames():
     assert batch.metadata["provenance"]["delayed"]["window_frames"] == 120
 
 
+@pytest.mark.realdata
+@pytest.mark.parametrize("name", ["CTK", "ELK"])
+def test_no_returned_step_is_larger_than_the_inputs(name):
+    """Issue 10, point 4, across runs: consecutive frames come from different runs (the
+    later one sees a frame more and may judge a failure otherwise), yet no returned step
+    exceeds the joint's largest input step where the input is present at both frames.
+    KERAAL CTK and ELK had such steps (up to 32 cm beyond) before the guard."""
+    seq = load(data_file(f"keraal/G3-Kinect-{name}-P1T1-Unknown-C-0.txt"))[0]
+    out = tk.smooth_delayed(seq, delay=0.5)
+    present = np.isfinite(seq.positions).all(axis=-1)
+    step_in = np.linalg.norm(np.diff(seq.positions, axis=0), axis=-1)
+    both = present[1:] & present[:-1]
+    largest = np.max(np.where(both, step_in, 0.0), axis=0)
+    step_out = np.linalg.norm(np.diff(out.positions, axis=0), axis=-1)
+    assert not (both & (step_out > largest[None] + 1e-9)).any()
+
+
 def test_bodies_and_timestamps_each_as_alone():
     """Two bodies in one (B, J, 3) stream with irregular timestamps: each body's frames are
     smooth_delayed of that body alone (robust treats bodies independently)."""

@@ -12,9 +12,11 @@ frame, runs an offline method (default :data:`~tobitkf.smoothing.api.DEFAULT_MET
 seconds back. Its batch twin :func:`smooth_delayed` gives, for a whole recording, the
 frames a stream of it would have returned: frame ``t`` is the method's output at ``t``
 on frames ``max(0, b - W) .. b - 1``, ``b = min(T, t + D + 1)`` (``D`` and ``W`` the
-delay and window in frames). :meth:`DelayedSmoother.flush` returns the last ``D``
-frames at the end of a stream, so nothing is lost. The work per frame is one run of
-the method on at most ``W`` frames (bounded; docs/robust.md measures it).
+delay and window in frames), its noise fit held for ``refit`` seconds (:class:`_HeldFit`)
+and its step from the frame returned before held to the input's (:class:`_Guard`).
+:meth:`DelayedSmoother.flush` returns the last ``D`` frames at the end of a stream, so
+nothing is lost. The work per frame is one run of the method on at most ``W`` frames
+(bounded; docs/robust.md measures it).
 
 Example
 -------
@@ -132,6 +134,64 @@ class _HeldFit:
         return out
 
 
+class _Guard:
+    """No returned step larger than the input's (issue 10, point 4), across the runs.
+
+    Each run keeps its own output within the input's steps, but consecutive frames come
+    from different runs: run ``t + 1`` sees one frame more, may judge a failure
+    differently, and its frame ``t + 1`` can then jump from run ``t``'s frame ``t``
+    further than the joint's input ever stepped. So the frames returned go through the
+    step guard of the causal methods (:mod:`tobitkf.smoothing._step_guard`): a returned
+    step where the input is present at both frames is held to the largest input step of
+    the joint among the frames received so far (frame ``t + D`` when frame ``t`` is
+    returned; all of them at the flush); the shift is added to the variance. An input
+    sample is present when its coordinates are finite and its tracking state (if any)
+    is not NOT_TRACKED. The stream and :func:`smooth_delayed` guard alike."""
+
+    def __init__(self) -> None:
+        self.state: Any = None
+        self.prev: tuple[Array, NDArray[np.bool_]] | None = None  # the last frame received
+
+    @staticmethod
+    def _frame(pos: Array, states: Any) -> tuple[Array, NDArray[np.bool_]]:
+        """One input frame ``(B, J, D)`` as the guard reads it: float, and its absent
+        samples."""
+        y = np.ascontiguousarray(pos, dtype=float)
+        missing = ~np.isfinite(y).all(axis=-1)
+        if states is not None:
+            missing |= np.asarray(states) == 0  # NOT_TRACKED
+        return y, missing
+
+    def receive(self, pos: Array, states: Any) -> None:
+        """A frame received (``(B, J, D)``): its step joins the largest steps."""
+        from tobitkf.smoothing import _step_guard as g
+
+        y, missing = self._frame(pos, states)
+        if self.state is None:
+            self.state = g.new_state(*missing.shape, y.shape[-1])
+        elif self.prev is not None:
+            g.largest_steps(np.stack([self.prev[0], y]), np.stack([self.prev[1], missing]),
+                            self.state[1])  # fmt: skip
+        self.prev = (y, missing)
+
+    def give(self, pos: Array, states: Any, est: Array, std: Array | None) -> None:
+        """Guard the frame returned, in place: ``est (B, J, D)`` and ``std (B, J)`` (or
+        None) of the input frame ``pos``, ``states``."""
+        from tobitkf.smoothing import _step_guard as g
+
+        y, missing = self._frame(pos, states)
+        var = np.zeros(missing.shape) if std is None else std**2
+        out = np.array(est, dtype=float)[None]  # copies: the guard works in place
+        v = np.array(var, dtype=float)[None]
+        g.guard_frames(y[None], missing[None], out, v, 0, *self.state)
+        # a step the run's own guard already held is held again to within rounding: left
+        # as it is (the whole recording in view is then smooth()'s output exactly)
+        moved = np.abs(out[0] - est).max(axis=-1) > 1e-12 * (1 + np.abs(est).max(axis=-1))
+        est[moved] = out[0][moved]
+        if std is not None:
+            std[moved] = np.sqrt(v[0][moved])
+
+
 def _coupled(units: str | None, params: Mapping[str, Any]) -> bool:
     """Whether :func:`smooth` couples the bodies it gets in one call: it undoes identity
     swaps between them (``untangle``: True, or "auto" in pixels and unknown units) or
@@ -210,7 +270,16 @@ def smooth_delayed(
     states = np.zeros(sequence.positions.shape[:2], np.int8)
     last: SkeletonSequence | None = None
     runs: dict[tuple[int, int], SkeletonSequence] = {}
+    guard, received = _Guard(), 0
+    ts = sequence.tracking_state
+
+    def state(t: int) -> Any:
+        return None if ts is None else ts[t][None]
+
     for t in range(T):
+        while received < min(T, t + D + 1):  # the frames a stream has when it returns t
+            guard.receive(sequence.positions[received][None], state(received))
+            received += 1
         a, b = _bounds(t, T, D, W)
         if (a, b) not in runs:  # the last D frames share one run (the stream's flush)
             runs = {(a, b): hold.run(t, [_frames(sequence, a, b)], method, kwargs)[0]}
@@ -220,6 +289,8 @@ def smooth_delayed(
             std[t] = last.std[t - a]
         if last.sample_state is not None:
             states[t] = last.sample_state[t - a]
+        guard.give(sequence.positions[t][None], state(t), pos[t][None],
+                   None if last.std is None else std[t][None])  # fmt: skip
     if last is None:
         raise ValueError("smooth_delayed: the sequence has no frames")
     out = last.replace(positions=pos, timestamps=sequence.timestamps, fps=sequence.fps,
@@ -332,6 +403,7 @@ class DelayedSmoother:
         self._stamps: deque[float | None] = deque(maxlen=self.D + 1)
         self._hold = _HeldFit(self.params, self.R)
         self._last: list[SkeletonSequence] | None = None  # the run on the buffer as it is
+        self._guard = _Guard()
 
     def update(
         self,
@@ -468,6 +540,7 @@ class DelayedSmoother:
     def _push(self, frame: tuple) -> Array | None:
         """Take a checked frame (:meth:`_checked`); the frame ``delay`` back, or None."""
         self._buffer.append(frame)
+        self._guard.receive(frame[0], frame[1])
         for i, x in enumerate(frame):
             if x is not None:
                 x = np.asarray(x, dtype=float if i == 2 else None)[None]
@@ -518,12 +591,18 @@ class DelayedSmoother:
         def take(field: str) -> Any:
             if getattr(out[0], field) is None:
                 return None
-            a = np.stack([getattr(s, field)[rows] for s in out], axis=1)  # (n, B, ...)
-            return a[:, 0] if single else a
+            return np.stack([getattr(s, field)[rows] for s in out], axis=1)  # (n, B, ...)
 
+        pos, std, states = take("positions"), take("std"), take("sample_state")
+        P, S = self._stacked[0], self._stacked[1]
+        for i, row in enumerate(rows):  # in time order, from the previous frame returned
+            self._guard.give(P[row], None if S is None else S[row], pos[i],
+                             None if std is None else std[i])  # fmt: skip
         self.frame_index = last
         self.timestamp = self._buffer[last - (self.n_frames - len(self._buffer))][2]
-        return take("positions"), take("std"), take("sample_state")
+        if single:
+            return tuple(None if a is None else a[:, 0] for a in (pos, std, states))
+        return pos, std, states
 
     def _checked(self, positions: Any, states: Any, timestamp: Any, confidence: Any) -> tuple:
         """A frame checked against the stream, with a body axis; nothing is changed when
