@@ -66,6 +66,9 @@ def test_the_stream_gives_the_batch_twins_frames():
     assert index == list(range(seq.n_frames - 15))
     assert (states == SampleState.REJECTED).any()
     assert batch.metadata["provenance"]["delayed"]["window_frames"] == 120
+    assert batch.metadata["provenance"]["delayed"]["refit_frames"] == 30  # 1 s, the default
+    fixed = tk.smooth_delayed(seq, delay=0.5, window=4.0, noise="fixed")
+    assert fixed.metadata["provenance"]["delayed"]["refit_frames"] is None  # nothing held
 
 
 @pytest.mark.realdata

@@ -235,7 +235,9 @@ def _frames(seq: SkeletonSequence, a: int, b: int) -> SkeletonSequence:
 
 
 def _delay_meta(out: SkeletonSequence, delay: float, window: float, D: int, W: int,
-                R: int) -> None:  # fmt: skip
+                R: int | None) -> None:  # fmt: skip
+    """``provenance["delayed"]``: the settings in seconds and in frames (``refit_frames``
+    None: no fit held, the method fits at every run or not at all)."""
     prov = out.metadata.setdefault("provenance", {})
     prov["delayed"] = {"delay": delay, "window": window, "delay_frames": D, "window_frames": W,
                        "refit_frames": R}  # fmt: skip
@@ -298,7 +300,7 @@ def smooth_delayed(
                        std=None if last.std is None else std,
                        sample_state=None if last.sample_state is None else states,
                        metadata=dict(last.metadata))  # fmt: skip
-    _delay_meta(out, float(delay), float(window), D, W, hold.R)
+    _delay_meta(out, float(delay), float(window), D, W, hold.R if hold.active else None)
     return out
 
 
