@@ -17,10 +17,9 @@ The first call of each method is not timed (it loads, or compiles, the robust ke
 Live: the per-frame latency of the live default (``robust_online``) and of ``atkf``
 through ``LiveSmoother`` for one body (without and with the Kinect's tracking states), six
 bodies in one array, and one and six bodies keyed by id (the keyed stream's own one-body
-cost beside the array's), next to a minimal
-numpy per-frame Kalman update of one body. Files: ``tobitkf smooth`` (default
-method) over a folder of small recordings, start-up included, with 1 and 2 processes, and
-over the KIMORE folder (best of 3 runs).
+cost beside the array's), next to a minimal numpy per-frame Kalman update of one body.
+Files: ``tobitkf smooth`` (default method) over a folder of small recordings, start-up
+included, with 1 and 2 processes, and over the KIMORE folder (best of 3 runs).
 ``--markdown`` ends with the README's table (``make bench``).
 """
 

@@ -46,3 +46,13 @@ def test_a_refused_frame_does_not_move_the_stream(method, bad_state):
     got += [live.update(f) for f in frames[3:]]
     for g, e in zip(got, expected, strict=True):
         np.testing.assert_array_equal(g, e)
+
+
+@pytest.mark.parametrize("bad_state", [5, -1, 1.5])
+def test_a_bad_tracking_state_is_named(bad_state):
+    # the message names the value that is not 0, 1 or 2 (a float inside [0, 2] too)
+    live = tk.LiveSmoother(TOPO, fps=30.0)
+    states = np.full(TOPO.n_joints, 2, dtype=type(bad_state))
+    states[3] = bad_state
+    with pytest.raises(ValueError, match=rf"found \[{bad_state}\]"):
+        live.update(_frames()[0], tracking_state=states)
