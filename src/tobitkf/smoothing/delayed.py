@@ -50,6 +50,7 @@ from tobitkf.smoothing.stream_frames import (
     check_states,
     timestamp_seconds,
 )
+from tobitkf.smoothing.timebase import measurements
 
 __all__ = ["DelayedSmoother", "delay_frames", "smooth_delayed"]
 
@@ -145,8 +146,9 @@ class _Guard:
     step where the input is present at both frames is held to the largest input step of
     the joint among the frames received so far (frame ``t + D`` when frame ``t`` is
     returned; all of them at the flush); the shift is added to the variance. An input
-    sample is present when its coordinates are finite and its tracking state (if any)
-    is not NOT_TRACKED. The stream and :func:`smooth_delayed` guard alike."""
+    sample is present as every method reads it (:func:`~tobitkf.smoothing.timebase.
+    measurements`: not NaN, not NOT_TRACKED). The stream and :func:`smooth_delayed`
+    guard alike."""
 
     def __init__(self) -> None:
         self.state: Any = None
@@ -156,11 +158,8 @@ class _Guard:
     def _frame(pos: Array, states: Any) -> tuple[Array, NDArray[np.bool_]]:
         """One input frame ``(B, J, D)`` as the guard reads it: float, and its absent
         samples."""
-        y = np.ascontiguousarray(pos, dtype=float)
-        missing = ~np.isfinite(y).all(axis=-1)
-        if states is not None:
-            missing |= np.asarray(states) == 0  # NOT_TRACKED
-        return y, missing
+        y, missing = measurements(pos, states)
+        return np.ascontiguousarray(y), missing
 
     def receive(self, pos: Array, states: Any) -> None:
         """A frame received (``(B, J, D)``): its step joins the largest steps."""
@@ -380,10 +379,9 @@ class DelayedSmoother:
 
     def reset(self) -> None:
         """Forget the stream; the next frame starts a new one."""
-        # (positions (B, J, D), tracking state or None, timestamp or None, confidence or None)
-        self._buffer: deque[tuple[Array, Any, float | None, Any]] = deque(maxlen=self.W)
-        # the same window stacked (positions, states, timestamps, confidence; None for
-        # what the stream does not give): one copy per frame, not a stack of W frames
+        # the last W frames, stacked: positions (n, B, J, D), tracking states (n, B, J),
+        # timestamps (n,), confidence (n, B, J); None for what the stream does not give
+        # (one copy per frame, not a stack of W frames)
         self._stacked: list[Any] = [None] * 4
         self._shape: tuple[int, ...] | None = None
         self._has: tuple[bool, bool, bool] | None = None  # states, timestamps, confidence
@@ -453,7 +451,7 @@ class DelayedSmoother:
             shape = (0, *self._shape) if self._shape is not None else (0, 0, 0)
             self.std = self.sample_state = None
             return np.empty(shape)
-        first = self.n_frames - len(self._buffer)
+        first = self.n_frames - self._held()
         rows = list(range(start - first, self.n_frames - first))
         # the last frame's run (the window has not changed since), or the first run
         out = self._last if self._last is not None else self._run(0)
@@ -541,7 +539,6 @@ class DelayedSmoother:
     # ------------------------------------------------------------------ one array stream
     def _push(self, frame: tuple) -> Array | None:
         """Take a checked frame (:meth:`_checked`); the frame ``delay`` back, or None."""
-        self._buffer.append(frame)
         self._guard.receive(frame[0], frame[1])
         for i, x in enumerate(frame):
             if x is not None:
@@ -554,7 +551,7 @@ class DelayedSmoother:
         t = self.n_frames - 1 - self.D
         if t < 0:
             return None
-        first = self.n_frames - len(self._buffer)
+        first = self.n_frames - self._held()
         self._last = self._run(t)
         pos, std, states = self._give(self._last, [t - first], t)
         self.std = None if std is None else std[0]
@@ -562,6 +559,15 @@ class DelayedSmoother:
         return pos[0]
 
     # ------------------------------------------------------------------ internals
+    def _held(self) -> int:
+        """Frames in the window (the last ``W`` received)."""
+        return 0 if self._stacked[0] is None else len(self._stacked[0])
+
+    def _stamp(self, row: int) -> float | None:
+        """The timestamp of window row ``row`` (None: the stream has none)."""
+        stamps = self._stacked[2]
+        return None if stamps is None else float(stamps[row])
+
     def _run(self, k: int) -> list[SkeletonSequence]:
         """Run ``k`` (the one giving frame ``k``) of the method on the buffered frames,
         one sequence per body."""
@@ -601,7 +607,7 @@ class DelayedSmoother:
             self._guard.give(P[row], None if S is None else S[row], pos[i],
                              None if std is None else std[i])  # fmt: skip
         self.frame_index = last
-        self.timestamp = self._buffer[last - (self.n_frames - len(self._buffer))][2]
+        self.timestamp = self._stamp(last - (self.n_frames - self._held()))
         if single:
             return tuple(None if a is None else a[:, 0] for a in (pos, std, states))
         return pos, std, states
@@ -623,7 +629,7 @@ class DelayedSmoother:
         pos, cf = np.array(pos), None if cf is None else np.array(cf)
         ts = timestamp_seconds(timestamp)
         if ts is not None:
-            prev = self._buffer[-1][2] if self._buffer else None
+            prev = self._stamp(-1) if self._held() else None
             if prev is not None and ts < prev:
                 raise ValueError(f"timestamp {ts} comes before the previous frame's ({prev})")
         has = (st is not None, ts is not None, cf is not None)
