@@ -40,6 +40,11 @@ def late_frames(name: str, window: float) -> str:
     return {"robust_online": "0 (causal)", "robust": "whole recording"}.get(name, "")
 
 
+def given(params: dict) -> str:
+    """The delayed rows' settings other than the defaults, for a table's caption."""
+    return "".join(f", delayed rows with {k} {v:g}" for k, v in params.items())
+
+
 def vs_raw(value: float, raw: float, name: str) -> str:
     return "" if name == "raw" else f"{100 * (value / raw - 1):+.0f} %"
 
@@ -50,9 +55,8 @@ def real(tracks: list[str], replace: tuple[str, str], delays: list[float], windo
     tables = [evaluate_paths(p, p.replace(*replace), methods)[1] for p in tracks]
     pooled = pool_scores(tables)
     n = sum(t.scores[0].counts["all"] for t in tables)
-    given = "".join(f", delayed rows with {k} {v:g}" for k, v in params.items())
     print(f"RMSE against motion capture, cm ({len(tables)} recordings, {n:,} samples; "
-          f"pooled; window {window:g} s{given}):\n")  # fmt: skip
+          f"pooled; window {window:g} s{given(params)}):\n")  # fmt: skip
     print("| method | frames late at 30 fps | RMSE | vs raw | sustained | in 95% ball |")
     print("|---|---|---|---|---|---|")
     raw = pooled[0]["rmse_cm"]
@@ -69,9 +73,8 @@ def benchmark(seeds: int, delays: list[float], window: float, **params: float) -
                      for seed in range(seeds)]) * 100  # fmt: skip
     names = [m if isinstance(m, str) else m[0] for m in methods]
     mean, sd = rmse.mean(axis=0), rmse.std(axis=0, ddof=1)
-    given = "".join(f", delayed rows with {k} {v:g}" for k, v in params.items())
     print(f"RMSE against the truth, cm (built-in synthetic benchmark, mean ± sd over seeds "
-          f"0–{seeds - 1}; window {window:g} s{given}):\n")  # fmt: skip
+          f"0–{seeds - 1}; window {window:g} s{given(params)}):\n")  # fmt: skip
     print("| method | frames late at 30 fps | RMSE | vs raw |")
     print("|---|---|---|---|")
     for name, m, s in zip(names, mean, sd, strict=True):
@@ -93,9 +96,8 @@ def main(argv: list[str] | None = None) -> None:
     else:
         args, replace = parse_with_truth_replace(parser, argv)
     delays = [float(d) for d in args.delays.split(",")]
-    extra = {} if args.fit_seconds is None else {"fit_seconds": args.fit_seconds}
-    if args.refit is not None:
-        extra["refit"] = args.refit
+    extra = {k: v for k, v in (("fit_seconds", args.fit_seconds), ("refit", args.refit))
+             if v is not None}  # fmt: skip
     if args.benchmark:
         benchmark(args.benchmark, delays, args.window, **extra)
     else:
