@@ -197,7 +197,9 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
     if lower.endswith(".csv"):
         from tobitkf.io.generic_csv import sidecar_provenance
 
-        prov = sidecar_provenance(p) or {}
+        prov = sidecar_provenance(p)
+        if prov is None:  # no sidecar: a CSV format that keeps no provenance (LightningPose)?
+            return method if _provenance_free_csv(p) else None
         return method if prov.get("method") == method else None
     if lower.endswith(".npz"):
         from tobitkf.io import load
@@ -208,6 +210,18 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
             return None
         return method if isinstance(prov, dict) and prov.get("method") == method else None
     return method  # no provenance kept in the format: the name decides
+
+
+def _provenance_free_csv(p: Path) -> bool:
+    """True when ``p``'s content is a format other than the generic CSV that tobitkf
+    writes as ``.csv`` (no sidecar, so its name decides, as for NTU)."""
+    from tobitkf.io import detect_format, output_extension, writable_formats
+
+    try:
+        fmt = detect_format(p)
+    except (OSError, ValueError):
+        return False
+    return fmt != "csv" and fmt in writable_formats() and output_extension(fmt) == ".csv"
 
 
 def is_recording_folder(path: Path) -> bool:

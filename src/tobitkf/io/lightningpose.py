@@ -62,4 +62,5 @@ def sniff_lightningpose(path: Path, head: str) -> int:
 register_format(
     "lightningpose", read_lightningpose, write_lightningpose, (), sniff_lightningpose,
     description="LightningPose predictions CSV (DeepLabCut layout)", aliases=("lp",),
+    output_ext=".csv",  # a .csv, told from a generic CSV by its content
 )  # fmt: skip

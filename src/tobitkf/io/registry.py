@@ -56,6 +56,7 @@ class FormatSpec:
     side_outputs: Callable[[Path], list[Path]] | None = None
     sniff_dir: DirSniffer | None = None
     read_with: Callable[[Path], list[Path]] | None = None
+    output_ext: str | None = None
 
 
 _FORMATS: dict[str, FormatSpec] = {}
@@ -75,6 +76,7 @@ def register_format(
     side_outputs: Callable[[Path], list[Path]] | None = None,
     sniff_dir: DirSniffer | None = None,
     read_with: Callable[[Path], list[Path]] | None = None,
+    output_ext: str | None = None,
 ) -> FormatSpec:
     """Register (or replace) a file format.
 
@@ -104,6 +106,10 @@ def register_format(
         recordings (a UI-PRMD positions file's angles, an array's JSON sidecar), given
         any path (``[]`` when it is none of this format's): batch tools hash them with
         the recording (:func:`input_files`), so that editing one redoes its output.
+    output_ext : str, optional
+        The ending of the writer's outputs when it is not the first of ``extensions``:
+        a format that shares its files' ending with another, and so claims none for
+        detection (a LightningPose CSV is a ``.csv``, read as one by its content).
     """
     spec = FormatSpec(
         name=name,
@@ -116,6 +122,7 @@ def register_format(
         side_outputs=side_outputs,
         sniff_dir=sniff_dir,
         read_with=read_with,
+        output_ext=None if output_ext is None else output_ext.lower(),
     )
     _FORMATS[name] = spec
     for a in aliases:
@@ -166,8 +173,12 @@ def writable_formats() -> list[str]:
 def output_extension(name: str) -> str:
     """The file ending a writer's output gets: the format's first extension."""
     spec = get_format(name)
-    if spec.writer is None or not spec.extensions:
+    if spec.writer is None:
         raise ValueError(f"format {name!r} cannot be written; writable: {writable_formats()}")
+    if spec.output_ext is not None:
+        return spec.output_ext
+    if not spec.extensions:
+        raise ValueError(f"format {name!r} names no ending for its files (output_ext)")
     return spec.extensions[0]
 
 
