@@ -79,6 +79,7 @@ _EXPORTS: dict[str, str] = {
     "register_format": "tobitkf.io",
     "formats": "tobitkf.io",
     "ReadError": "tobitkf.io",
+    "read_noise_fit": "tobitkf.io.noise_fit",
     "from_movement": "tobitkf.io.movement",
     "to_movement": "tobitkf.io.movement",
 }

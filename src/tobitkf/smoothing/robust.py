@@ -592,7 +592,15 @@ def _robust_bodies(
     body_params = None
     if fits is not None:
         arrays, reports = fits
-        body_params = tuple({name: a[b].tolist() for name, a in arrays.items()} for b in range(B))
+        # per joint the values used; per region the fit itself, which `noise=` takes back
+        # (tobitkf.io.read_noise_fit reads it from an output file)
+        body_params = tuple(
+            {
+                **{name: a[b].tolist() for name, a in arrays.items()},
+                "noise_fit": {g: dict(r) for g, r in reports[b].items()},
+            }
+            for b in range(B)
+        )
         for b in range(B):
             diags[b]["noise_fit"] = reports[b]
     return est, std, diags, resolved, body_params

@@ -94,6 +94,15 @@ from tobitkf.core.jsonable import dumps
     "v_max=hands:6,arms:4 (the regions not named keep their defaults); repeatable.",
 )
 @click.option(
+    "--noise-from",
+    "noise_from",
+    type=click.Path(exists=True, dir_okay=False),
+    metavar="FILE",
+    help="robust: the noise fit recorded in FILE (an earlier robust output, or its "
+    "sidecar .json, or a JSON of the fit) instead of fitting each input's own; e.g. "
+    "short clips with the noise of a long recording of the same sensor and person.",
+)
+@click.option(
     "--offline",
     is_flag=True,
     help="Run the RTS smoother after Kalman-type methods (uses future frames).",
@@ -136,6 +145,7 @@ def smooth(
     topology,
     overwrite,
     params,
+    noise_from,
     offline,
     pattern,
     jobs,
@@ -161,6 +171,12 @@ def smooth(
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc), param_hint="--param") from exc
+    if noise_from is not None:
+        kwargs = _noise_from(noise_from, method, kwargs)
+        try:  # the fit's values, checked as robust checks them
+            check_params(method, kwargs)
+        except (ValueError, TypeError) as exc:
+            raise click.BadParameter(str(exc), param_hint="--noise-from") from exc
     if offline and not get_method(method).offline_ok:
         try:  # the library's reason, naming the methods that have one
             check_params(method, {"offline": True})
@@ -296,6 +312,26 @@ def smooth(
         sys.exit(130)
     if failed:
         sys.exit(1)
+
+
+def _noise_from(path: str, method: str, kwargs: dict) -> dict:
+    """``kwargs`` with ``noise`` the fit recorded in ``path`` (``--noise-from``)."""
+    from tobitkf.io.noise_fit import read_noise_fit
+    from tobitkf.smoothing.api import method_defaults
+
+    if method_defaults(method).get("noise") != "fit":  # robust_online keeps its constants
+        raise click.BadParameter(
+            f"{method} takes no noise fit (robust, which fits its own, does)",
+            param_hint="--noise-from",
+        )
+    if "noise" in kwargs:
+        raise click.BadParameter(
+            "give the noise once: -p noise=... or --noise-from", param_hint="--noise-from"
+        )
+    try:
+        return {**kwargs, "noise": read_noise_fit(path)}
+    except (OSError, ValueError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--noise-from") from exc
 
 
 def _shown_names(sources: list[str]) -> list[str]:
