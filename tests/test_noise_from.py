@@ -156,3 +156,40 @@ def test_the_cli_refuses_what_takes_no_fit(long_run, tmp_path):
     assert res.exit_code == 2 and "--noise-from" in res.output
     assert "noise['legs']['speed_sd'] must be a positive" in res.output
     assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_a_fit_holds_for_data_in_its_own_units_only():
+    """The fit records the units the method saw (metres for any length, pixels, unknown
+    units); a recording in other units refuses it, one in millimetres takes a fit made in
+    metres and gives the metre result scaled (lengths are converted to metres first)."""
+    seq = _recording(10, 4.0)
+    fit = tk.smooth(seq).metadata["diagnostics"]["noise_fit"]
+    assert {r["units"] for r in fit.values()} == {"m"}
+    mm = seq.replace(positions=seq.positions * 1000, units="mm")
+    np.testing.assert_allclose(tk.smooth(mm, noise=fit).positions / 1000,
+                               tk.smooth(seq, noise=fit).positions, rtol=0, atol=1e-12)  # fmt: skip
+    px = seq.replace(positions=seq.positions * 500, units="px")
+    unknown = seq.replace(units=None)
+    with pytest.raises(ValueError, match="made on a recording in m, and this one is in px"):
+        tk.smooth(px, noise=fit)
+    with pytest.raises(ValueError, match="in m, and this one is in unknown units"):
+        tk.smooth(unknown, noise=fit)
+    fit_px = tk.smooth(px).metadata["diagnostics"]["noise_fit"]
+    assert {r["units"] for r in fit_px.values()} == {"px"}
+    with pytest.raises(ValueError, match="made on a recording in px, and this one is in m"):
+        tk.smooth(seq, noise=fit_px)
+    # a fit that says nothing of its units is taken as given, in any units
+    bare = {g: {k: v for k, v in r.items() if k != "units"} for g, r in fit.items()}
+    tk.smooth(px, noise=bare)
+    with pytest.raises(ValueError, match=r"\['units'\] must be 'm'"):
+        tk.smooth(seq, noise={g: {**r, "units": "mm"} for g, r in fit.items()})
+
+
+def test_the_cli_refuses_a_fit_of_other_units(long_run, tmp_path):
+    d, _ = long_run
+    seq = tk.load(d / "long.csv")[0]
+    px = tmp_path / "px.csv"
+    tk.save([seq.replace(positions=seq.positions * 500, units="px")], px, format="csv")
+    res = _cli("smooth", str(px), "-o", str(tmp_path / "o"),
+               "--noise-from", str(d / "csv" / "long.robust.json"))  # fmt: skip
+    assert res.exit_code == 1 and "made on a recording in m, and this one is in px" in res.output

@@ -592,6 +592,9 @@ def _robust_bodies(
     body_params = None
     if fits is not None:
         arrays, reports = fits
+        for report in reports:  # a fit holds for data in these units only (_noise_units)
+            for r in report.values():
+                r["units"] = units
         # per joint the values used; per region the fit itself, which `noise=` takes back
         # (tobitkf.io.read_noise_fit reads it from an output file)
         body_params = tuple(
@@ -894,9 +897,10 @@ def robust_smooth(
         to the recording per body region (:mod:`tobitkf.smoothing.robust_fit`; the
         fitted values are in ``params`` and ``diagnostics["noise_fit"]``); ``"fixed"``
         uses the values as given (online always); a fit made before (a
-        ``diagnostics["noise_fit"]`` mapping, every region of the skeleton) is used as
-        the fit would be, without fitting
-        (:func:`~tobitkf.smoothing.robust_fit.check_given_noise`).
+        ``diagnostics["noise_fit"]`` mapping, every region of the skeleton; from a file:
+        :func:`tobitkf.io.noise_fit.read_noise_fit`) is used as the fit would be,
+        without fitting (:func:`~tobitkf.smoothing.robust_fit.check_given_noise`); a
+        recording in other units than the fit's (each region's ``units``) refuses it.
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
     shared_errors : True (default) adds the errors that the INFERRED guesses of one
         occlusion and the carried samples of one stretch share, estimated from the
@@ -968,6 +972,23 @@ def robust_smooth(
     )
 
 
+def _noise_units(params: Mapping[str, Any], n_dims: int, units: str | None) -> None:
+    """``check_data``: a noise fit given (``noise=``) that says the units it was fitted
+    in must be those of this recording as the method sees it (metres for any length):
+    a fit made in pixels would be a thousandfold off on metres, and silently."""
+    noise = params.get("noise")
+    if not isinstance(noise, Mapping):
+        return
+    made = {r["units"] for r in noise.values() if isinstance(r, Mapping) and "units" in r}
+    for u in made:
+        if u != units:
+            raise ValueError(
+                f"noise: the fit given was made on a recording in {u or 'unknown units'}, "
+                f"and this one is in {units or 'unknown units'}: a fit holds only for data "
+                "in its own units (lengths count as metres)"
+            )
+
+
 def _register(name: str, offline: bool, description: str) -> None:
     def run(inp: SmoothInput, **params: Any) -> SmoothOutput:
         return _run(inp, offline, params)
@@ -980,6 +1001,7 @@ def _register(name: str, offline: bool, description: str) -> None:
         description=description,
         causal=not offline,
         live=None if offline else RobustStepper,
+        check_data=_noise_units if offline else None,
     )
 
 

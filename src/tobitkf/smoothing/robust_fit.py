@@ -180,7 +180,9 @@ def check_given_noise(name: str, value: Any) -> dict[str, dict[str, Any]]:
     A region with ``fitted`` false keeps the constants (its values are not read, as the
     fit's report of a region with too few samples has none that count). Otherwise
     ``speed_sd`` and ``error_tau`` must be positive, ``noise_sd`` and ``error_sd`` at
-    least 0 and not both 0. Returns plain floats and bools (JSON for the provenance)."""
+    least 0 and not both 0; ``units``, when given, is what the fit was made in (``"m"``,
+    ``"px"`` or None; robust refuses the fit for data in other units). Returns plain
+    floats and bools (JSON for the provenance)."""
     from tobitkf.skeleton.topology import GROUP_NAMES
 
     if not isinstance(value, Mapping) or not value:
@@ -210,6 +212,12 @@ def check_given_noise(name: str, value: Any) -> dict[str, dict[str, Any]]:
         if vals["noise_sd"] == 0 and vals["error_sd"] == 0:
             raise ValueError(f"{where}: noise_sd and error_sd are both 0 (no measurement noise)")
         out[g] = {**vals, "fitted": True}
+        if "units" in region:  # what the fit was made in (robust's check_data compares)
+            units = region["units"]
+            if units not in ("m", "px", None):  # a fit of any lengths is in metres
+                raise ValueError(f"{where}['units'] must be 'm' (any length: the fit is "
+                                 f"in metres), 'px' or null, got {units!r}")  # fmt: skip
+            out[g]["units"] = units
     return out
 
 
