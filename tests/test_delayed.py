@@ -186,21 +186,35 @@ def test_a_held_fit_reads_the_fit_runs_window():
     assert not np.array_equal(spoilt(slice(22, 23), 0.005), base, equal_nan=True)
 
 
-def test_bodies_a_run_couples_are_fitted_together_at_every_frame():
+@pytest.mark.parametrize("t", [45, 50, 59])
+def test_bodies_a_run_couples_hold_their_fits_together(t):
     """Two people in one pixel array, their identities exchanged for a stretch: one run
-    untangles them (and measures the gates on both), so they are smoothed together and
-    fitted at every frame, the default refit giving refit 0's frames; in metres each
-    body is its own and the fit is held."""
+    untangles them and measures the gates on both, so they are smoothed in one call,
+    each with its own fit held (``noise=`` one per body). Frame t is built here with
+    smooth() alone: the two bodies' own window, given the fits of the coupled run k0 =
+    15 * (t // 15) (refit 0.5 s, D = 6, W = 30); it differs from fitting at every frame
+    exactly off the fit runs. In metres each body is its own, and holds its fit too."""
     a, _ = _recording(10, 3.0)
     b, _ = _recording(11, 3.0, "walk")
     T = min(a.n_frames, b.n_frames, 80)
     pos = np.stack([a.positions[:T, :, :2] * 500, b.positions[:T, :, :2] * 500 + 300], 1)
     pos[30:45] = pos[30:45, ::-1]  # an identity switch of half a second
     px = tk.SkeletonSequence(pos[:, 0], a.topology, fps=30.0, units=None)
-    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
+    kw = {"delay": 0.2, "window": 1.0, "max_reject": 0.5, "refit": 0.5}
     held, _, _, _ = _stream(px, positions=pos, **kw)
-    every, _, _, _ = _stream(px, positions=pos, refit=0.0, **kw)
-    np.testing.assert_array_equal(held, every)
+
+    def bodies(lo, hi):  # the stream's window as DelayedSmoother hands it to smooth()
+        return [tk.SkeletonSequence(pos[lo:hi, i], a.topology, fps=30.0, body_id=i)
+                for i in (0, 1)]  # fmt: skip
+
+    k0 = 15 * (t // 15)
+    fits = [o.metadata["diagnostics"]["noise_fit"]
+            for o in tk.smooth(bodies(k0 + 7 - 30, k0 + 7), max_reject=0.5)]  # fmt: skip
+    own = tk.smooth(bodies(t + 7 - 30, t + 7), noise=fits, max_reject=0.5)
+    for i in (0, 1):
+        np.testing.assert_array_equal(held[t, i], own[i].positions[-7])
+    every, _, _, _ = _stream(px, positions=pos, **{**kw, "refit": 0.0})
+    assert np.array_equal(held[t], every[t]) == (t == k0)
     m = {"delay": 0.2, "window": 1.0, "max_reject": 0.5}
     metres = np.stack([a.positions[:T], b.positions[:T]], 1)
     plain = a.replace(positions=a.positions[:T], tracking_state=None, timestamps=None)

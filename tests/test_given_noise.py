@@ -167,3 +167,50 @@ def test_a_valid_fit_is_read_as_given(fit):
         else:
             assert out[g] == {"fitted": False}
     assert check_given_noise("noise", json.loads(json.dumps(out))) == out
+
+
+def test_one_fit_per_body_is_each_bodys_own():
+    """``noise=[fit_a, fit_b]`` for two bodies smoothed in one call gives each body what
+    it gives alone with its own fit, whether the two run together (same frames and
+    skeleton) or apart (``smooth`` groups the bodies it can run together), and each
+    body's provenance records its own fit."""
+    a, b = _recording(11), _recording(12)
+    other = tk.corrupt(tk.generate_motion("arms", duration=4.0, seed=13), seed=13).sequence
+    for second in (b, other):
+        fits = [tk.smooth(s).metadata["diagnostics"]["noise_fit"] for s in (a, second)]
+        outs = tk.smooth([a, second], noise=fits)
+        for seq, fit, out in zip((a, second), fits, outs, strict=True):
+            alone = tk.smooth(seq, noise=fit)
+            np.testing.assert_array_equal(out.positions, alone.positions)
+            np.testing.assert_array_equal(out.std, alone.std)
+            given = out.metadata["provenance"]["params"]["noise"]
+            assert given["hands"]["speed_sd"] == fit["hands"]["speed_sd"]
+    with pytest.raises(ValueError, match="noise: 1 given for 2 bodies"):
+        tk.smooth([a, b], noise=fits[:1])
+    with pytest.raises(ValueError, match="noise: 2 given for 1 body"):
+        tk.smooth(a, noise=fits)
+    with pytest.raises(ValueError, match="empty list of fits"):
+        tk.smooth([a, b], noise=[])
+    with pytest.raises(ValueError, match=r"noise\[1\]\['torso'\]"):
+        tk.smooth([a, b], noise=[fits[0], {**fits[0], "torso": {"speed_sd": 0}}])
+
+
+def test_per_body_names_the_methods_own_parameters():
+    with pytest.raises(ValueError, match="per_body names unknown parameters"):
+        tk.register_method("per_body_typo", lambda inp, x: inp.ys, params={"x": 1},
+                           per_body=("y",))  # fmt: skip
+
+
+def test_one_fit_per_body_in_chunks(monkeypatch):
+    """A batch cut into chunks of one body (tobitkf.smoothing.chunks) gives each chunk
+    its own bodies' fits: the numbers of the bodies smoothed alone."""
+    from tobitkf.smoothing import chunks
+
+    base, rng = _recording(14, 2.0), np.random.default_rng(14)
+    # one group (same frames): three noisy copies, each with a fit of its own
+    seqs = [base.replace(positions=base.positions + rng.normal(0, sd, base.positions.shape))
+            for sd in (0.002, 0.01, 0.03)]  # fmt: skip
+    fits = [tk.smooth(s).metadata["diagnostics"]["noise_fit"] for s in seqs]
+    monkeypatch.setattr(chunks, "CHUNK_BYTES", 1)  # a body per chunk
+    for seq, fit, out in zip(seqs, fits, tk.smooth(seqs, noise=fits), strict=True):
+        np.testing.assert_array_equal(out.positions, tk.smooth(seq, noise=fit).positions)

@@ -311,6 +311,7 @@ def smooth(
             "(use sequence.replace(...) to change them)"
         )
     if isinstance(sequence, SkeletonSequence):
+        _per_body(spec, full, 1)
         return _smooth_group([sequence], spec, full, *opts)[0]
     if isinstance(sequence, (str, bytes)) or not isinstance(sequence, Sequence):
         raise TypeError(
@@ -338,11 +339,24 @@ def smooth(
             s.units,
         )
         groups.setdefault(key, []).append(i)
+    per_body = _per_body(spec, full, len(seqs))  # each group runs with its bodies' own
     for idx in groups.values():
-        res = _smooth_group([seqs[i] for i in idx], spec, full, *opts)
+        mine = {n: tuple(full[n][i] for i in idx) for n in per_body}
+        res = _smooth_group([seqs[i] for i in idx], spec, {**full, **mine}, *opts)
         for i, r in zip(idx, res, strict=True):
             out[i] = r
     return out
+
+
+def _per_body(spec: MethodSpec, params: Mapping[str, Any], n: int) -> list[str]:
+    """The parameters given one value per body (``spec.per_body``, a tuple), checked to
+    give ``n``, one for each body of the call."""
+    names = [k for k in spec.per_body if isinstance(params.get(k), tuple)]
+    for k in names:
+        if len(params[k]) != n:
+            raise ValueError(f"{k}: {len(params[k])} given for {n} bod{'y' if n == 1 else 'ies'}"
+                             " (one per body)")  # fmt: skip
+    return names
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

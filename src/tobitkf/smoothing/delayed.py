@@ -121,11 +121,17 @@ class _HeldFit:
     def run(self, k: int, seqs: list[SkeletonSequence], method: str,
             kwargs: Mapping[str, Any]) -> list[SkeletonSequence]:  # fmt: skip
         """Run ``k`` of the method on ``seqs`` (one per body): with a held fit, each
-        body alone with its own (what :func:`smooth_delayed` of that body gives);
-        together, fitting at every run, where one call couples the bodies
-        (:func:`_coupled`) or nothing is held."""
-        if not self.active or (len(seqs) > 1 and _coupled(seqs[0].units, kwargs)):
+        body alone with its own (what :func:`smooth_delayed` of that body gives), or,
+        where one call couples the bodies (:func:`_coupled`), all in one call, each with
+        its own (``noise=`` one fit per body); a run without held fits fits them."""
+        if not self.active:
             return list(smooth(seqs, method, **kwargs))
+        if len(seqs) > 1 and _coupled(seqs[0].units, kwargs):
+            given = [self.noise(k, b) for b in range(len(seqs))]
+            held = {} if any(g is None for g in given) else {"noise": given}
+            out = list(smooth(seqs, method, **{**kwargs, **held}))
+            self.keep(k, out)
+            return out
         out = []
         for b, seq in enumerate(seqs):
             given = self.noise(k, b)
@@ -324,9 +330,10 @@ class DelayedSmoother:
         Seconds between two fits of the noise (default 1), when the method fits it to
         each window (``robust``'s default ``noise="fit"``): the fit is most of a run's
         work, so in between the runs take the last fit as given (``noise=`` that fit,
-        each body alone). 0 fits at every frame, and so do several bodies in one array
-        that one run couples (pixels: identity swaps undone between them, gates
-        measured on all of them); keyed bodies are each their own stream anyway.
+        each body alone, or, for several bodies in one array that one run couples,
+        pixels say, where identity swaps are undone between them and the gates
+        measured on all of them, all in one run with one fit each). 0 fits at every
+        frame; keyed bodies are each their own stream.
     fps : float
         Frame rate: turns ``delay`` and ``window`` into frames, and times the frames
         when no timestamps are given.

@@ -179,6 +179,9 @@ class MethodSpec:
         data its parameters cannot mean anything for (limits in metres on pixels), or
         None; called before a batch run and at a live stream's first frame, with the
         coordinates (2 or 3) and the units the method sees (``"m"`` for any length)
+    per_body : names of parameters that may be given one value per body: a list, which
+        the validator turns into a tuple, whose item ``i`` is body ``i``'s (``smooth``
+        hands each group of bodies it runs together their own items)
     """
 
     name: str
@@ -191,6 +194,7 @@ class MethodSpec:
     check: Callable[[dict[str, Any]], None] | None = None
     live: LiveFactory | None = None
     check_data: Callable[[Mapping[str, Any], int, str | None], None] | None = None
+    per_body: tuple[str, ...] = ()
 
     def is_causal(self, params: Mapping[str, Any] | None = None) -> bool:
         """Whether the method with ``params`` (default: its defaults) is causal."""
@@ -243,6 +247,7 @@ def register_method(
     live: LiveFactory | None = None,
     replace: bool = False,
     check_data: Callable[[Mapping[str, Any], int, str | None], None] | None = None,
+    per_body: tuple[str, ...] = (),
 ) -> Any:
     """Register a smoothing method; usable as a decorator when ``run`` is omitted.
 
@@ -259,7 +264,7 @@ def register_method(
     validators : mapping, optional
         Parameter name -> ``check(name, value) -> value`` (see
         :mod:`tobitkf.smoothing.params`); a parameter without one is passed as given.
-    description, causal, offline_ok, check, live, check_data :
+    description, causal, offline_ok, check, live, check_data, per_body :
         As in :class:`MethodSpec`.
     replace : bool
         Replace a method of the same name instead of raising ``ValueError``.
@@ -275,6 +280,9 @@ def register_method(
     extra = sorted(set(checks) - set(defaults))
     if extra:
         raise ValueError(f"validators for unknown parameters {extra} of method {name!r}")
+    unknown = sorted(set(per_body) - set(defaults))
+    if unknown:
+        raise ValueError(f"per_body names unknown parameters {unknown} of method {name!r}")
     if not (isinstance(causal, bool) or callable(causal)):
         raise TypeError(
             f"causal must be True, False or a function of the parameters, got {causal!r}"
@@ -299,6 +307,7 @@ def register_method(
             check=check,
             live=live,
             check_data=check_data,
+            per_body=tuple(per_body),
         )
         _METHODS[name] = spec
         return spec

@@ -216,12 +216,17 @@ def _offline_gates(name: str, value: Any) -> str:
 
 
 def _noise_choice(name: str, value: Any) -> Any:
-    """``robust``'s ``noise``: "fit", "fixed" or a fit given per body region
-    (:func:`tobitkf.smoothing.robust_fit.check_given_noise`)."""
+    """``robust``'s ``noise``: "fit", "fixed", a fit given per body region
+    (:func:`tobitkf.smoothing.robust_fit.check_given_noise`), or a list of such fits,
+    one per body of the call (bodies smoothed together, each with its own fit)."""
     if isinstance(value, str) and value in ("fit", "fixed"):
         return value
     from tobitkf.smoothing.robust_fit import check_given_noise
 
+    if isinstance(value, (list, tuple)):
+        if not value:
+            raise ValueError(f"{name}: an empty list of fits (give one per body)")
+        return tuple(check_given_noise(f"{name}[{b}]", v) for b, v in enumerate(value))
     return check_given_noise(name, value)
 
 
@@ -253,8 +258,8 @@ ROBUST_VALIDATORS: dict[str, Any] = {
 MIN_CONFIDENCE_WEIGHT = 0.01
 
 
-#: robust_online keeps the given noise (a causal fit is open work, docs/robust.md); its
-#: shared errors come from the frames so far
+#: robust_online keeps the given noise (a causal fit would gain little: docs/robust.md,
+#: "Which choices"); its shared errors come from the frames so far
 ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
 ONLINE_VALIDATORS: dict[str, Any] = {
     **ROBUST_VALIDATORS,
@@ -417,11 +422,17 @@ def _offline(
         # fitted on the accepted samples the sensor vouches for (not INFERRED ones)
         fits = _fit_noise(ys, acc & ~inferred, rinf, steps, setup, params)
         sd = fits[0]["noise_sd"]
-    elif isinstance(params["noise"], Mapping):  # a fit made before, used as the fit's
+    elif isinstance(params["noise"], (Mapping, tuple)):  # fits made before, used as its own
         from tobitkf.smoothing.robust_fit import given_noise_bodies
 
-        fits = given_noise_bodies(params["noise"], B, setup.groups, tau=float(params["tau"]),
-                                  speed_sd=setup.spd, noise_sd=setup.sd)  # fmt: skip
+        given = params["noise"]
+        kw = {"tau": float(params["tau"]), "speed_sd": setup.spd, "noise_sd": setup.sd}
+        if isinstance(given, tuple):  # one fit per body: this chunk's bodies' own
+            parts = [given_noise_bodies(g, 1, setup.groups, **kw) for g in given[b0 : b0 + B]]
+            fits = ({name: np.concatenate([f[0][name] for f in parts]) for name in parts[0][0]},
+                    [f[1][0] for f in parts])  # fmt: skip
+        else:
+            fits = given_noise_bodies(given, B, setup.groups, **kw)
         sd = fits[0]["noise_sd"]
     rvar = sd**2 * rinf  # a new (T, B, J) array: the carried samples' are written in
     tau = float(params["tau"])
@@ -540,6 +551,8 @@ def _robust_bodies(
     diagnostics dict per body and the resolved per-joint parameters.
     """
     T, B, J = missing.shape
+    if isinstance(params["noise"], tuple) and len(params["noise"]) != B:
+        raise ValueError(f"noise: {len(params['noise'])} fits given for {B} bodies (one per body)")
     if params["gates"] == "stream":  # online only (its validator)
         return _stream_gated(ys, missing, states, times, steps, topo, params, factor,
                              confidence, n_dims)  # fmt: skip
@@ -597,10 +610,13 @@ def _robust_bodies(
                 r["units"] = units
         # per joint the values used; per region the fit itself, which `noise=` takes back
         # (tobitkf.io.read_noise_fit reads it from an output file)
+        given = params["noise"]
         body_params = tuple(
             {
                 **{name: a[b].tolist() for name, a in arrays.items()},
                 "noise_fit": {g: dict(r) for g, r in reports[b].items()},
+                # each body's own fit given, not the list of all of them
+                **({"noise": given[b]} if isinstance(given, tuple) else {}),
             }
             for b in range(B)
         )
@@ -900,7 +916,8 @@ def robust_smooth(
         ``diagnostics["noise_fit"]`` mapping, every region of the skeleton; from a file:
         :func:`tobitkf.io.noise_fit.read_noise_fit`) is used as the fit would be,
         without fitting (:func:`~tobitkf.smoothing.robust_fit.check_given_noise`); a
-        recording in other units than the fit's (each region's ``units``) refuses it.
+        recording in other units than the fit's (each region's ``units``) refuses it;
+        through :func:`tobitkf.smooth`, several bodies take a list of fits, one each.
     fit_seconds : the most of the recording the fit reads, s (default 5; ``inf`` = all).
     shared_errors : True (default) adds the errors that the INFERRED guesses of one
         occlusion and the carried samples of one stretch share, estimated from the
@@ -977,9 +994,11 @@ def _noise_units(params: Mapping[str, Any], n_dims: int, units: str | None) -> N
     in must be those of this recording as the method sees it (metres for any length):
     a fit made in pixels would be a thousandfold off on metres, and silently."""
     noise = params.get("noise")
-    if not isinstance(noise, Mapping):
+    if isinstance(noise, Mapping):
+        noise = (noise,)
+    if not isinstance(noise, tuple):
         return
-    made = {r["units"] for r in noise.values() if isinstance(r, Mapping) and "units" in r}
+    made = {r["units"] for fit in noise for r in fit.values() if "units" in r}
     for u in made:
         if u != units:
             raise ValueError(
@@ -1002,6 +1021,7 @@ def _register(name: str, offline: bool, description: str) -> None:
         causal=not offline,
         live=None if offline else RobustStepper,
         check_data=_noise_units if offline else None,
+        per_body=("noise",) if offline else (),
     )
 
 
