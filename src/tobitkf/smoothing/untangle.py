@@ -88,9 +88,11 @@ def _runs_to_undo(changed: NDArray[np.bool_], max_frames: int) -> NDArray[np.boo
     return out
 
 
-def _last_valid(y: Array, last: Array) -> None:
-    ok = ~np.isnan(y).any(axis=-1)
-    last[ok] = y[ok]
+def _kernels() -> Any:
+    """The compiled frame loops (imports numba on first use)."""
+    from tobitkf.smoothing import _untangle_kernels
+
+    return _untangle_kernels
 
 
 def untangle(
@@ -126,58 +128,35 @@ def untangle(
     pairs = [(int(a), int(b)) for a, b in pairs]
     P = len(pairs)
     order = np.tile(np.arange(B), (T, 1))
-    if bodies and B > 1:
+    k = _kernels()
+    ys = np.ascontiguousarray(ys, dtype=float)
+    if bodies and B == 2:  # keep or exchange: all of it compiled
+        k.two_identities(ys, float(margin), RATIO, order)
+    elif bodies and B > 2:  # the least-cost assignment of each frame by scipy
         current = np.arange(B)
         last = np.full(ys.shape[1:], np.nan)  # per identity: its last assigned samples
+        cost, scratch, ids = np.empty((B, B)), np.empty(ys.shape[2]), np.arange(B)
         for t in range(T):
             y = ys[t]
-            d = np.linalg.norm(y[None, :] - last[:, None], axis=-1)  # (B, B, J)
-            with _quiet():
-                cost = np.nanmedian(d, axis=-1)  # cost[a, b]: body b as identity a
-            now = cost[np.arange(B), current]
-            if np.isfinite(now).all() and np.isfinite(cost).all():
+            k.identity_costs(y, last, cost, scratch)  # cost[a, b]: body b as identity a
+            now = cost[ids, current]
+            if np.isfinite(cost).all():
                 best = _assign(cost)
-                new = cost[np.arange(B), best].sum()
+                new = cost[ids, best].sum()
                 if new < RATIO * now.sum() and now.sum() - new > margin:
                     current = best
             order[t] = current
-            _last_valid(y[current], last)
+            k.keep_last(np.ascontiguousarray(y[current]), last)
+    if bodies and B > 1:
         moved = (order != np.arange(B)).any(axis=1)
         keep_raw = moved & ~_runs_to_undo(moved, max_frames)
         order[keep_raw] = np.arange(B)
     exchanged = np.zeros((T, B, P), dtype=bool)
     if P:
-        yo = ys[np.arange(T)[:, None], order]  # identity order
+        yo = np.ascontiguousarray(ys[np.arange(T)[:, None], order])  # identity order
         left = np.array([a for a, _ in pairs], dtype=np.intp)
         right = np.array([b for _, b in pairs], dtype=np.intp)
-        state = np.zeros((B, P), dtype=bool)
-        last = np.full(ys.shape[1:], np.nan)  # corrected
-        bi, pi = np.nonzero(np.ones((B, P), dtype=bool))
-        for t in range(T):
-            y = yo[t]
-            yl, yr = y[:, left], y[:, right]
-            ll, lr_ = last[:, left], last[:, right]
-            # a joint of the pair counts when it and both last samples are there (a pair
-            # with one joint missing is still decided by the other)
-            kl, sl = np.linalg.norm(yl - ll, axis=-1), np.linalg.norm(yl - lr_, axis=-1)
-            kr, sr = np.linalg.norm(yr - lr_, axis=-1), np.linalg.norm(yr - ll, axis=-1)
-            # ... and its evidence is plausible: one of the two choices is a step that
-            # happens (a glitch in the last sample makes both choices far: no evidence)
-            with np.errstate(invalid="ignore"):
-                okl = np.isfinite(kl) & np.isfinite(sl) & (np.minimum(kl, sl) <= near)
-                okr = np.isfinite(kr) & np.isfinite(sr) & (np.minimum(kr, sr) <= near)
-            keep = np.where(okl, kl, 0.0) + np.where(okr, kr, 0.0)
-            swap = np.where(okl, sl, 0.0) + np.where(okr, sr, 0.0)
-            keep[~okl & ~okr] = np.nan
-            clear_swap = (swap < RATIO * keep) & (keep - swap > margin)
-            clear_keep = (keep < RATIO * swap) & (swap - keep > margin)
-            state = np.where(clear_swap, True, np.where(clear_keep, False, state))
-            exchanged[t] = state
-            yc = y.copy()
-            m = state[bi, pi]
-            yc[bi[m], left[pi[m]]] = y[bi[m], right[pi[m]]]
-            yc[bi[m], right[pi[m]]] = y[bi[m], left[pi[m]]]
-            _last_valid(yc, last)
+        k.pair_exchanges(yo, left, right, float(margin), float(near), RATIO, exchanged)
         exchanged &= _runs_to_undo(exchanged, max_frames)
     return order, exchanged
 

@@ -107,9 +107,14 @@ class _Watch:
 
 def _run_tiny(method: str) -> None:
     from tobitkf.smoothing.live import LiveSmoother, live_methods
+    from tobitkf.smoothing.untangle import untangle_sequences
 
     seq = tiny_recording()
     smooth(seq, method=method)
+    # several people in pixels are untangled before any method runs: its compiled loops
+    px = seq.positions[..., :2] * 500
+    untangle_sequences([seq.replace(positions=px + 100 * b, units="px", tracking_state=None)
+                        for b in range(2)])  # fmt: skip
     # and one where nothing fails: some kernels have a path of their own for it (the
     # robust smoother's without shared errors)
     smooth(tiny_recording(clean=True), method=method)

@@ -1,0 +1,145 @@
+"""The frame loops of :mod:`tobitkf.smoothing.untangle`, compiled (numba, ``cache=True``).
+
+Each frame's choice depends on the samples assigned at the frame before, so the loops
+run in time order; in NumPy their per-frame overhead was most of the smoothing of a
+pose estimator's recording of several people. The arithmetic is NumPy's: distances as
+``np.linalg.norm`` (squares summed in axis order), the median of the finite distances
+as ``np.nanmedian`` (the middle value, or the mean of the two middle ones), so the
+decisions are those of the NumPy form (``tests/test_untangle_kernels.py`` compares).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _distance(y: np.ndarray, x: np.ndarray) -> float:
+    """``|y - x|`` over the last axis, NaN when either has a NaN."""
+    s = 0.0
+    for k in range(y.shape[0]):
+        d = y[k] - x[k]
+        s += d * d
+    return math.sqrt(s)
+
+
+@njit(cache=True, nogil=True)
+def _median_finite(v: np.ndarray, n: int) -> float:
+    """Median of the first ``n`` values of ``v`` (sorted in place); NaN for none."""
+    if n == 0:
+        return np.nan
+    w = np.sort(v[:n])
+    if n % 2 == 1:
+        return w[n // 2]
+    return (w[n // 2 - 1] + w[n // 2]) / 2
+
+
+@njit(cache=True, nogil=True)
+def identity_costs(y: np.ndarray, last: np.ndarray, cost: np.ndarray, scratch: np.ndarray) -> None:
+    """``cost[a, b]``: the median over joints of the distance from body ``b``'s sample in
+    ``y (B, J, D)`` to identity ``a``'s last one in ``last``, joints with a NaN left out
+    (NaN when none is left)."""
+    B, J = y.shape[0], y.shape[1]
+    for a in range(B):
+        for b in range(B):
+            n = 0
+            for j in range(J):
+                d = _distance(y[b, j], last[a, j])
+                if not math.isnan(d):
+                    scratch[n] = d
+                    n += 1
+            cost[a, b] = _median_finite(scratch, n)
+
+
+@njit(cache=True, nogil=True)
+def keep_last(y: np.ndarray, last: np.ndarray) -> None:
+    """``last[b, j] = y[b, j]`` where the sample has no NaN."""
+    B, J, D = y.shape
+    for b in range(B):
+        for j in range(J):
+            ok = True
+            for k in range(D):
+                if math.isnan(y[b, j, k]):
+                    ok = False
+            if ok:
+                for k in range(D):
+                    last[b, j, k] = y[b, j, k]
+
+
+@njit(cache=True, nogil=True)
+def pair_exchanges(
+    yo: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    margin: float,
+    near: float,
+    ratio: float,
+    exchanged: np.ndarray,
+) -> None:
+    """The left/right loop of :func:`~tobitkf.smoothing.untangle.untangle`: for each
+    frame of ``yo (T, B, J, D)`` (bodies in identity order), each body and pair, whether
+    the pair is exchanged (written into ``exchanged (T, B, P)``), against the samples as
+    corrected at the frames before."""
+    T, B, J, D = yo.shape
+    P = left.shape[0]
+    state = np.zeros((B, P), dtype=np.bool_)
+    last = np.full((B, J, D), np.nan)
+    yc = np.empty((B, J, D))
+    for t in range(T):
+        for b in range(B):
+            for p in range(P):
+                lj, rj = left[p], right[p]
+                kl = _distance(yo[t, b, lj], last[b, lj])
+                sl = _distance(yo[t, b, lj], last[b, rj])
+                kr = _distance(yo[t, b, rj], last[b, rj])
+                sr = _distance(yo[t, b, rj], last[b, lj])
+                # a joint counts when both choices are measured and one is a plausible step
+                okl = math.isfinite(kl) and math.isfinite(sl) and min(kl, sl) <= near
+                okr = math.isfinite(kr) and math.isfinite(sr) and min(kr, sr) <= near
+                # (with neither joint counting, both are 0 and nothing is clear)
+                keep = (kl if okl else 0.0) + (kr if okr else 0.0)
+                swap = (sl if okl else 0.0) + (sr if okr else 0.0)
+                if swap < ratio * keep and keep - swap > margin:
+                    state[b, p] = True
+                elif keep < ratio * swap and swap - keep > margin:
+                    state[b, p] = False
+                exchanged[t, b, p] = state[b, p]
+        yc[:] = yo[t]
+        for b in range(B):
+            for p in range(P):
+                if state[b, p]:
+                    for k in range(D):
+                        yc[b, left[p], k] = yo[t, b, right[p], k]
+                        yc[b, right[p], k] = yo[t, b, left[p], k]
+        keep_last(yc, last)
+
+
+@njit(cache=True, nogil=True)
+def two_identities(ys: np.ndarray, margin: float, ratio: float, order: np.ndarray) -> None:
+    """The identity loop of :func:`~tobitkf.smoothing.untangle.untangle` for two bodies,
+    whose least-cost assignment is one of two: keep them, or exchange them (an exact tie
+    changes nothing, whichever is taken: the new cost is then the current one). Writes
+    ``order (T, 2)``."""
+    T, _, J, D = ys.shape
+    last = np.full((2, J, D), np.nan)
+    cost = np.empty((2, 2))
+    scratch = np.empty(J)
+    y = np.empty((2, J, D))
+    c0, c1 = 0, 1
+    for t in range(T):
+        identity_costs(ys[t], last, cost, scratch)
+        # (a NaN cost, a body or identity without samples, fails every comparison: the
+        # current order stays, as where scipy is not asked)
+        keep = cost[0, 0] + cost[1, 1]
+        swap = cost[0, 1] + cost[1, 0]
+        b0, b1 = (0, 1) if keep <= swap else (1, 0)
+        new = cost[0, b0] + cost[1, b1]
+        now = cost[0, c0] + cost[1, c1]
+        if new < ratio * now and now - new > margin:
+            c0, c1 = b0, b1
+        order[t, 0], order[t, 1] = c0, c1
+        y[0], y[1] = ys[t, c0], ys[t, c1]
+        keep_last(y, last)
