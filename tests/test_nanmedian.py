@@ -36,7 +36,9 @@ def _numpy(a, axis, q=None):
                     elements=values),
        data=st.data())  # fmt: skip
 def test_it_is_numpys_nanmedian(a, data):
-    axis = data.draw(st.integers(-a.ndim, a.ndim - 1))
+    one = st.integers(-a.ndim, a.ndim - 1)
+    several = st.lists(st.integers(0, a.ndim - 1), min_size=1, max_size=a.ndim, unique=True)
+    axis = data.draw(st.one_of(one, several.map(tuple)))
     got, want = _nanmedian(a, axis=axis), _numpy(a, axis)
     assert np.shape(got) == np.shape(want)
     np.testing.assert_array_equal(got, want)
@@ -68,3 +70,21 @@ def test_it_is_numpys_nanpercentile(a, q):
     got, want = nanpercentile_last(a, q), _numpy(a, -1, q)
     assert np.shape(got) == np.shape(want)
     np.testing.assert_array_equal(got, want)
+
+
+def test_projected_bone_centres_are_numpys_per_bone():
+    """All bones at once give each bone's ``np.nanpercentile`` of its lengths over time."""
+    from tobitkf.skeleton.topology import get_topology
+    from tobitkf.smoothing.robust_scale import BONE_MAX_FACTOR, _projected_bone_centres
+
+    topo = get_topology("coco17")
+    rng = np.random.default_rng(2)
+    y = rng.normal(size=(50, 3, topo.n_joints, 2)) * 100
+    y[rng.random(y.shape[:3]) < 0.2] = np.nan
+    y[:, 1, 5] = np.nan  # a joint never seen: its bones NaN
+    want = np.full((3, topo.n_joints), np.nan)
+    for j, p in enumerate(topo.parents):
+        if p >= 0:
+            length = np.sqrt(np.sum((y[:, :, j] - y[:, :, p]) ** 2, axis=-1))
+            want[:, j] = BONE_MAX_FACTOR * _numpy(length, 0, 95) / 2
+    np.testing.assert_array_equal(_projected_bone_centres(y, topo.parents), want)

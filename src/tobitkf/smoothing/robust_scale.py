@@ -134,8 +134,16 @@ def nanpercentile_last(d: Array, q: float) -> Array:
 
 
 def _nanmedian(a: Array, axis: Any = None) -> Any:
-    if isinstance(axis, (int, np.integer)):  # one axis: the fast form
-        return nanmedian_last(np.moveaxis(np.asarray(a, dtype=float), axis, -1))
+    """``np.nanmedian(a, axis)``: for one axis or several, the fast form (the axes moved
+    last and flattened into one, as numpy itself does)."""
+    if isinstance(axis, (int, np.integer)):
+        axis = (axis,)
+    if isinstance(axis, tuple) and axis:
+        a = np.asarray(a, dtype=float)
+        k = len(axis)
+        moved = np.moveaxis(a, axis, tuple(range(a.ndim - k, a.ndim)))
+        lead = moved.shape[: a.ndim - k]
+        return nanmedian_last(moved.reshape(*lead, math.prod(moved.shape[a.ndim - k :])))
     with _quiet():
         return np.nanmedian(a, axis=axis)
 
@@ -165,12 +173,11 @@ def _projected_bone_centres(y: Array, parents: Any) -> Array:
     percentile of the recorded lengths (a few per cent of glitches do not reach it)."""
     B, J = y.shape[1], y.shape[2]
     out = np.full((B, J), np.nan)
-    for j, p in enumerate(parents):
-        if p < 0:
-            continue
-        length = np.sqrt(np.sum((y[:, :, j] - y[:, :, p]) ** 2, axis=-1))  # (T, B)
-        with _quiet():
-            out[:, j] = BONE_MAX_FACTOR * nanpercentile_last(length.T, 95) / 2
+    par = np.asarray(parents, dtype=np.intp)
+    child = np.flatnonzero(par >= 0)
+    if child.size:  # every bone at once: lengths (T, B, K), percentile over time
+        length = np.sqrt(np.sum((y[:, :, child] - y[:, :, par[child]]) ** 2, axis=-1))
+        out[:, child] = BONE_MAX_FACTOR * nanpercentile_last(length.transpose(1, 2, 0), 95) / 2
     return out
 
 
