@@ -88,3 +88,24 @@ def test_projected_bone_centres_are_numpys_per_bone():
             length = np.sqrt(np.sum((y[:, :, j] - y[:, :, p]) ** 2, axis=-1))
             want[:, j] = BONE_MAX_FACTOR * _numpy(length, 0, 95) / 2
     np.testing.assert_array_equal(_projected_bone_centres(y, topo.parents), want)
+
+
+@settings(max_examples=200, deadline=None)
+@given(a=hnp.arrays(np.float64, hnp.array_shapes(min_dims=1, max_dims=3, min_side=1, max_side=12),
+                    elements=st.one_of(st.floats(-1e300, 1e300, allow_nan=False),
+                                       st.just(np.nan), st.sampled_from([np.inf, -np.inf]))),
+       window=st.sampled_from([1, 3, 5, 7]))  # fmt: skip
+def test_the_running_median_is_numpys_over_windows(a, window):
+    """The compiled running median is ``np.nanmedian`` over each centred window of the
+    NaN-padded series (the NumPy form it replaced)."""
+    from tobitkf.smoothing.robust_scale import _running_median
+
+    T = a.shape[0]
+    if T < window:
+        want = a
+    else:
+        h = window // 2
+        pad = np.concatenate([np.full((h, *a.shape[1:]), np.nan), a,
+                              np.full((h, *a.shape[1:]), np.nan)])  # fmt: skip
+        want = _numpy(np.lib.stride_tricks.sliding_window_view(pad, window, axis=0), -1)
+    np.testing.assert_array_equal(_running_median(a, window), want)

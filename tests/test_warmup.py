@@ -53,8 +53,11 @@ with event.install_listener("numba:compile", Listener()):
     # two people of a pose estimator, in pixels: untangled before the method
     from tobitkf.smoothing.untangle import untangle_sequences
     seq = tk.load(files[0])[0]
-    untangle_sequences([seq.replace(positions=seq.positions[:, :, :2] * 300 + 50 * b,
-                                    units="px", tracking_state=None) for b in range(3)])
+    people = [seq.replace(positions=seq.positions[:, :, :2] * 300 + 50 * b, units="px",
+                          tracking_state=None) for b in range(3)]
+    untangle_sequences(people)
+    if method == "robust":  # its gates from the recording, in pixels
+        tk.smooth(people, method=method)
     if tk.methods()[method].live is not None and method in tk.live_methods():
         seq = tk.load(files[0])[0]
         live = tk.LiveSmoother(seq.topology, method=method, fps=seq.fps or 30.0)

@@ -154,15 +154,17 @@ def _fill(values: Array, fallback: float) -> Array:
 
 
 def _running_median(y: Array, window: int) -> Array:
-    """Centred running median over time (axis 0), NaN-aware; shorter at the ends."""
+    """Centred running median over time (axis 0) of an odd ``window``, NaN-aware;
+    shorter at the ends (compiled: :mod:`._scale_kernels`)."""
     T = y.shape[0]
     if T < window:
         return y
-    h = window // 2
-    pad = np.concatenate([np.full((h, *y.shape[1:]), np.nan), y,
-                          np.full((h, *y.shape[1:]), np.nan)])  # fmt: skip
-    win = np.lib.stride_tricks.sliding_window_view(pad, window, axis=0)
-    return _nanmedian(win, axis=-1)
+    from tobitkf.smoothing._scale_kernels import running_median
+
+    flat = np.ascontiguousarray(y, dtype=float).reshape(T, -1)
+    out = np.empty(flat.shape)
+    running_median(flat, int(window), out)
+    return out.reshape(y.shape)
 
 
 def _projected_bone_centres(y: Array, parents: Any) -> Array:
