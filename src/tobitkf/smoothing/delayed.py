@@ -41,8 +41,6 @@ from numpy.typing import ArrayLike, NDArray
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import DEFAULT_METHOD, check_params, get_method, smooth
-from tobitkf.smoothing.keypoints import length_scale
-from tobitkf.smoothing.robust import use_recording_gates
 from tobitkf.smoothing.stream_frames import (
     INFINITE,
     check_confidence,
@@ -98,7 +96,7 @@ class _HeldFit:
     """When a method fits its noise to each window (``robust``'s ``noise="fit"``), the
     fit of one run in every ``R`` is held for the runs until the next: run ``k`` (the
     one that gives frame ``k``) fits when ``k % R == 0`` and otherwise takes the held
-    fit as its ``noise`` (a body whose fit run gave no fit fits its own). The fit is
+    fit as its ``noise`` (a run where a body has no held fit fits them all). The fit is
     most of a run's work (docs/robust.md), and a window moves by a few frames of many
     between two fits. The stream and :func:`smooth_delayed` share this schedule."""
 
@@ -120,23 +118,14 @@ class _HeldFit:
 
     def run(self, k: int, seqs: list[SkeletonSequence], method: str,
             kwargs: Mapping[str, Any]) -> list[SkeletonSequence]:  # fmt: skip
-        """Run ``k`` of the method on ``seqs`` (one per body): with a held fit, each
-        body alone with its own (what :func:`smooth_delayed` of that body gives), or,
-        where one call couples the bodies (:func:`_coupled`), all in one call, each with
-        its own (``noise=`` one fit per body); a run without held fits fits them."""
-        if not self.active:
-            return list(smooth(seqs, method, **kwargs))
-        if len(seqs) > 1 and _coupled(seqs[0].units, kwargs):
-            given = [self.noise(k, b) for b in range(len(seqs))]
-            held = {} if any(g is None for g in given) else {"noise": given}
-            out = list(smooth(seqs, method, **{**kwargs, **held}))
-            self.keep(k, out)
-            return out
-        out = []
-        for b, seq in enumerate(seqs):
-            given = self.noise(k, b)
-            held = {} if given is None else {"noise": given}
-            out.append(smooth(seq, method, **{**kwargs, **held}))
+        """Run ``k`` of the method on ``seqs`` (one per body), all in one call: with the
+        held fits, each body its own (``noise=`` one fit per body), or, in a fit run,
+        fitting them. Bodies that one call does not couple (metres: no untangling, gates
+        as given) get what each gives alone; several people in pixels stay together,
+        their identity swaps undone and their gates measured on all of them."""
+        given = [self.noise(k, b) for b in range(len(seqs))]
+        held = {} if any(g is None for g in given) else {"noise": given}
+        out = list(smooth(seqs, method, **{**kwargs, **held}))
         self.keep(k, out)
         return out
 
@@ -195,17 +184,6 @@ class _Guard:
         est[moved] = out[0][moved]
         if std is not None:
             std[moved] = np.sqrt(v[0][moved])
-
-
-def _coupled(units: str | None, params: Mapping[str, Any]) -> bool:
-    """Whether :func:`smooth` couples the bodies it gets in one call: it undoes identity
-    swaps between them (``untangle``: True, or "auto" in pixels and unknown units) or
-    ``robust`` measures its gates on all of them (pixels and unknown units, or
-    ``gates="recording"``). Otherwise each body's output is that of the body alone."""
-    untangle = params.get("untangle", "auto")
-    metric = length_scale(units) is not None
-    return (untangle is True or (untangle == "auto" and not metric)
-            or use_recording_gates(dict(params), "m" if metric else None))  # fmt: skip
 
 
 def _check_window(params: Mapping[str, Any], window: float) -> None:
@@ -329,11 +307,9 @@ class DelayedSmoother:
     refit : float
         Seconds between two fits of the noise (default 1), when the method fits it to
         each window (``robust``'s default ``noise="fit"``): the fit is most of a run's
-        work, so in between the runs take the last fit as given (``noise=`` that fit,
-        each body alone, or, for several bodies in one array that one run couples,
-        pixels say, where identity swaps are undone between them and the gates
-        measured on all of them, all in one run with one fit each). 0 fits at every
-        frame; keyed bodies are each their own stream.
+        work, so in between the runs take the last fit as given (``noise=`` one fit per
+        body of the array). 0 fits at every frame; keyed bodies are each their own
+        stream.
     fps : float
         Frame rate: turns ``delay`` and ``window`` into frames, and times the frames
         when no timestamps are given.
