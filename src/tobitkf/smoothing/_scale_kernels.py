@@ -10,6 +10,17 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
+def middle(w: np.ndarray, n: int) -> float:
+    """The median of the first ``n`` values of ``w``, sorted, as ``np.nanmedian`` gives it:
+    the middle value, or the mean of the two middle ones; NaN for none."""
+    if n == 0:
+        return np.nan
+    if n % 2 == 1:
+        return w[n // 2]
+    return (w[n // 2 - 1] + w[n // 2]) / 2
+
+
+@njit(cache=True, nogil=True)
 def running_median(y: np.ndarray, window: int, out: np.ndarray) -> None:
     """``out[t, k]``: the median of the non-NaN ``y[t - h .. t + h, k]`` (``h = window //
     2``, an odd ``window`` centred on ``t``, cut at both ends), for ``y (T, N)``."""
@@ -28,9 +39,4 @@ def running_median(y: np.ndarray, window: int, out: np.ndarray) -> None:
                         i -= 1
                     buf[i] = v
                     n += 1
-            if n == 0:
-                out[t, k] = np.nan
-            elif n % 2 == 1:
-                out[t, k] = buf[n // 2]
-            else:
-                out[t, k] = (buf[n // 2 - 1] + buf[n // 2]) / 2
+            out[t, k] = middle(buf, n)

@@ -15,6 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
+from tobitkf.smoothing._scale_kernels import middle
+
 
 @njit(cache=True, nogil=True)
 def _distance(y: np.ndarray, x: np.ndarray) -> float:
@@ -24,17 +26,6 @@ def _distance(y: np.ndarray, x: np.ndarray) -> float:
         d = y[k] - x[k]
         s += d * d
     return math.sqrt(s)
-
-
-@njit(cache=True, nogil=True)
-def _median_finite(v: np.ndarray, n: int) -> float:
-    """Median of the first ``n`` values of ``v`` (sorted in place); NaN for none."""
-    if n == 0:
-        return np.nan
-    w = np.sort(v[:n])
-    if n % 2 == 1:
-        return w[n // 2]
-    return (w[n // 2 - 1] + w[n // 2]) / 2
 
 
 @njit(cache=True, nogil=True)
@@ -51,7 +42,7 @@ def identity_costs(y: np.ndarray, last: np.ndarray, cost: np.ndarray, scratch: n
                 if not math.isnan(d):
                     scratch[n] = d
                     n += 1
-            cost[a, b] = _median_finite(scratch, n)
+            cost[a, b] = middle(np.sort(scratch[:n]), n)
 
 
 @njit(cache=True, nogil=True)
