@@ -52,11 +52,12 @@ def test_the_measurement_frames():
 @pytest.mark.parametrize("timestamps", [True, False])
 def test_live_is_batch_exactly(timestamps):
     """The stream (two bodies in one array) gives what the batch run gives, bit for bit,
-    with the recording's timestamps or at its frame rate; untangle=False: a stream
-    cannot undo swaps it has not seen the end of."""
+    with the recording's timestamps or at its frame rate (with the untangling too:
+    tests/test_untangle_stream.py)."""
     _, noisy = _people(seed=1, timestamps=timestamps)
     batch = tk.smooth(noisy, "robust_online", gates="stream", untangle=False)
-    np.testing.assert_array_equal(_live(noisy), np.stack([b.positions for b in batch], 1))
+    np.testing.assert_array_equal(_live(noisy, untangle=False),
+                                  np.stack([b.positions for b in batch], 1))  # fmt: skip
 
 
 def test_the_first_frames_are_returned_as_measured():
@@ -71,8 +72,8 @@ def test_the_first_frames_are_returned_as_measured():
 
 
 def _smoothed(noisy):
-    """The stream gates' output with the people's identity swaps undone (which a live
-    stream cannot do; live and batch are otherwise the same, above)."""
+    """The stream gates' output with the people's swaps undone as a live stream undoes
+    them (causally)."""
     return np.stack([o.positions for o in tk.smooth(noisy, "robust_online", gates="stream")], 1)
 
 
@@ -132,15 +133,17 @@ def test_the_stream_keeps_its_own_copy_of_the_frames():
 def test_each_body_of_a_keyed_stream_has_its_own_gates():
     """Keyed by id, each body is exactly a stream of it alone: bodies 7 and 9 arrive
     together but their gates are measured each on its own frames; body 5 arrives at
-    frame 30, and its gates are first measured at its own 16th frame."""
+    frame 30, and its gates are first measured at its own 16th frame. (Untangled, the
+    bodies are not independent: their samples may be exchanged; untangle=False.)"""
     _, noisy = _people(seed=2)
     _, more = _people(seed=3)
     tracks = {7: noisy[0], 9: noisy[1], 5: more[0]}
     start = {7: 0, 9: 0, 5: 30}
     ts = noisy[0].timestamps
     topo = noisy[0].topology
-    keyed = tk.LiveSmoother(topo, fps=30, gates_from="stream")
-    alone = {b: tk.LiveSmoother(topo, fps=30, gates_from="stream") for b in tracks}
+    keyed = tk.LiveSmoother(topo, fps=30, gates_from="stream", untangle=False)
+    alone = {b: tk.LiveSmoother(topo, fps=30, gates_from="stream", untangle=False)
+             for b in tracks}  # fmt: skip
     for t in range(noisy[0].n_frames):
         ids = [b for b in tracks if t >= start[b]]
         out = keyed.update({b: tracks[b].positions[t] for b in ids},

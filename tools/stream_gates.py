@@ -25,7 +25,7 @@ STREAM = ("stream", "robust_online", {"gates": "stream"})
 METHODS = (
     ("raw", "raw"),
     ("robust_online, gates from the whole recording", "robust_online"),
-    ("robust_online, gates from the stream so far", STREAM),
+    ("robust_online, gates and untangling from the stream so far", STREAM),
     ("robust (offline)", "robust"),
 )
 

@@ -277,7 +277,8 @@ def smooth(
         Undo identity swaps between the bodies of a list and left/right swaps within a
         body before smoothing (:mod:`tobitkf.smoothing.untangle`); ``"auto"``: for
         sequences in pixels or unknown units (pose-estimator output), not for tracks in
-        metres.
+        metres. With ``gates="stream"`` the untangling is causal too, as live
+        (:class:`~tobitkf.smoothing.untangle.StreamUntangler`).
     **params
         Method parameters; :func:`method_defaults` lists them.
 
@@ -379,7 +380,9 @@ def _smooth_group(
     on a body axis."""
     untangled = None
     if untangle is True or (untangle == "auto" and length_scale(seqs[0].units) is None):
-        seqs, untangled = untangle_sequences(seqs)
+        # gates measured on the frames so far: the untangling is causal too (what a live
+        # stream of the recording gives)
+        seqs, untangled = untangle_sequences(seqs, stream=params.get("gates") == "stream")
     ref = seqs[0]
     steps, _, is_reference = frame_steps(ref)
     # (T, B, J, D); one body is a view, not a copy

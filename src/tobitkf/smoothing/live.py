@@ -48,6 +48,7 @@ from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import (
     DEFAULT_LIVE_METHOD,
+    _check_untangle,
     check_params,
     get_method,
     method_names,
@@ -61,6 +62,7 @@ from tobitkf.smoothing.keypoints import (
     low_confidence,
     pad_third_axis,
 )
+from tobitkf.smoothing.live_untangle import LiveUntangle
 from tobitkf.smoothing.paper import REFERENCE_DT
 from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
@@ -83,6 +85,7 @@ from tobitkf.smoothing.timebase import (
     frame_steps,
     measurements,
 )
+from tobitkf.smoothing.untangle import untangle_stats
 
 __all__ = ["LiveSmoother", "live_methods"]
 
@@ -291,6 +294,13 @@ class LiveSmoother:
         returned as measured), all six of them; what ``smooth(recording,
         "robust_online", gates="stream")`` gives. In a stream keyed by body id, each body
         has its own (and its own stepper: the bodies are not stepped as one array).
+    untangle : ``"auto"`` (default), True or False
+        Undo identity swaps between the bodies of a frame (the rows of a ``(B, J, D)``
+        frame, or the ids of a keyed one) and left/right swaps within each, causally,
+        before the method sees them (:mod:`tobitkf.smoothing.untangle`, "Causal form");
+        ``"auto"``: for a stream in pixels or unknown units, when ``gates_from`` gives
+        what the decisions are measured on (the sample, or the stream's frames so far).
+        What was undone in the last frame: :attr:`swapped`.
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
     """
@@ -307,9 +317,12 @@ class LiveSmoother:
         units: str | None = None,
         gates_from: Any = None,
         min_confidence: float = DEFAULT_MIN_CONFIDENCE,
+        untangle: Any = "auto",
         **params: Any,
     ) -> None:
         self.spec = get_method(method)
+        self.untangle = _check_untangle(untangle)
+        self._sample_untangle: tuple[float, float, int] | None = None
         if "offline" in params:
             raise ValueError("offline smoothing needs the whole recording: it cannot run live")
         self.params = check_params(method, params)
@@ -358,6 +371,11 @@ class LiveSmoother:
             )
         elif gates_from is not None:
             self._measure_gates(gates_from)
+        if self.untangle is True and not self._stream_gates and self._sample_untangle is None:
+            raise ValueError(
+                "untangle=True: the swaps are judged against the noise and the steps "
+                "measured on gates_from (a recording of the same set-up, or 'stream')"
+            )
         self.reset()
 
     @property
@@ -398,6 +416,9 @@ class LiveSmoother:
         if np.isinf(pos).any():
             raise ValueError(f"gates_from: {INFINITE}")
         dims = pos.shape[-1]
+        times = (sample.times() if isinstance(sample, SkeletonSequence)
+                 else np.arange(len(pos)) / self.fps)  # fmt: skip
+        self._sample_untangle = untangle_stats(pos, times)  # in the stream's units
         scale = length_scale(self._stream_units(dims))
         if scale is not None and scale != 1.0:
             pos = pos * scale
@@ -412,6 +433,40 @@ class LiveSmoother:
         measured = {k: gates[k] for k in GATE_PARAMS if k not in self._given}
         self.params = check_params(self.method, {**self.params, **measured})
         self._gates_dims = dims
+
+    def _start_untangle(self, dims: int) -> None:
+        """At the first frame: whether swaps are undone (``untangle``), and on what."""
+        self._untangling = None
+        if self.untangle is False:
+            return
+        if self.untangle == "auto" and length_scale(self._stream_units(dims)) is not None:
+            return  # a track in metres (or cm, mm): as smooth(), left as it is
+        if self._stream_gates or self._sample_untangle is not None:
+            stats = None if self._stream_gates else self._sample_untangle
+            self._untangling = LiveUntangle(self.topology.symmetry, stats)
+
+    @property
+    def swapped(self) -> dict[str, Any] | None:
+        """What the untangling changed in the last frame: ``identity_swapped`` (a body
+        took another's samples) and ``lr_swapped`` (per pair of
+        ``topology.symmetry``), shaped as :attr:`std` (a keyed stream: per id); None
+        when the stream is not untangled."""
+        u = self._untangling
+        if u is None or self.n_frames == 0:
+            return None
+        ident, lr = u.identity_swapped, u.lr_swapped
+        if self._keys is not None:
+            return {"identity_swapped": dict(zip(self._keys, ident.tolist(), strict=True)),
+                    "lr_swapped": dict(zip(self._keys, lr, strict=True))}  # fmt: skip
+        if self._single:
+            return {"identity_swapped": bool(ident[0]), "lr_swapped": lr[0]}
+        return {"identity_swapped": ident, "lr_swapped": lr}
+
+    def _frame_time(self, timestamp: float | None) -> float:
+        """The frame's time as ``SkeletonSequence.times()`` has it: its timestamp, else
+        its index over ``fps``."""
+        t = timestamp_seconds(timestamp)
+        return self.n_frames / self.fps if t is None else t
 
     def _stream_units(self, dims: int) -> str:
         """The stream's units: as given, else metres in 3-D and pixels in 2-D."""
@@ -467,6 +522,8 @@ class LiveSmoother:
         self._time: float | None = None  # the timestamp of the frame being stepped
         self.n_frames = 0
         self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
+        self._untangling: LiveUntangle | None = None  # set at the first frame
+        self._keys: list[Any] | None = None  # a keyed stream's ids in the last frame
         # the last frame, for .std and .sample_state (per body when keyed: its group's
         # frame and its slot there)
         self._last: _FrameInfo | None = None
@@ -586,6 +643,8 @@ class LiveSmoother:
         # everything checked: from here on the frame is part of the stream
         self._shape = shape[:-1]
         self._single = pos.ndim == 2
+        if self._untangling is not None:
+            pos, states, conf = self._untangle_frame(pos, states, conf, timestamp)
         self._time = None if timestamp is None else stamp
         if self._stream_gates:
             out = self._stream_step(self._stream, pos, states, dt, conf)
@@ -596,6 +655,19 @@ class LiveSmoother:
         self._last_timestamp = stamp
         self.n_frames += 1
         return out
+
+    def _untangle_frame(self, pos: Array, states: Any, conf: Any, timestamp: Any) -> tuple:
+        """An array frame with its swaps undone (positions, states and scores together)."""
+        one = pos.ndim == 2
+
+        def rows(a: Any) -> Any:
+            return None if a is None else (np.asarray(a)[None] if one else a)
+
+        y, st, cf = self._untangling.frame(rows(pos), None, self._frame_time(timestamp),
+                                           rows(states), rows(conf))  # fmt: skip
+        if one:
+            return y[0], None if st is None else st[0], None if cf is None else cf[0]
+        return y, st, cf
 
     def _step(self, stepper: Any, pos: Array, states: Any, dt: float, conf: Any = None) -> Array:
         ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
@@ -703,6 +775,10 @@ class LiveSmoother:
             raise
         dt, stamp = self._step_seconds(timestamp)
         # everything checked: from here on the frame is part of the stream
+        if self._untangling is not None:
+            arr, sts, confs = self._untangling.frame(arr, bodies, self._frame_time(timestamp),
+                                                     sts, confs)  # fmt: skip
+        self._keys = bodies
         self._clock += dt
         self._time = None if timestamp is None else stamp
         same = self._same
@@ -766,6 +842,8 @@ class LiveSmoother:
             entry = self._bodies[body]
             if self._clock - entry.last_seen > self.max_missing:
                 del self._bodies[body]  # gone: dropped (its slot gets empty frames)
+                if self._untangling is not None:
+                    self._untangling.forget([body])
                 entry.group.members[entry.slot] = None
         new = [b for b in bodies if b not in self._bodies]
         # new ids start new filters: one group for all of them when the method has a
@@ -827,6 +905,7 @@ class LiveSmoother:
                     and D in (2, 3) and not np.isinf(arr).any()):  # fmt: skip
                 if self._dims is None:
                     self._check_gates(D)
+                    self._start_untangle(D)
                 self._dims = D
                 return bodies, arr, None
         dims = self._dims  # a refused frame leaves it as it was
@@ -870,6 +949,7 @@ class LiveSmoother:
         shape = pos.shape
         if self._dims is None:
             self._check_gates(shape[-1])
+            self._start_untangle(shape[-1])
         if check_inf and np.isinf(pos).any():
             raise ValueError(INFINITE)
         states = check_states(tracking_state, shape[:-1])

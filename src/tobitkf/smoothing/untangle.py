@@ -34,6 +34,19 @@ default) on sequences in pixels or unknown units — pose-estimator output; Kine
 motion-capture tracks in metres are left as they are unless ``untangle=True`` — and
 reports the frames it changed in ``diagnostics["identity_swapped"]`` (T,) and
 ``diagnostics["lr_swapped"]`` (T, P) of each output.
+
+**Causal form** (:class:`StreamUntangler`, :func:`untangle_stream`): the same frame
+loops, one frame at a time, for a live stream (``LiveSmoother(untangle=...)``) and for
+``smooth(..., gates="stream")``. Two things differ, because a stream has not seen the
+end: the margin and the plausible step are measured on the frames so far (at the
+frames where ``gates="stream"`` measures its gates; before the first, nothing is
+exchanged, and at the first the loops go over the frames so far, returned as detected,
+so that a swap under way is seen from its start) or on a sample recording of the
+set-up; and a swap is undone for its first
+``MAX_SWAP_S`` only: after that the frames are taken as detected, and the loop goes on
+from them as if nothing had been exchanged (offline, a longer swap is left as detected
+from its start). With the same statistics and no swap longer than that, the decisions
+are the offline ones (``tests/test_untangle_stream.py``).
 """
 
 from __future__ import annotations
@@ -45,7 +58,16 @@ from numpy.typing import NDArray
 
 from tobitkf.smoothing.robust_scale import _quiet
 
-__all__ = ["MAX_SWAP_S", "NEAR_FACTOR", "RATIO", "untangle", "untangle_sequences"]
+__all__ = [
+    "MAX_SWAP_S",
+    "NEAR_FACTOR",
+    "RATIO",
+    "StreamUntangler",
+    "untangle",
+    "untangle_sequences",
+    "untangle_stats",
+    "untangle_stream",
+]
 
 Array = NDArray[np.float64]
 
@@ -178,24 +200,190 @@ def apply(a: Array, order: NDArray[np.intp], exchanged: NDArray[np.bool_], pairs
     return out
 
 
-def untangle_sequences(seqs: list[Any]) -> tuple[list[Any], list[dict[str, Any]]]:
-    """Sequences of one group (same frames and topology) with swaps undone: positions,
-    confidence and tracking states reordered together; and per sequence the frames
-    changed (``identity_swapped`` (T,), ``lr_swapped`` (T, P))."""
+def untangle_stats(ys: Array, times: Array) -> tuple[float, float, int]:
+    """``(margin, near, max_frames)`` measured on the frames ``ys (T, B, J, D)`` as
+    detected (NaN where missing) at ``times (T,)`` s: ``MARGIN_SDS`` standard deviations
+    of the distance between two noisy samples, ``NEAR_FACTOR`` times the 95th
+    percentile of the frame-to-frame steps plus the margin, and ``MAX_SWAP_S`` in frames
+    of the median time step (1/30 s without one)."""
     from tobitkf.smoothing.robust_scale import MARGIN_SDS, noise_scale
 
-    ys = np.stack([s.positions for s in seqs], axis=1)
-    missing = np.isnan(ys).any(axis=-1)
     D = ys.shape[-1]
-    pairs = list(seqs[0].topology.symmetry)
     margin = MARGIN_SDS * noise_scale(ys) * np.sqrt(2.0 * D)
-    steps = np.diff(seqs[0].times())
+    steps = np.diff(np.asarray(times, dtype=float))
     step = float(np.median(steps)) if steps.size and np.median(steps) > 0 else 1 / 30
     max_frames = max(1, round(MAX_SWAP_S / step))
     with _quiet():
         step_q95 = np.nanpercentile(np.linalg.norm(np.diff(ys, axis=0), axis=-1), 95)
     near = NEAR_FACTOR * float(step_q95) + margin if np.isfinite(step_q95) else np.inf
-    order, exch = untangle(ys, missing, pairs, margin, max_frames=max_frames, near=near)
+    return float(margin), float(near), int(max_frames)
+
+
+class StreamUntangler:
+    """:func:`untangle`, causal: frame by frame, each frame's bodies (rows) assigned to
+    the identities and each pair exchanged or not, against the samples assigned before
+    (module docstring, "Causal form").
+
+    The rows of a frame carry keys (a stream's body ids; ``None``: the row numbers): an
+    identity is a key. When the keys of a frame differ from the last frame's (a body
+    came or went), the identity assignment starts again from the rows as detected; each
+    key's last samples and pair choices are kept.
+    """
+
+    def __init__(self, pairs: Any, *, bodies: bool = True) -> None:
+        self.pairs = [(int(a), int(b)) for a, b in pairs]
+        self.left = np.array([a for a, _ in self.pairs], dtype=np.intp)
+        self.right = np.array([b for _, b in self.pairs], dtype=np.intp)
+        self.bodies = bodies
+        # no statistics yet: no exchange can be clear (the loops still follow the frames)
+        self.margin, self.near, self.max_frames = np.inf, np.inf, 1
+        self._keys: list[Any] | None = None
+        self._current = np.zeros(0, dtype=np.intp)
+        self._run = 0  # frames the identity loop's order has differed from the rows'
+        self._last: dict[Any, Array] = {}  # identity: its last assigned samples
+        self._plast: dict[Any, Array] = {}  # identity: its last samples, pairs corrected
+        self._pstate: dict[Any, NDArray[np.bool_]] = {}  # identity: pairs exchanged
+        self._prun: dict[Any, NDArray[np.int64]] = {}  # identity: frames each has been
+
+    def set_stats(self, margin: float, near: float, max_frames: int) -> None:
+        """The statistics the decisions use from the next frame on (:func:`untangle_stats`)."""
+        self.margin, self.near, self.max_frames = float(margin), float(near), int(max_frames)
+
+    def forget(self, keys: Any) -> None:
+        """Drop what is kept of identities that will not come back."""
+        for key in keys:
+            for d in (self._last, self._plast, self._pstate, self._prun):
+                d.pop(key, None)
+
+    def step(
+        self, y: Array, keys: list[Any] | None = None
+    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        """One frame ``y (B, J, D)`` (NaN where missing): ``order (B,)`` (identity ``a``
+        takes row ``order[a]``'s samples) and ``exchanged (B, P)`` (pair ``p`` of
+        identity ``a`` exchanged), as :func:`untangle` returns them for a frame."""
+        y = np.ascontiguousarray(y, dtype=float)
+        B, J, D = y.shape
+        keys = list(range(B)) if keys is None else list(keys)
+        ids = np.arange(B)
+        if keys != self._keys:  # another cast: the rows as detected
+            self._keys, self._current, self._run = keys, ids.copy(), 0
+        nan = np.full((J, D), np.nan)
+        order = ids
+        if self.bodies and B > 1:
+            last = np.stack([self._last.get(k, nan) for k in keys])
+            cost = np.empty((B, B))
+            _kernels().identity_costs(y, last, cost, np.empty(J))
+            current = self._current
+            now = cost[ids, current].sum()
+            if B == 2:  # as two_identities: keep or exchange
+                keep, swap = cost[0, 0] + cost[1, 1], cost[0, 1] + cost[1, 0]
+                best = ids if keep <= swap else ids[::-1]
+                new = cost[ids, best].sum()
+                if new < RATIO * now and now - new > self.margin:
+                    current = best.copy()
+            elif np.isfinite(cost).all():
+                best = _assign(cost)
+                new = cost[ids, best].sum()
+                if new < RATIO * now and now - new > self.margin:
+                    current = best
+            moved = bool((current != ids).any())
+            self._run = self._run + 1 if moved else 0
+            if self._run > self.max_frames:  # too long for a swap: the rows as detected
+                current, self._run = ids.copy(), 0
+            self._current = current
+            order = current
+            for a, k in enumerate(keys):  # the loop's own assignment, as offline
+                self._last[k] = _kept(y[current[a]], self._last.get(k))
+        elif B:
+            for a, k in enumerate(keys):
+                self._last[k] = _kept(y[a], self._last.get(k))
+        P = len(self.pairs)
+        exchanged = np.zeros((B, P), dtype=bool)
+        if P:
+            for a, k in enumerate(keys):
+                exchanged[a] = self._pair_step(y[order[a]], k)
+        return order, exchanged
+
+    def _pair_step(self, yo: Array, key: Any) -> NDArray[np.bool_]:
+        """The left/right loop of ``pair_exchanges`` for one identity's frame ``yo``."""
+        P = len(self.pairs)
+        last = self._plast.get(key)
+        if last is None:
+            last = np.full(yo.shape, np.nan)
+        state = self._pstate.get(key, np.zeros(P, dtype=bool))
+        lj, rj = self.left, self.right
+
+        def dist(u: Array, v: Array) -> Array:
+            return np.sqrt(((u - v) ** 2).sum(-1))
+
+        kl, sl = dist(yo[lj], last[lj]), dist(yo[lj], last[rj])
+        kr, sr = dist(yo[rj], last[rj]), dist(yo[rj], last[lj])
+        okl = np.isfinite(kl) & np.isfinite(sl) & (np.minimum(kl, sl) <= self.near)
+        okr = np.isfinite(kr) & np.isfinite(sr) & (np.minimum(kr, sr) <= self.near)
+        keep = np.where(okl, kl, 0.0) + np.where(okr, kr, 0.0)
+        swap = np.where(okl, sl, 0.0) + np.where(okr, sr, 0.0)
+        to_swap = (swap < RATIO * keep) & (keep - swap > self.margin)
+        to_keep = (keep < RATIO * swap) & (swap - keep > self.margin)
+        state = np.where(to_swap, True, np.where(to_keep, False, state))
+        run = np.where(state, self._prun.get(key, np.zeros(P, dtype=np.int64)) + 1, 0)
+        state &= run <= self.max_frames  # too long for a swap: the joints as detected
+        run[~state] = 0
+        yc = yo.copy()
+        yc[lj[state]], yc[rj[state]] = yo[rj[state]], yo[lj[state]]
+        self._plast[key] = _kept(yc, last)
+        self._pstate[key] = state
+        self._prun[key] = run
+        return state
+
+
+def _kept(y: Array, last: Array | None) -> Array:
+    """``last`` with the joints of ``y`` that have no NaN written in (``keep_last``)."""
+    ok = ~np.isnan(y).any(axis=-1)
+    out = np.where(ok[:, None], y, np.nan) if last is None else last.copy()
+    out[ok] = y[ok]
+    return out
+
+
+def untangle_stream(
+    ys: Array, times: Array, pairs: Any, *, bodies: bool = True
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The causal untangling of a recording ``ys (T, B, J, D)`` at ``times (T,)``, its
+    statistics measured on the frames so far where ``gates="stream"`` measures its
+    gates: what a live stream of it gives (``order (T, B)``, ``exchanged (T, B, P)``)."""
+    from tobitkf.smoothing.robust_scale import stream_gate_frames
+
+    T, B = ys.shape[:2]
+    st = StreamUntangler(pairs, bodies=bodies)
+    order = np.tile(np.arange(B), (T, 1))
+    exchanged = np.zeros((T, B, len(st.pairs)), dtype=bool)
+    frames = stream_gate_frames(T)
+    if not frames:
+        return order, exchanged
+    for t in range(frames[0], T):
+        if t in frames:
+            st.set_stats(*untangle_stats(ys[:t], times[:t]))
+            if t == frames[0]:  # the frames so far (returned as detected) set the loops'
+                for s in range(t):  # state: a swap under way is seen from its start
+                    st.step(ys[s])
+        order[t], exchanged[t] = st.step(ys[t])
+    return order, exchanged
+
+
+def untangle_sequences(
+    seqs: list[Any], *, stream: bool = False
+) -> tuple[list[Any], list[dict[str, Any]]]:
+    """Sequences of one group (same frames and topology) with swaps undone: positions,
+    confidence and tracking states reordered together; and per sequence the frames
+    changed (``identity_swapped`` (T,), ``lr_swapped`` (T, P)). ``stream``: the causal
+    form (:func:`untangle_stream`)."""
+    ys = np.stack([s.positions for s in seqs], axis=1)
+    missing = np.isnan(ys).any(axis=-1)
+    pairs = list(seqs[0].topology.symmetry)
+    if stream:
+        order, exch = untangle_stream(ys, seqs[0].times(), pairs)
+    else:
+        margin, near, max_frames = untangle_stats(ys, seqs[0].times())
+        order, exch = untangle(ys, missing, pairs, margin, max_frames=max_frames, near=near)
     info = [
         {
             "identity_swapped": order[:, a] != a,
