@@ -31,6 +31,7 @@ def test_tiny_recording_exercises_the_rules():
 
 COVER = r"""
 import json, sys
+import numpy as np
 import tobitkf as tk
 from numba.core import event
 from tobitkf.smoothing.warmup import warm
@@ -58,6 +59,10 @@ with event.install_listener("numba:compile", Listener()):
     untangle_sequences(people)
     if method == "robust":  # its gates from the recording, in pixels
         tk.smooth(people, method=method)
+    if method == "robust_online":  # a live stream of them, untangled frame by frame
+        live = tk.LiveSmoother(seq.topology, fps=30.0, gates_from="stream")
+        for t in range(40):
+            live.update(np.stack([p.positions[t] for p in people]))
     if tk.methods()[method].live is not None and method in tk.live_methods():
         seq = tk.load(files[0])[0]
         live = tk.LiveSmoother(seq.topology, method=method, fps=seq.fps or 30.0)

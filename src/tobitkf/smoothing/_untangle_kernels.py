@@ -46,18 +46,73 @@ def identity_costs(y: np.ndarray, last: np.ndarray, cost: np.ndarray, scratch: n
 
 
 @njit(cache=True, nogil=True)
+def keep_last1(y: np.ndarray, last: np.ndarray) -> None:
+    """``last[j] = y[j]`` where the sample has no NaN (one body, ``(J, D)``)."""
+    J, D = y.shape
+    for j in range(J):
+        ok = True
+        for k in range(D):
+            if math.isnan(y[j, k]):
+                ok = False
+        if ok:
+            for k in range(D):
+                last[j, k] = y[j, k]
+
+
+@njit(cache=True, nogil=True)
 def keep_last(y: np.ndarray, last: np.ndarray) -> None:
     """``last[b, j] = y[b, j]`` where the sample has no NaN."""
-    B, J, D = y.shape
-    for b in range(B):
-        for j in range(J):
-            ok = True
-            for k in range(D):
-                if math.isnan(y[b, j, k]):
-                    ok = False
-            if ok:
-                for k in range(D):
-                    last[b, j, k] = y[b, j, k]
+    for b in range(y.shape[0]):
+        keep_last1(y[b], last[b])
+
+
+@njit(cache=True, nogil=True)
+def pair_step(
+    yo: np.ndarray,
+    last: np.ndarray,
+    state: np.ndarray,
+    run: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    margin: float,
+    near: float,
+    ratio: float,
+    max_frames: int,
+    yc: np.ndarray,
+) -> None:
+    """One frame of the left/right loop for one identity: its samples ``yo (J, D)``
+    against ``last (J, D)``, its last samples with the pairs corrected (updated), into
+    ``state (P,)``, whether each pair is exchanged (updated). ``run (P,)`` counts the
+    frames each pair has been exchanged; one exchanged for more than ``max_frames`` is
+    taken as detected again (the causal form; offline, ``max_frames`` is never reached).
+    ``yc (J, D)``: work."""
+    for p in range(left.shape[0]):
+        lj, rj = left[p], right[p]
+        kl = _distance(yo[lj], last[lj])
+        sl = _distance(yo[lj], last[rj])
+        kr = _distance(yo[rj], last[rj])
+        sr = _distance(yo[rj], last[lj])
+        # a joint counts when both choices are measured and one is a plausible step
+        okl = math.isfinite(kl) and math.isfinite(sl) and min(kl, sl) <= near
+        okr = math.isfinite(kr) and math.isfinite(sr) and min(kr, sr) <= near
+        # (with neither joint counting, both are 0 and nothing is clear)
+        keep = (kl if okl else 0.0) + (kr if okr else 0.0)
+        swap = (sl if okl else 0.0) + (sr if okr else 0.0)
+        if swap < ratio * keep and keep - swap > margin:
+            state[p] = True
+        elif keep < ratio * swap and swap - keep > margin:
+            state[p] = False
+        run[p] = run[p] + 1 if state[p] else 0
+        if run[p] > max_frames:
+            state[p] = False
+            run[p] = 0
+    yc[:] = yo
+    for p in range(left.shape[0]):
+        if state[p]:
+            for k in range(yo.shape[1]):
+                yc[left[p], k] = yo[right[p], k]
+                yc[right[p], k] = yo[left[p], k]
+    keep_last1(yc, last)
 
 
 @njit(cache=True, nogil=True)
@@ -77,35 +132,15 @@ def pair_exchanges(
     T, B, J, D = yo.shape
     P = left.shape[0]
     state = np.zeros((B, P), dtype=np.bool_)
+    run = np.zeros((B, P), dtype=np.int64)
     last = np.full((B, J, D), np.nan)
-    yc = np.empty((B, J, D))
+    yc = np.empty((J, D))
+    never = T + 1  # offline, long exchanges are taken back afterwards (untangle())
     for t in range(T):
         for b in range(B):
-            for p in range(P):
-                lj, rj = left[p], right[p]
-                kl = _distance(yo[t, b, lj], last[b, lj])
-                sl = _distance(yo[t, b, lj], last[b, rj])
-                kr = _distance(yo[t, b, rj], last[b, rj])
-                sr = _distance(yo[t, b, rj], last[b, lj])
-                # a joint counts when both choices are measured and one is a plausible step
-                okl = math.isfinite(kl) and math.isfinite(sl) and min(kl, sl) <= near
-                okr = math.isfinite(kr) and math.isfinite(sr) and min(kr, sr) <= near
-                # (with neither joint counting, both are 0 and nothing is clear)
-                keep = (kl if okl else 0.0) + (kr if okr else 0.0)
-                swap = (sl if okl else 0.0) + (sr if okr else 0.0)
-                if swap < ratio * keep and keep - swap > margin:
-                    state[b, p] = True
-                elif keep < ratio * swap and swap - keep > margin:
-                    state[b, p] = False
-                exchanged[t, b, p] = state[b, p]
-        yc[:] = yo[t]
-        for b in range(B):
-            for p in range(P):
-                if state[b, p]:
-                    for k in range(D):
-                        yc[b, left[p], k] = yo[t, b, right[p], k]
-                        yc[b, right[p], k] = yo[t, b, left[p], k]
-        keep_last(yc, last)
+            pair_step(yo[t, b], last[b], state[b], run[b], left, right, margin, near, ratio,
+                      never, yc)  # fmt: skip
+            exchanged[t, b] = state[b]
 
 
 @njit(cache=True, nogil=True)

@@ -219,10 +219,23 @@ def untangle_stats(ys: Array, times: Array) -> tuple[float, float, int]:
     return float(margin), float(near), int(max_frames)
 
 
+class _Identity:
+    """What the causal loops keep of one identity: its last assigned samples, its last
+    samples with the pairs corrected, which pairs are exchanged and for how long."""
+
+    __slots__ = ("last", "plast", "run", "state")
+
+    def __init__(self, J: int, D: int, P: int) -> None:
+        self.last = np.full((J, D), np.nan)
+        self.plast = np.full((J, D), np.nan)
+        self.state = np.zeros(P, dtype=np.bool_)
+        self.run = np.zeros(P, dtype=np.int64)
+
+
 class StreamUntangler:
     """:func:`untangle`, causal: frame by frame, each frame's bodies (rows) assigned to
     the identities and each pair exchanged or not, against the samples assigned before
-    (module docstring, "Causal form").
+    (module docstring, "Causal form"); the compiled steps of the offline loops.
 
     The rows of a frame carry keys (a stream's body ids; ``None``: the row numbers): an
     identity is a key. When the keys of a frame differ from the last frame's (a body
@@ -240,10 +253,7 @@ class StreamUntangler:
         self._keys: list[Any] | None = None
         self._current = np.zeros(0, dtype=np.intp)
         self._run = 0  # frames the identity loop's order has differed from the rows'
-        self._last: dict[Any, Array] = {}  # identity: its last assigned samples
-        self._plast: dict[Any, Array] = {}  # identity: its last samples, pairs corrected
-        self._pstate: dict[Any, NDArray[np.bool_]] = {}  # identity: pairs exchanged
-        self._prun: dict[Any, NDArray[np.int64]] = {}  # identity: frames each has been
+        self._ids: dict[Any, _Identity] = {}
 
     def set_stats(self, margin: float, near: float, max_frames: int) -> None:
         """The statistics the decisions use from the next frame on (:func:`untangle_stats`)."""
@@ -252,8 +262,7 @@ class StreamUntangler:
     def forget(self, keys: Any) -> None:
         """Drop what is kept of identities that will not come back."""
         for key in keys:
-            for d in (self._last, self._plast, self._pstate, self._prun):
-                d.pop(key, None)
+            self._ids.pop(key, None)
 
     def step(
         self, y: Array, keys: list[Any] | None = None
@@ -263,16 +272,22 @@ class StreamUntangler:
         identity ``a`` exchanged), as :func:`untangle` returns them for a frame."""
         y = np.ascontiguousarray(y, dtype=float)
         B, J, D = y.shape
+        P = len(self.pairs)
         keys = list(range(B)) if keys is None else list(keys)
         ids = np.arange(B)
         if keys != self._keys:  # another cast: the rows as detected
             self._keys, self._current, self._run = keys, ids.copy(), 0
-        nan = np.full((J, D), np.nan)
+        idents = []
+        for k in keys:
+            ident = self._ids.get(k)
+            if ident is None:
+                ident = self._ids[k] = _Identity(J, D, P)
+            idents.append(ident)
+        k = _kernels()
         order = ids
         if self.bodies and B > 1:
-            last = np.stack([self._last.get(k, nan) for k in keys])
             cost = np.empty((B, B))
-            _kernels().identity_costs(y, last, cost, np.empty(J))
+            k.identity_costs(y, np.stack([i.last for i in idents]), cost, np.empty(J))
             current = self._current
             now = cost[ids, current].sum()
             if B == 2:  # as two_identities: keep or exchange
@@ -290,58 +305,18 @@ class StreamUntangler:
             self._run = self._run + 1 if moved else 0
             if self._run > self.max_frames:  # too long for a swap: the rows as detected
                 current, self._run = ids.copy(), 0
-            self._current = current
-            order = current
-            for a, k in enumerate(keys):  # the loop's own assignment, as offline
-                self._last[k] = _kept(y[current[a]], self._last.get(k))
-        elif B:
-            for a, k in enumerate(keys):
-                self._last[k] = _kept(y[a], self._last.get(k))
-        P = len(self.pairs)
+            self._current = order = current
+        for a, ident in enumerate(idents):  # the loop's own assignment, as offline
+            k.keep_last1(y[order[a]], ident.last)
         exchanged = np.zeros((B, P), dtype=bool)
         if P:
-            for a, k in enumerate(keys):
-                exchanged[a] = self._pair_step(y[order[a]], k)
+            yc = np.empty((J, D))
+            for a, ident in enumerate(idents):
+                k.pair_step(y[order[a]], ident.plast, ident.state, ident.run, self.left,
+                            self.right, self.margin, self.near, RATIO, self.max_frames,
+                            yc)  # fmt: skip
+                exchanged[a] = ident.state
         return order, exchanged
-
-    def _pair_step(self, yo: Array, key: Any) -> NDArray[np.bool_]:
-        """The left/right loop of ``pair_exchanges`` for one identity's frame ``yo``."""
-        P = len(self.pairs)
-        last = self._plast.get(key)
-        if last is None:
-            last = np.full(yo.shape, np.nan)
-        state = self._pstate.get(key, np.zeros(P, dtype=bool))
-        lj, rj = self.left, self.right
-
-        def dist(u: Array, v: Array) -> Array:
-            return np.sqrt(((u - v) ** 2).sum(-1))
-
-        kl, sl = dist(yo[lj], last[lj]), dist(yo[lj], last[rj])
-        kr, sr = dist(yo[rj], last[rj]), dist(yo[rj], last[lj])
-        okl = np.isfinite(kl) & np.isfinite(sl) & (np.minimum(kl, sl) <= self.near)
-        okr = np.isfinite(kr) & np.isfinite(sr) & (np.minimum(kr, sr) <= self.near)
-        keep = np.where(okl, kl, 0.0) + np.where(okr, kr, 0.0)
-        swap = np.where(okl, sl, 0.0) + np.where(okr, sr, 0.0)
-        to_swap = (swap < RATIO * keep) & (keep - swap > self.margin)
-        to_keep = (keep < RATIO * swap) & (swap - keep > self.margin)
-        state = np.where(to_swap, True, np.where(to_keep, False, state))
-        run = np.where(state, self._prun.get(key, np.zeros(P, dtype=np.int64)) + 1, 0)
-        state &= run <= self.max_frames  # too long for a swap: the joints as detected
-        run[~state] = 0
-        yc = yo.copy()
-        yc[lj[state]], yc[rj[state]] = yo[rj[state]], yo[lj[state]]
-        self._plast[key] = _kept(yc, last)
-        self._pstate[key] = state
-        self._prun[key] = run
-        return state
-
-
-def _kept(y: Array, last: Array | None) -> Array:
-    """``last`` with the joints of ``y`` that have no NaN written in (``keep_last``)."""
-    ok = ~np.isnan(y).any(axis=-1)
-    out = np.where(ok[:, None], y, np.nan) if last is None else last.copy()
-    out[ok] = y[ok]
-    return out
 
 
 def untangle_stream(
