@@ -10,10 +10,11 @@ to the causal live default (``LiveSmoother``, ``robust_online``) and a minimal n
 Kalman update of one body, in the same run. Latencies are taken once the window is
 full (the work per frame is then constant but for the frames that refit), median, mean
 and 99th percentile in ms, with the ratio of the median to the live default's and the
-share of a 30 fps frame interval (33.3 ms) one stream uses on average. A last row
-streams two such bodies as a pose estimator's two people in pixels, one array: one run
-untangles them and measures the gates on both. ``--markdown`` prints the README's table
-(``make bench``).
+share of a 30 fps frame interval (33.3 ms) one stream uses on average. The last rows
+stream two such bodies as a pose estimator's two people in pixels, one array: through
+``DelayedSmoother`` (one run untangles them and measures the gates on both), and through
+``LiveSmoother`` with the gates measured on the stream, without and with the causal
+untangling. ``--markdown`` prints the README's table (``make bench``).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import tobitkf as tk
 
 WINDOWS = (4.0, 6.0, 10.0)
 PEOPLE = "DelayedSmoother (robust), 2 people in pixels, 0.5 s late, 10 s window"
+LIVE_PEOPLE = "LiveSmoother (robust_online), 2 people in pixels, gates from the stream"
 
 
 def share(pct: float) -> str:
@@ -71,6 +73,10 @@ def main(argv: list[str] | None = None) -> None:
            for name, kw in (("refit=0", {"refit": 0.0}),
                             ("refit=0, fit_seconds=2", {"refit": 0.0, "fit_seconds": 2.0}))},
         PEOPLE: lambda: tk.DelayedSmoother(topo, delay=0.5, window=10.0, fps=30.0),
+        f"{LIVE_PEOPLE}, not untangled":
+            lambda: tk.LiveSmoother(topo, fps=30.0, gates_from="stream", untangle=False),
+        f"{LIVE_PEOPLE}, untangled":
+            lambda: tk.LiveSmoother(topo, fps=30.0, gates_from="stream"),
     }  # fmt: skip
     # the configurations take turns, ROUNDS times; each keeps its round of lowest median
     # (a burst of the shared machine's noise then spoils one round, not one configuration)
@@ -79,7 +85,7 @@ def main(argv: list[str] | None = None) -> None:
         for name, make in configs.items():
             if make is None:
                 lat = minimal_kf_latency(args.frames)[skip:] * 1e-3
-            elif name == PEOPLE:
+            elif name == PEOPLE or name.startswith(LIVE_PEOPLE):
                 lat = latencies(make(), people, None, skip)
             else:
                 lat = latencies(make(), P, S, skip)
@@ -90,7 +96,7 @@ def main(argv: list[str] | None = None) -> None:
         for name, lat in rows.items():
             print(f"{name:55s} median {np.median(lat):8.3f} ms  p99 {np.percentile(lat, 99):8.3f}")
         return
-    print(f"Measured {machine()}; one body (two in the last row), 25 joints, {args.frames} "
+    print(f"Measured {machine()}; one body (two in the last three rows), 25 joints, {args.frames} "
           "frames streamed, "
           f"timed from frame {skip} on; each configuration streamed {args.rounds} times, the "
           "configurations taking turns, the round with the lowest median shown.\n")  # fmt: skip
