@@ -233,16 +233,18 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
     y = np.asarray(ys, dtype=float)[..., :n_dims]
     T, J = y.shape[0], y.shape[2]
     steps = np.asarray(steps, dtype=float)
-    # a scale for degenerate recordings (static, or too short): the spread of the data
-    extent = _nanmedian(np.abs(y - _nanmedian(y, axis=(0, 1))[None, None]))
-    tiny = 1e-9 * float(extent) if np.isfinite(extent) and extent > 0 else 1e-9
     if T >= 3:
         dd = y[2:] - 2 * y[1:-1] + y[:-2]  # (T-2, B, J, D)
         sigma = _MAD * _nanmedian(np.abs(dd).transpose(2, 0, 1, 3).reshape(J, -1), axis=1)
         sigma = sigma / np.sqrt(6.0)
     else:
         sigma = np.full(J, np.nan)
-    sigma = _fill(_fill(sigma, _nanmedian(_fill(sigma, np.nan))), tiny)
+    sigma = _fill(sigma, _nanmedian(_fill(sigma, np.nan)))
+    if not (np.isfinite(sigma) & (sigma > 0)).all():
+        # a degenerate recording (static, or too short): a scale from the data's spread
+        # (a median over every sample: measured only when needed)
+        extent = _nanmedian(np.abs(y - _nanmedian(y, axis=(0, 1))[None, None]))
+        sigma = _fill(sigma, 1e-9 * float(extent) if np.isfinite(extent) and extent > 0 else 1e-9)
     if T >= 2:
         dt = steps[1:, None, None]
         v = (y[1:] - y[:-1]) / dt[..., None]  # (T-1, B, J, D)
@@ -257,8 +259,11 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
         sm = np.sqrt(np.sum(flat * flat, axis=-1))
         with _quiet():
             q98 = nanpercentile_last(sm, 98)
-            ms = np.nanmean(np.where((sm <= q98[:, None])[..., None], flat * flat, np.nan),
-                            axis=(1, 2))  # fmt: skip
+        # the mean square over the steps kept (np.nanmean's own sum and count, without
+        # its copy: a sample left out adds 0, a kept one is finite)
+        keep = np.broadcast_to((sm <= q98[:, None])[..., None], flat.shape)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ms = np.where(keep, flat * flat, 0.0).sum(axis=(1, 2)) / keep.sum(axis=(1, 2))
         speed_sd = np.sqrt(ms)
         vmax = V_MAX_FACTOR * q90
         vmax = np.maximum(_fill(vmax, np.nan), _nanmedian(_fill(vmax, np.nan)))
