@@ -42,11 +42,11 @@ end: the margin and the plausible step are measured on the frames so far (at the
 frames where ``gates="stream"`` measures its gates; before the first, nothing is
 exchanged, and at the first the loops go over the frames so far, returned as detected,
 so that a swap under way is seen from its start) or on a sample recording of the
-set-up; and a swap is undone for its first
-``MAX_SWAP_S`` only: after that the frames are taken as detected, and the loop goes on
-from them as if nothing had been exchanged (offline, a longer swap is left as detected
-from its start). With the same statistics and no swap longer than that, the decisions
-are the offline ones (``tests/test_untangle_stream.py``).
+set-up; and a swap is undone for its first ``MAX_SWAP_S`` only: after that the frames
+are taken as detected, and the loop goes on from them as if nothing had been exchanged
+(offline, a longer swap is left as detected from its start). With the same statistics
+and no swap longer than that, the decisions are the offline ones
+(``tests/test_untangle_stream.py``).
 """
 
 from __future__ import annotations
@@ -278,10 +278,10 @@ class StreamUntangler:
         if keys != self._keys:  # another cast: the rows as detected
             self._keys, self._current, self._run = keys, ids.copy(), 0
         idents = []
-        for k in keys:
-            ident = self._ids.get(k)
+        for key in keys:
+            ident = self._ids.get(key)
             if ident is None:
-                ident = self._ids[k] = _Identity(J, D, P)
+                ident = self._ids[key] = _Identity(J, D, P)
             idents.append(ident)
         k = _kernels()
         order = ids
