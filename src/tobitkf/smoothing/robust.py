@@ -141,7 +141,14 @@ from tobitkf.smoothing.params import (
     region_value,
 )
 from tobitkf.smoothing.registry import SmoothInput, SmoothOutput, register_method
-from tobitkf.smoothing.robust_gating import bone_lengths, joint_order, kernels, region_values
+from tobitkf.smoothing.robust_gating import (
+    bone_lengths,
+    girdle_joints,
+    joint_order,
+    kernels,
+    region_values,
+    reject_dropped_shoulders,
+)
 from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates, stream_gate_frames
 from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS
 from tobitkf.smoothing.timebase import (
@@ -178,6 +185,11 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "two_pass": True,
     # longest believable tracking failure, s (KERAAL's longest: 48 frames = 1.6 s)
     "max_reject": 2.0,
+    # offline: a shoulder whose clavicle points this far (degrees) below the recording's
+    # usual angle to the spine's perpendicular, or 3.5 robust sds of it if more, is
+    # rejected (about 10 of shoulder depression, 15 of angle noise of a clavicle, 5 of
+    # the spine axis); inf: no rule
+    "shoulder_drop": 30.0,
     # online: frames dropped from the state when a rejection starts (~67 ms at 30 fps)
     "lookback": 2,
     # offline: an accepted run between two rejections must last this long, s
@@ -242,6 +254,7 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "bones": as_bool,
     "two_pass": as_bool,
     "max_reject": positive_or_inf,
+    "shoulder_drop": positive_or_inf,
     # frames re-predicted at a rejection's start (failures enter over a few); each one is
     # a copy of the filter's state per joint, so a bound keeps the memory reasonable
     "lookback": int_between(0, MAX_LOOKBACK),
@@ -299,6 +312,7 @@ class _Setup:
         # stationary velocity variance of the OU model is q tau / 2
         qa = 2 * self.spd**2 / tau if np.isfinite(tau) else self.spd**2
         self.groups = topo.joint_groups()
+        self.girdle = girdle_joints(topo.joints)  # the shoulder-girdle rule's joints
         self.parents, self.order = joint_order(topo.parents)
         self.pj = np.zeros((J, k.N_PJ))
         self.pj[:, k.J_VMAX] = self.vmax
@@ -409,6 +423,8 @@ def _offline(
                       L_fixed, bool(params["bones"]), float(params["max_reject"]),
                       bool(params["two_pass"]), k.new_state(B, J, 0),
                       k.new_state(B, J, 0))  # fmt: skip
+    if setup.girdle is not None and setup.pi[k.I_NDIMS] == 3:  # a shoulder dropped too far
+        acc = reject_dropped_shoulders(acc, ys, setup.girdle, float(params["shoulder_drop"]))
     if params["min_run"] > 0:
         acc = k.drop_short_runs_run(acc, ~missing & ~acc, times, float(params["min_run"]))
     if params["two_pass"]:
@@ -897,6 +913,10 @@ def robust_smooth(
     two_pass : offline only: also gate backwards in time (default True).
     max_reject : s; a joint rejected longer than this is re-acquired as soon as it moves
         plausibly from frame to frame (default 2).
+    shoulder_drop : offline only, skeletons with Kinect's spine and shoulder joints, 3-D:
+        a shoulder whose clavicle points more than this (degrees) below the recording's
+        usual angle to the spine's perpendicular, or 3.5 robust standard deviations of
+        that angle if more, is rejected (default 30; ``inf``: no rule).
     lookback : online only: accepted frames dropped from the state when a rejection
         starts (default 2).
     min_run : an accepted run between two rejections shorter than this (s) is rejected

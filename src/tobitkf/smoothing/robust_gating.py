@@ -24,17 +24,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "GIRDLE_JOINTS",
+    "GIRDLE_MIN_SAMPLES",
+    "GIRDLE_SPREAD",
     "bone_lengths",
     "carry_with_parent",
+    "clavicle_elevation",
     "confirm_reacquisition",
     "drop_short_runs",
     "enforce_chain",
     "gate_measurements",
+    "girdle_joints",
     "joint_levels",
     "joint_order",
     "kernels",
     "project_inferred",
     "region_values",
+    "reject_dropped_shoulders",
 ]
 
 Array = NDArray[np.float64]
@@ -186,6 +192,69 @@ def gate_measurements(
         k.new_state(1, J, 0), False, acc,
     )  # fmt: skip
     return acc[:, 0]
+
+
+#: the shoulder-girdle rule's joints: the spine joint below the shoulder centre, the
+#: shoulder centre, and the two shoulders (Kinect's names; other skeletons: no rule)
+GIRDLE_JOINTS = ("SpineMid", "SpineShoulder", "ShoulderLeft", "ShoulderRight")
+#: the rule's threshold is at least this many robust standard deviations of the
+#: recording's own clavicle angle (the usual outlier bound of a modified z-score)
+GIRDLE_SPREAD = 3.5
+#: fewer accepted angles than this (a second at 30 fps) describe no posture: no rule
+GIRDLE_MIN_SAMPLES = 30
+
+
+def girdle_joints(joints: Any) -> tuple[int, int, int, int] | None:
+    """The indices of :data:`GIRDLE_JOINTS` in ``joints``, or None when one is absent."""
+    names = list(joints)
+    if not all(n in names for n in GIRDLE_JOINTS):
+        return None
+    a, b, c, d = (names.index(n) for n in GIRDLE_JOINTS)
+    return a, b, c, d
+
+
+def clavicle_elevation(ys: Array, girdle: tuple[int, int, int, int]) -> Array:
+    """``(T, B, 2)`` degrees: each clavicle's (shoulder centre to left / right shoulder)
+    angle above the plane perpendicular to the spine axis (spine joint to shoulder
+    centre) at the shoulder centre, of ``ys (T, B, J, 3)``; NaN where a joint is
+    missing."""
+    y = np.asarray(ys, dtype=float)
+    sm, ss = y[:, :, girdle[0]], y[:, :, girdle[1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = (ss - sm) / np.linalg.norm(ss - sm, axis=-1, keepdims=True)
+        out = np.empty((*y.shape[:2], 2))
+        for k, j in enumerate(girdle[2:]):
+            c = y[:, :, j] - ss
+            c = c / np.linalg.norm(c, axis=-1, keepdims=True)
+            out[..., k] = np.degrees(np.arcsin(np.clip(np.sum(c * axis, axis=-1), -1, 1)))
+    return out
+
+
+def reject_dropped_shoulders(
+    acc: NDArray[np.bool_], ys: Array, girdle: tuple[int, int, int, int], drop: float
+) -> NDArray[np.bool_]:
+    """The shoulder-girdle rule (offline; docs/robust.md, Method 5): a shoulder whose
+    clavicle points further below the recording's own usual angle than ``drop`` degrees,
+    or than ``GIRDLE_SPREAD`` robust standard deviations of that angle if more, is
+    rejected. The usual angle and its spread are the median and the scaled MAD over the
+    frames where the shoulder, the shoulder centre and the spine joint were accepted
+    (at least ``GIRDLE_MIN_SAMPLES`` of them). ``acc (T, B, J)`` is not changed."""
+    out = acc.copy()
+    if not np.isfinite(drop):
+        return out
+    elev = clavicle_elevation(ys, girdle)
+    sm, ss = girdle[0], girdle[1]
+    for k, j in enumerate(girdle[2:]):
+        for b in range(acc.shape[1]):
+            e = elev[:, b, k]
+            x = e[acc[:, b, j] & acc[:, b, ss] & acc[:, b, sm] & np.isfinite(e)]
+            if x.size < GIRDLE_MIN_SAMPLES:
+                continue
+            usual = float(np.median(x))
+            spread = 1.4826 * float(np.median(np.abs(x - usual)))
+            with np.errstate(invalid="ignore"):
+                out[:, b, j] &= ~(usual - e > max(drop, GIRDLE_SPREAD * spread))
+    return out
 
 
 def enforce_chain(
