@@ -144,11 +144,28 @@ def pair_exchanges(
 
 
 @njit(cache=True, nogil=True)
+def two_choice(cost: np.ndarray, c0: int, c1: int, margin: float, ratio: float) -> tuple:
+    """One frame's decision of the two-body identity loop: keep the current order
+    ``(c0, c1)`` or take the cheaper of keeping and exchanging the bodies, when it costs
+    less than ``ratio`` times the current one and at least ``margin`` less (an exact tie
+    changes nothing, whichever is taken: the new cost is then the current one). A NaN
+    cost, a body or identity without samples, fails every comparison: the current order
+    stays, as where scipy is not asked."""
+    keep = cost[0, 0] + cost[1, 1]
+    swap = cost[0, 1] + cost[1, 0]
+    b0, b1 = (0, 1) if keep <= swap else (1, 0)
+    new = cost[0, b0] + cost[1, b1]
+    now = cost[0, c0] + cost[1, c1]
+    if new < ratio * now and now - new > margin:
+        return b0, b1
+    return c0, c1
+
+
+@njit(cache=True, nogil=True)
 def two_identities(ys: np.ndarray, margin: float, ratio: float, order: np.ndarray) -> None:
     """The identity loop of :func:`~tobitkf.smoothing.untangle.untangle` for two bodies,
-    whose least-cost assignment is one of two: keep them, or exchange them (an exact tie
-    changes nothing, whichever is taken: the new cost is then the current one). Writes
-    ``order (T, 2)``."""
+    whose least-cost assignment is one of two: keep them, or exchange them
+    (:func:`two_choice`). Writes ``order (T, 2)``."""
     T, _, J, D = ys.shape
     last = np.full((2, J, D), np.nan)
     cost = np.empty((2, 2))
@@ -157,15 +174,7 @@ def two_identities(ys: np.ndarray, margin: float, ratio: float, order: np.ndarra
     c0, c1 = 0, 1
     for t in range(T):
         identity_costs(ys[t], last, cost, scratch)
-        # (a NaN cost, a body or identity without samples, fails every comparison: the
-        # current order stays, as where scipy is not asked)
-        keep = cost[0, 0] + cost[1, 1]
-        swap = cost[0, 1] + cost[1, 0]
-        b0, b1 = (0, 1) if keep <= swap else (1, 0)
-        new = cost[0, b0] + cost[1, b1]
-        now = cost[0, c0] + cost[1, c1]
-        if new < ratio * now and now - new > margin:
-            c0, c1 = b0, b1
+        c0, c1 = two_choice(cost, c0, c1, margin, ratio)
         order[t, 0], order[t, 1] = c0, c1
         y[0], y[1] = ys[t, c0], ys[t, c1]
         keep_last(y, last)

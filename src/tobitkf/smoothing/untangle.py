@@ -56,13 +56,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.smoothing.robust_scale import _quiet
+from tobitkf.smoothing.robust_scale import STREAM_FIRST, STREAM_LAST, _quiet
 
 __all__ = [
     "MAX_SWAP_S",
     "NEAR_FACTOR",
     "RATIO",
     "StreamUntangler",
+    "StreamUntangling",
     "untangle",
     "untangle_sequences",
     "untangle_stats",
@@ -91,6 +92,25 @@ def _assign(cost: Array) -> NDArray[np.intp]:
     out = np.arange(cost.shape[0])
     out[rows] = cols
     return out
+
+
+def _choose(cost: Array, current: NDArray[np.intp], margin: float) -> NDArray[np.intp]:
+    """One frame's identity decision (``cost[a, b]``: body ``b`` as identity ``a``): the
+    least-cost assignment when it costs less than ``RATIO`` times the current one and at
+    least ``margin`` less, else ``current``. Two bodies: keep or exchange (the compiled
+    loop's own step); more: scipy's assignment, asked only when every cost is finite."""
+    B = len(current)
+    if B == 2:
+        c = _kernels().two_choice(cost, int(current[0]), int(current[1]), float(margin), RATIO)
+        return np.array(c, dtype=np.intp)
+    ids = np.arange(B)
+    now = cost[ids, current]
+    if np.isfinite(cost).all():
+        best = _assign(cost)
+        new = cost[ids, best].sum()
+        if new < RATIO * now.sum() and now.sum() - new > margin:
+            return best
+    return current
 
 
 def _runs_to_undo(changed: NDArray[np.bool_], max_frames: int) -> NDArray[np.bool_]:
@@ -157,16 +177,11 @@ def untangle(
     elif bodies and B > 2:  # the least-cost assignment of each frame by scipy
         current = np.arange(B)
         last = np.full(ys.shape[1:], np.nan)  # per identity: its last assigned samples
-        cost, scratch, ids = np.empty((B, B)), np.empty(ys.shape[2]), np.arange(B)
+        cost, scratch = np.empty((B, B)), np.empty(ys.shape[2])
         for t in range(T):
             y = ys[t]
             k.identity_costs(y, last, cost, scratch)  # cost[a, b]: body b as identity a
-            now = cost[ids, current]
-            if np.isfinite(cost).all():
-                best = _assign(cost)
-                new = cost[ids, best].sum()
-                if new < RATIO * now.sum() and now.sum() - new > margin:
-                    current = best
+            current = _choose(cost, current, margin)
             order[t] = current
             k.keep_last(np.ascontiguousarray(y[current]), last)
     if bodies and B > 1:
@@ -288,19 +303,7 @@ class StreamUntangler:
         if self.bodies and B > 1:
             cost = np.empty((B, B))
             k.identity_costs(y, np.stack([i.last for i in idents]), cost, np.empty(J))
-            current = self._current
-            now = cost[ids, current].sum()
-            if B == 2:  # as two_identities: keep or exchange
-                keep, swap = cost[0, 0] + cost[1, 1], cost[0, 1] + cost[1, 0]
-                best = ids if keep <= swap else ids[::-1]
-                new = cost[ids, best].sum()
-                if new < RATIO * now and now - new > self.margin:
-                    current = best.copy()
-            elif np.isfinite(cost).all():
-                best = _assign(cost)
-                new = cost[ids, best].sum()
-                if new < RATIO * now and now - new > self.margin:
-                    current = best
+            current = _choose(cost, self._current, self.margin)
             moved = bool((current != ids).any())
             self._run = self._run + 1 if moved else 0
             if self._run > self.max_frames:  # too long for a swap: the rows as detected
@@ -319,28 +322,83 @@ class StreamUntangler:
         return order, exchanged
 
 
+class StreamUntangling:
+    """:class:`StreamUntangler` with its statistics: given once (``stats``, measured on a
+    sample recording by :func:`untangle_stats`), or, with ``stats=None``, measured on the
+    frames so far where ``gates="stream"`` measures its gates. Before the first of
+    those nothing is exchanged; at the first, the loops go over the frames so far
+    (returned as detected), so that a swap under way is seen from its start (module
+    docstring, "Causal form"). A live stream and :func:`untangle_stream` both step it."""
+
+    def __init__(
+        self, pairs: Any, stats: tuple[float, float, int] | None = None, *, bodies: bool = True
+    ) -> None:
+        self.core = StreamUntangler(pairs, bodies=bodies)
+        self.pairs = self.core.pairs
+        self.from_stream = stats is None
+        if stats is not None:
+            self.core.set_stats(*stats)
+        self._frames: list[dict[Any, Array]] = []  # the frames so far, row by key
+        self._times: list[float] = []
+        self._n = 0  # frames seen
+        self._next = STREAM_FIRST
+
+    def _measure(self, n: int) -> None:
+        """The statistics of the first ``n`` frames (every key seen, NaN where absent)."""
+        keys = list(dict.fromkeys(k for f in self._frames for k in f))
+        J, D = next(iter(next(f for f in self._frames if f).values())).shape
+        ys = np.full((n, len(keys), J, D), np.nan)
+        col = {k: i for i, k in enumerate(keys)}
+        for t, f in enumerate(self._frames):
+            for k, y in f.items():
+                ys[t, col[k]] = y
+        self.core.set_stats(*untangle_stats(ys, np.asarray(self._times)))
+
+    def step(
+        self, y: Array, keys: list[Any] | None, time: float
+    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        """One frame ``y (B, J, D)`` as detected, its rows' ``keys`` (None: the row
+        numbers) and time (s): ``(order, exchanged)`` as :meth:`StreamUntangler.step`
+        gives them (the rows as detected before the first measurement)."""
+        if self.from_stream:
+            n = self._n
+            if n == self._next <= STREAM_LAST:
+                if any(self._frames):
+                    self._measure(n)
+                    if n == STREAM_FIRST:  # the frames so far (returned as detected) set
+                        for f in self._frames:  # the loops' state
+                            rows = list(f)
+                            self.core.step(np.stack([f[k] for k in rows]) if rows
+                                           else y[:0], rows)  # fmt: skip
+                self._next *= 2
+            if n < STREAM_LAST:  # what the next measurements read
+                rows = range(len(y)) if keys is None else keys
+                self._frames.append({k: np.array(y[i]) for i, k in enumerate(rows)})
+                self._times.append(float(time))
+            else:
+                self._frames, self._times = [], []
+            self._n = n + 1
+            if self._n <= STREAM_FIRST:  # no statistics yet: as detected
+                return np.arange(len(y)), np.zeros((len(y), len(self.pairs)), dtype=bool)
+        return self.core.step(y, keys)
+
+    def forget(self, keys: Any) -> None:
+        """Bodies dropped from a keyed stream."""
+        self.core.forget(keys)
+
+
 def untangle_stream(
     ys: Array, times: Array, pairs: Any, *, bodies: bool = True
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """The causal untangling of a recording ``ys (T, B, J, D)`` at ``times (T,)``, its
-    statistics measured on the frames so far where ``gates="stream"`` measures its
-    gates: what a live stream of it gives (``order (T, B)``, ``exchanged (T, B, P)``)."""
-    from tobitkf.smoothing.robust_scale import stream_gate_frames
-
+    statistics measured on the frames so far (:class:`StreamUntangling`): what a live
+    stream of it gives (``order (T, B)``, ``exchanged (T, B, P)``)."""
     T, B = ys.shape[:2]
-    st = StreamUntangler(pairs, bodies=bodies)
+    st = StreamUntangling(pairs, bodies=bodies)
     order = np.tile(np.arange(B), (T, 1))
     exchanged = np.zeros((T, B, len(st.pairs)), dtype=bool)
-    frames = stream_gate_frames(T)
-    if not frames:
-        return order, exchanged
-    for t in range(frames[0], T):
-        if t in frames:
-            st.set_stats(*untangle_stats(ys[:t], times[:t]))
-            if t == frames[0]:  # the frames so far (returned as detected) set the loops'
-                for s in range(t):  # state: a swap under way is seen from its start
-                    st.step(ys[s])
-        order[t], exchanged[t] = st.step(ys[t])
+    for t in range(T):
+        order[t], exchanged[t] = st.step(ys[t], None, float(times[t]))
     return order, exchanged
 
 
