@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tobitkf as tk
-from test_live_stream_gates import _live
+from test_live_stream_gates import _live, _rmse
 from test_live_stream_gates import _people as _benchmark_people
 from test_pose2d import _people as _two_people
 from test_untangle_kernels import _people as _random_people
@@ -115,12 +115,7 @@ def test_live_untangles_as_batch_does(timestamps):
         1,
     )
     true = np.stack([t.positions for t in truth], 1)
-
-    def rmse(x):
-        e = np.linalg.norm(x[STREAM_FIRST:] - true[STREAM_FIRST:], axis=-1)
-        return float(np.sqrt(np.nanmean(e**2)))
-
-    assert rmse(out) < 0.8 * rmse(plain)
+    assert _rmse(out, true) < 0.8 * _rmse(plain, true)
 
 
 def test_a_keyed_stream_follows_the_people_through_an_identity_switch():

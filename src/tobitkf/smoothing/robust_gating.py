@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tobitkf.smoothing.robust_scale import _MAD
+
 __all__ = [
     "GIRDLE_JOINTS",
     "GIRDLE_MIN_SAMPLES",
@@ -251,7 +253,7 @@ def reject_dropped_shoulders(
             if x.size < GIRDLE_MIN_SAMPLES:
                 continue
             usual = float(np.median(x))
-            spread = 1.4826 * float(np.median(np.abs(x - usual)))
+            spread = _MAD * float(np.median(np.abs(x - usual)))
             with np.errstate(invalid="ignore"):
                 out[:, b, j] &= ~(usual - e > max(drop, GIRDLE_SPREAD * spread))
     return out
