@@ -86,7 +86,7 @@ from tobitkf.smoothing.registry import (
     unregister_method,
 )
 from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR, frame_steps, frame_times
-from tobitkf.smoothing.untangle import untangle_sequences
+from tobitkf.smoothing.untangle import check_untangle, untangle_sequences
 
 __all__ = [
     "COMMON_KEYWORDS",
@@ -138,7 +138,7 @@ def check_params(method: str, params: Mapping[str, Any]) -> dict[str, Any]:
     if "min_confidence" in params:
         check_min_confidence(params["min_confidence"])
     if "untangle" in params:
-        _check_untangle(params["untangle"])
+        check_untangle(params["untangle"])
     return full
 
 
@@ -166,12 +166,6 @@ def _refuse_other_containers(sequence: Any) -> None:
             f"{type(sequence).__name__} of {type(sequence[0]).__name__}: for keypoint "
             "coordinates pass np.asarray(...) of shape (T, J, D)"
         )
-
-
-def _check_untangle(value: Any) -> Any:
-    if value == "auto" or isinstance(value, bool):
-        return value
-    raise ValueError(f"untangle must be 'auto', True or False, got {value!r}")
 
 
 def _check_offline(spec: MethodSpec, offline: bool) -> None:
@@ -294,7 +288,7 @@ def smooth(
         up_axis = check_up_axis(up_axis)
     factor = check_inferred_factor(inferred_noise_factor)
     min_conf = check_min_confidence(min_confidence)
-    untangle = _check_untangle(untangle)
+    untangle = check_untangle(untangle)
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
     opts = (offline, up_axis, factor, min_conf, untangle)

@@ -48,7 +48,6 @@ from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, get_topology
 from tobitkf.smoothing.api import (
     DEFAULT_LIVE_METHOD,
-    _check_untangle,
     check_params,
     get_method,
     method_names,
@@ -85,7 +84,7 @@ from tobitkf.smoothing.timebase import (
     frame_steps,
     measurements,
 )
-from tobitkf.smoothing.untangle import untangle_stats
+from tobitkf.smoothing.untangle import check_untangle, untangle_stats
 
 __all__ = ["LiveSmoother", "live_methods"]
 
@@ -321,7 +320,7 @@ class LiveSmoother:
         **params: Any,
     ) -> None:
         self.spec = get_method(method)
-        self.untangle = _check_untangle(untangle)
+        self.untangle = check_untangle(untangle)
         self._sample_untangle: tuple[float, float, int] | None = None
         if "offline" in params:
             raise ValueError("offline smoothing needs the whole recording: it cannot run live")

@@ -64,6 +64,7 @@ __all__ = [
     "RATIO",
     "StreamUntangler",
     "StreamUntangling",
+    "check_untangle",
     "untangle",
     "untangle_sequences",
     "untangle_stats",
@@ -71,6 +72,14 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+
+def check_untangle(value: Any) -> Any:
+    """The ``untangle`` option of :func:`tobitkf.smooth` and ``LiveSmoother``, checked."""
+    if value == "auto" or isinstance(value, bool):
+        return value
+    raise ValueError(f"untangle must be 'auto', True or False, got {value!r}")
+
 
 #: a new assignment must cost less than this times the current one
 RATIO = 0.5
