@@ -88,7 +88,8 @@ J_Q = 1  # OU velocity noise density
 J_R = 2  # measurement variance
 J_SD = 3  # measurement standard deviation
 J_V0 = 4  # initial velocity variance
-N_PJ = 5
+J_MIRROR = 5  # online: the joint whose bone mirrors this one's (-1: none; mirror_bones)
+N_PJ = 6
 # int parameters (pi[k])
 I_BONES = 0
 I_CARRY = 1
@@ -450,6 +451,14 @@ def gate_frame(
         tol = tol_abs + tol_rel * Lj  # NaN without a bone length (yet): no bone rule
         if use_bones:
             bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
+            m = int(pj[j, J_MIRROR])
+            if online and not bone_ok and m >= 0:
+                # the mirror rule: when the length learnt for the other side's bone
+                # disagrees with this one's (learnt while the limb was failing, at the
+                # stream's start), it is a second reference
+                Lm = sf[m, S_L_CUR]
+                if math.isfinite(Lm) and abs(Lj - Lm) > tol_abs + tol_rel * min(Lj, Lm):
+                    bone_ok = not (abs(blen - Lm) > tol_abs + tol_rel * Lm)
         if step_ok and not parent_acc and has_prev and sb[pp, B_PREV_ACC]:
             # the parent's rejection starts at this step: a joint that made the same step
             # (to within its bone's tolerance; a step larger than that) kept its bone to

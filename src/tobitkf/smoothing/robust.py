@@ -22,7 +22,10 @@ A valid measurement ``y_j(t)`` is *accepted* when
 2. **bone gate** — if its parent was accepted in this frame, the bone to the parent has
    its normal length: ``| |y_j - y_parent| - L_j | <= bone_tol_abs + bone_tol_rel L_j``
    with ``L_j`` the recording's median bone length (offline) or the median of the
-   lengths seen so far (online).  A wrong bone is blamed on the distal joint;
+   lengths seen so far (online; in 3-D, when the length learnt for the bone's mirror
+   image disagrees with its own, a bone that keeps the mirror's is accepted too, so a
+   limb failing at a stream's start does not teach the gate a wrong length for good).
+   A wrong bone is blamed on the distal joint;
 3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
    joint is accepted only if it was accepted in the previous frame and did not jump
    (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
@@ -146,6 +149,7 @@ from tobitkf.smoothing.robust_gating import (
     girdle_joints,
     joint_order,
     kernels,
+    mirror_bones,
     region_values,
     reject_dropped_shoulders,
 )
@@ -320,6 +324,7 @@ class _Setup:
         self.pj[:, k.J_R] = self.sd**2
         self.pj[:, k.J_SD] = self.sd
         self.pj[:, k.J_V0] = qa * tau / 2 if np.isfinite(tau) else 1.0
+        self.pj[:, k.J_MIRROR] = mirror_bones(topo) if n_dims == 3 else -1
         self.pf = np.zeros(k.N_PF)
         self.pf[k.P_MARGIN] = params["margin"]
         self.pf[k.P_TOL_ABS] = params["bone_tol_abs"]

@@ -40,6 +40,7 @@ __all__ = [
     "joint_levels",
     "joint_order",
     "kernels",
+    "mirror_bones",
     "project_inferred",
     "region_values",
     "reject_dropped_shoulders",
@@ -120,6 +121,7 @@ def _gate_params(J: int, v_max: Any, margin: float, tol_abs: float = np.inf,
     k = kernels()
     pj = np.zeros((J, k.N_PJ))
     pj[:, k.J_VMAX] = np.broadcast_to(np.asarray(v_max, dtype=float), (J,))
+    pj[:, k.J_MIRROR] = -1  # no mirror rule (it needs the topology's pairs)
     pf = np.zeros(k.N_PF)
     pf[k.P_MARGIN], pf[k.P_TOL_ABS], pf[k.P_TOL_REL] = margin, tol_abs, tol_rel
     return pj, pf
@@ -204,6 +206,21 @@ GIRDLE_JOINTS = ("SpineMid", "SpineShoulder", "ShoulderLeft", "ShoulderRight")
 GIRDLE_SPREAD = 3.5
 #: fewer accepted angles than this (a second at 30 fps) describe no posture: no rule
 GIRDLE_MIN_SAMPLES = 30
+
+
+def mirror_bones(topology: Any) -> NDArray[np.intp]:
+    """``(J,)``: for each joint the joint whose bone (to its parent) is the mirror image of
+    its own, -1 for none: the topology's left/right pairs whose parents are the same joint
+    (shoulders, hips) or a pair too (elbow and elbow). The online bone gate's mirror rule
+    (docs/robust.md, Method 6) compares the lengths learnt for the two."""
+    parents = [int(p) for p in topology.parents]
+    mirror = topology.mirror_indices()
+    out = np.full(len(parents), -1, dtype=np.intp)
+    for a, b in enumerate(mirror):
+        pa, pb = parents[a], parents[b]
+        if b != a and pa >= 0 and pb >= 0 and mirror[pa] == pb:
+            out[a] = b
+    return out
 
 
 def girdle_joints(joints: Any) -> tuple[int, int, int, int] | None:

@@ -1,0 +1,117 @@
+"""The online bone gate's mirror rule (docs/robust.md, Method 6).
+
+A stream that starts while a limb is failing teaches the online bone gate a wrong length
+for it; without a second reference, the limb's good samples that follow are rejected as
+broken bones until ``max_reject`` (2 s) has passed. The rule compares the length learnt
+for a bone with the one learnt for its mirror image and, when the two disagree, also
+accepts a sample that keeps the mirror's length.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tobitkf as tk
+from tobitkf.skeleton.topology import Topology, get_topology
+from tobitkf.smoothing import _robust_kernels as k
+from tobitkf.smoothing.robust import ROBUST_DEFAULTS, _Setup
+from tobitkf.smoothing.robust_gating import mirror_bones
+
+CHAIN = ("WristRight", "HandRight", "HandTipRight", "ThumbRight")
+OFFSET = np.array([0.0, 0.4, 0.0])  # a hand chain put 40 cm off, its own bones intact
+
+
+def test_mirror_bones_pairs_the_bones_that_mirror_each_other():
+    topo = get_topology("kinect_v2")
+    names = topo.joints
+    m = mirror_bones(topo)
+    pairs = {names[a]: (names[b] if b >= 0 else None) for a, b in enumerate(m)}
+    # the parents are a left/right pair too, or the same joint
+    assert pairs["ElbowLeft"] == "ElbowRight" and pairs["ElbowRight"] == "ElbowLeft"
+    assert pairs["ShoulderLeft"] == "ShoulderRight"  # both on SpineShoulder
+    assert pairs["HipRight"] == "HipLeft"  # both on SpineBase
+    assert pairs["ThumbLeft"] == "ThumbRight"
+    for trunk in ("SpineBase", "SpineMid", "Neck", "Head", "SpineShoulder"):
+        assert pairs[trunk] is None
+    # a pair hung on different trunk joints: its bones are not each other's mirror
+    odd = Topology("odd", ("root", "neck", "left", "right"), (-1, 0, 0, 1), ((2, 3),))
+    assert mirror_bones(odd).tolist() == [-1, -1, -1, -1]
+
+
+def test_a_projection_has_no_mirror_rule():
+    # projected lengths of the two sides differ with the pose: no second reference
+    topo = get_topology("kinect_v2")
+    params = dict(ROBUST_DEFAULTS)
+    assert (_Setup(topo, params, n_dims=2).pj[:, k.J_MIRROR] == -1).all()
+    assert (_Setup(topo, params, n_dims=3).pj[:, k.J_MIRROR] >= 0).sum() == 2 * 10
+
+
+def _stream(
+    first: slice,
+    later: slice | None = None,
+    other: slice | None = None,
+    no_left: bool = False,
+    long_left: float = 0.0,
+    other_offset: tuple[float, float, float] = (0.25, 0.0, 0.0),
+):
+    clean = tk.generate_motion("arms", duration=4.0, seed=0)
+    idx = [clean.topology.joints.index(n) for n in CHAIN]
+    y = clean.positions + np.random.default_rng(0).normal(scale=0.003, size=clean.positions.shape)
+    y[first, idx] += OFFSET
+    if later is not None:
+        y[later, idx] += OFFSET
+    if other is not None:  # a failure of another size: the wrist's bone fits neither side
+        y[other, idx] += other_offset
+    if long_left:  # the left forearm longer by this much
+        names = clean.topology.joints
+        left = [names.index(n.replace("Right", "Left")) for n in CHAIN]
+        d = y[:, left[0]] - y[:, names.index("ElbowLeft")]
+        y[:, left] += (long_left * d / np.linalg.norm(d, axis=-1, keepdims=True))[:, None]
+    if no_left:  # the mirror's bone is never seen, so never learnt
+        y[:, [clean.topology.joints.index(n.replace("Right", "Left")) for n in CHAIN]] = np.nan
+    out = tk.smooth(tk.SkeletonSequence(y, clean.topology, fps=30.0), "robust_online")
+    return clean, out, idx[0]
+
+
+def test_good_samples_after_a_failure_at_the_start_are_accepted():
+    # frames 3-24 failed: the wrist's bone is learnt (15 samples) mostly from the failure
+    clean, out, w = _stream(slice(3, 25), slice(60, 80))
+    rej = out.metadata["diagnostics"]["rejected"][:, w]
+    err = np.linalg.norm(out.positions[:, w] - clean.positions[:, w], axis=-1)
+    # the good samples that follow: accepted (the confirmation may hold one or two)
+    assert rej[25:45].sum() <= 3
+    assert np.sqrt(np.mean(err[30:50] ** 2)) < 0.02  # the 40 cm failure is left behind
+    # a failure once both lengths agree is still rejected throughout
+    assert rej[60:80].all()
+
+
+def test_a_bone_that_fits_neither_side_is_still_rejected():
+    # while the learnt length is still the failure's, a sample that keeps neither it nor
+    # the mirror's is a broken bone
+    _, out, w = _stream(slice(3, 25), other=slice(30, 34))
+    assert out.metadata["diagnostics"]["rejected"][30:34, w].all()
+
+
+def test_lengths_that_agree_leave_the_gate_as_it_was():
+    # the left forearm 6 cm longer (within the right one's tolerance, 3 cm + 15 %): a
+    # right wrist 13 cm too far out fits the left length, and is still rejected
+    _, out, w = _stream(slice(0, 0), long_left=0.06, other=slice(30, 34), other_offset=(0, 0, 0.25))
+    assert out.metadata["diagnostics"]["rejected"][30:34, w].all()
+
+
+def test_without_the_mirror_length_the_own_one_decides():
+    _, out, w = _stream(slice(0, 0), later=slice(60, 80), no_left=True)
+    rej = out.metadata["diagnostics"]["rejected"][:, w]
+    assert rej[60:80].all() and not rej[20:60].any()
+
+
+@pytest.mark.parametrize("method", ["robust_online"])
+def test_live_takes_the_same_decisions(method):
+    clean, out, _ = _stream(slice(3, 25))
+    idx = [clean.topology.joints.index(n) for n in CHAIN]
+    y = clean.positions + np.random.default_rng(0).normal(scale=0.003, size=clean.positions.shape)
+    y[3:25, idx] += OFFSET
+    live = tk.LiveSmoother(clean.topology, method=method, fps=30.0)
+    got = np.stack([live.update(f) for f in y])
+    np.testing.assert_array_equal(got, out.positions)
