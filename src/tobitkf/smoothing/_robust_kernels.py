@@ -404,6 +404,7 @@ def gate_frame(
     L_fixed: np.ndarray,  # (J,) offline bone lengths (NaN = no check)
     use_bones: bool,
     online: bool,  # bone lengths learnt from the accepted frames so far
+    mirror: bool,  # online, 3-D: the mirror rule (pj[:, J_MIRROR])
     max_reject: float,
     last: np.ndarray,  # state (J, 3): last accepted sample
     sf: np.ndarray,  # state (J, N_SF)
@@ -452,7 +453,7 @@ def gate_frame(
         if use_bones:
             bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
             m = int(pj[j, J_MIRROR])
-            if online and not bone_ok and m >= 0:
+            if mirror and not bone_ok and m >= 0:
                 # the mirror rule: when the length learnt for the other side's bone
                 # disagrees with this one's (learnt while the limb was failing, at the
                 # stream's start), it is a second reference
@@ -607,8 +608,8 @@ def gate_pass(
             tp = t + 1 if reverse else t - 1
         for b in range(B):
             gate_frame(ys[t, b], ys[tp, b], has_prev, times[i], dt_prev, i, parents, order,
-                       pj, pf, L_fixed[b], use_bones, online, max_reject, last[b], sf[b],
-                       sb[b], h_val[b], h_mult[b], h_cnt[b], out[b])  # fmt: skip
+                       pj, pf, L_fixed[b], use_bones, online, False, max_reject, last[b],
+                       sf[b], sb[b], h_val[b], h_mult[b], h_cnt[b], out[b])  # fmt: skip
         if reverse:
             for b in range(B):
                 for j in range(J):
@@ -1163,8 +1164,8 @@ def online_frames(
                 lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
             project_frame(y[b], project_n[f, b], parents, order, lengths, yb, scratch[3])
             gate_frame(yb, yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
-                       no_lengths, use_bones, True, pf[P_MAX_REJECT], last[b], sf[b], sb[b],
-                       h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
+                       no_lengths, use_bones, True, pi[I_NDIMS] == 3, pf[P_MAX_REJECT],
+                       last[b], sf[b], sb[b], h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
             if min_run > 0:
                 confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
                 if has_prev:

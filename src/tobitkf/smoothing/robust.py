@@ -324,7 +324,7 @@ class _Setup:
         self.pj[:, k.J_R] = self.sd**2
         self.pj[:, k.J_SD] = self.sd
         self.pj[:, k.J_V0] = qa * tau / 2 if np.isfinite(tau) else 1.0
-        self.pj[:, k.J_MIRROR] = mirror_bones(topo) if n_dims == 3 else -1
+        self.pj[:, k.J_MIRROR] = mirror_bones(topo)  # 3-D only (the kernel reads I_NDIMS)
         self.pf = np.zeros(k.N_PF)
         self.pf[k.P_MARGIN] = params["margin"]
         self.pf[k.P_TOL_ABS] = params["bone_tol_abs"]
