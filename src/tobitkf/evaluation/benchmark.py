@@ -189,6 +189,7 @@ def run_benchmark(
     duration: float = 10.0,
     model: CorruptionModel | None = None,
     outputs: dict[str, Any] | None = None,
+    fps: float = 30.0,
 ) -> BenchmarkTable:
     """Run every method on a corrupted synthetic recording and score it by glitch type.
 
@@ -203,6 +204,9 @@ def run_benchmark(
     model : corruption parameters (defaults calibrated on KERAAL / KIMORE).
     outputs : optional dict filled with ``label -> smoothed sequence``, plus ``"truth"``
         (the clean sequence) and ``"corrupted"`` (the :class:`CorruptedTrack`).
+    fps : frame rate of the recording (default 30, the Kinect's): the motion is generated
+        or the BVH resampled at it, and the corruption's episodes keep their duration
+        (:mod:`~tobitkf.evaluation.corruption`).
 
     Returns
     -------
@@ -211,9 +215,9 @@ def run_benchmark(
     from tobitkf.evaluation.synthetic import bvh_to_kinect, generate_motion
 
     if str(source) == "generator":
-        clean = generate_motion(motion, duration=duration, seed=seed)
+        clean = generate_motion(motion, duration=duration, seed=seed, fps=fps)
     else:
-        clean = bvh_to_kinect(source)
+        clean = bvh_to_kinect(source, fps=fps)
     corrupted = corrupt(clean, model, seed=seed)
     if outputs is not None:
         outputs["truth"] = clean
@@ -227,6 +231,7 @@ def run_benchmark(
             "motion": motion if str(source) == "generator" else None,
             "source": str(source),
             "duration_s": duration,
+            "fps": fps,
             "n_frames": corrupted.sequence.n_frames,
             "model": corrupted.model.to_dict(),
         },

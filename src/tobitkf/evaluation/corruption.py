@@ -7,9 +7,10 @@ reported, plus a (T, J) label array.  Error types, in the order they are applied
     white Gaussian noise per axis, standard deviation by joint group (torso 1 mm, arms and
     legs 2 mm, hands 6 mm), times ``depth_factor`` on the depth axis z.
 ``INFERRED`` drift (label 3)
-    episodes of ``inferred_length`` frames on a distal joint chain (a hand or a foot with
-    its children) during which the tracking state is INFERRED and the position drifts away
-    from the truth (a smooth random path reaching up to ``inferred_drift`` m).
+    episodes of ``inferred_length`` frames (at 30 fps: see below) on a distal joint chain
+    (a hand or a foot with its children) during which the tracking state is INFERRED and
+    the position drifts away from the truth (a smooth random path reaching up to
+    ``inferred_drift`` m).
 ``SUSTAINED`` failure (label 2)
     episodes of ``sustained_length`` frames (10–50) during which a hand chain (wrist, hand,
     tip, thumb) or foot chain is displaced by a vector of ``sustained_offset`` m (0.2–1 m),
@@ -20,7 +21,10 @@ reported, plus a (T, J) label array.  Error types, in the order they are applied
     per joint-frame probability is ``spike_rate`` times a group factor (hands 1, arms 0.25,
     legs 0.15, torso 0.05).
 (Episode counts are Poisson with the given rate per second, but at least one of each
-enabled type, so that every recording exercises every error type.)
+enabled type, so that every recording exercises every error type. Episode lengths are
+frames at 30 fps, the Kinect's rate at which they were measured; a recording at another
+rate gets episodes of the same duration, ``round(length · fps / 30)`` frames, at least 1.
+Spikes stay one frame long, and jitter per sample.)
 
 dropped frames and irregular time steps
     each interior frame is dropped with probability ``drop_rate``; kept frames get their
@@ -67,7 +71,8 @@ _GROUP_SPIKE = {"hands": 1.0, "arms": 0.25, "legs": 0.15, "torso": 0.05}
 
 @dataclass(frozen=True)
 class CorruptionModel:
-    """Parameters of :func:`corrupt` (module docstring); lengths in metres, times in s.
+    """Parameters of :func:`corrupt` (module docstring); lengths in metres, times in s,
+    episode lengths in frames at 30 fps.
 
     ``jitter`` maps joint group → noise standard deviation per axis; set a rate to 0 to
     switch an error type off.
@@ -150,13 +155,17 @@ def _groups(topology: Any, J: int) -> dict[str, list[int]]:
 
 
 def _episodes(
-    rng: np.random.Generator, n_frames: int, per_frame: float, length: tuple[int, int]
-) -> list[tuple[int, int]]:
-    """Random episodes ``(start, stop)``: a Poisson count, at least one when the rate is > 0."""
+    rng: np.random.Generator, n_frames: int, per_frame: float, length: tuple[int, int],
+    per30: float = 1.0,
+) -> list[tuple[int, int]]:  # fmt: skip
+    """Random episodes ``(start, stop)``: a Poisson count, at least one when the rate is > 0;
+    ``length`` in frames at 30 fps, ``per30`` the recording's frames per frame at 30 fps."""
     k = max(int(rng.poisson(per_frame * n_frames)), 1 if per_frame > 0 else 0)
     out = []
     for _ in range(k):
         L = int(rng.integers(length[0], length[1] + 1))
+        if per30 != 1.0:  # the same duration at the recording's rate (30 fps: as drawn)
+            L = max(1, round(L * per30))
         a = int(rng.integers(0, max(n_frames - L, 1)))
         out.append((a, min(a + L, n_frames)))
     return out
@@ -206,7 +215,8 @@ def corrupt(
 
     # inferred drift
     if chain_names and model.inferred_per_second > 0:
-        for a, b in _episodes(rng, T, model.inferred_per_second / fps, model.inferred_length):
+        rate = model.inferred_per_second / fps
+        for a, b in _episodes(rng, T, rate, model.inferred_length, fps / 30.0):
             idx = chains[chain_names[int(rng.integers(len(chain_names)))]]
             n = b - a
             # smooth drift: a random direction, growing like a smoothstep, plus a slow wobble
@@ -220,7 +230,8 @@ def corrupt(
 
     # sustained failures (hands mostly: 3 of 4 episodes)
     if chain_names and model.sustained_per_second > 0:
-        for a, b in _episodes(rng, T, model.sustained_per_second / fps, model.sustained_length):
+        rate = model.sustained_per_second / fps
+        for a, b in _episodes(rng, T, rate, model.sustained_length, fps / 30.0):
             hands = [c for c in chain_names if c.startswith("hand")]
             feet = [c for c in chain_names if c.startswith("foot")]
             pool = hands if (hands and (not feet or rng.random() < 0.75)) else feet

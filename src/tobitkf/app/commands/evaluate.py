@@ -348,9 +348,19 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     help="kinect: 3-D Kinect-like corruption (cm); pose2d: two people's 2-D keypoints "
     "in pixels with confidence, glitches and identity / left-right swaps (px).",
 )
-def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind):
+@click.option(
+    "--fps",
+    default=30.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Frame rate of the recording (kinect kind): the motion is generated or the BVH "
+    "resampled at it, and failures keep their duration in seconds.",
+)
+def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind, fps):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
     if kind == "pose2d":
+        if fps != 30.0:
+            _fail("--fps is for --kind kinect; the pose2d benchmark is at 30 fps")
         _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown)
         return
     from tobitkf.evaluation.benchmark import run_benchmark, seed_ball, seed_spread
@@ -362,7 +372,7 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
         seed,
         seeds,
         lambda s: run_benchmark(
-            seed=s, methods=specs, motion=motion, source=source, duration=duration
+            seed=s, methods=specs, motion=motion, source=source, duration=duration, fps=fps
         ),
     )
     if as_json:
