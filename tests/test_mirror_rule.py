@@ -122,3 +122,22 @@ def test_live_takes_the_same_decisions(method):
     live = tk.LiveSmoother(clean.topology, method=method, fps=30.0)
     got = np.stack([live.update(f) for f in y])
     np.testing.assert_array_equal(got, out.positions)
+
+
+@pytest.mark.parametrize("fps", [15.0, 30.0])
+def test_the_bone_gate_starts_after_half_a_second_at_a_low_rate(fps):
+    # a hand chain fails from frame 8 on. At 15 fps the gate has its lengths after 0.5 s
+    # of them (at its refresh of frame 10; 8 good, 2 failed: the median is good) instead
+    # of after 15 (a second), and the failure is rejected from frame 12 (the frames
+    # before are its confirmation); 15 frames later without this. At 30 fps, 15 frames
+    # are 0.5 s: as before, the failure passes until the gate starts at frame 15.
+    clean = tk.generate_motion("arms", duration=3.0, seed=0, fps=fps)
+    idx = [clean.topology.joints.index(n) for n in CHAIN]
+    y = clean.positions.copy()
+    y[8:28, idx] += OFFSET
+    out = tk.smooth(tk.SkeletonSequence(y, clean.topology, fps=fps), "robust_online")
+    rej = out.metadata["diagnostics"]["rejected"][:, idx[0]]
+    if fps < 30:
+        assert rej[12:28].all()
+    else:
+        assert not rej[9:16].any()

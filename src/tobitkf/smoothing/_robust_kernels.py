@@ -32,6 +32,10 @@ _jit = njit(cache=True, nogil=True)
 BONE_WINDOW = 600
 #: the online bone gate starts after this many accepted bones
 BONE_MIN_COUNT = 15
+#: ... or after this long, with at least BONE_MIN_EARLY of them: BONE_MIN_COUNT at 30 fps,
+#: so that a stream at a lower rate is not left without a bone gate for longer
+BONE_MIN_SECONDS = 0.5
+BONE_MIN_EARLY = 5
 #: the online bone length is refreshed every this many frames
 BONE_REFRESH = 5
 #: distinct lengths the window keeps sorted about its median (:func:`_bone_push`)
@@ -60,7 +64,8 @@ S_TRK_N = 7  # and their number
 S_O_N = 8  # online carried samples' error: the offsets from the parent seen so far,
 S_O_SUM = 9  # their sum (3: 9, 10, 11)
 S_O_SS = 12  # and the sum of their squared lengths
-N_SF = 13
+S_L_FIRST = 13  # time of the first length in the online bone window
+N_SF = 14
 # rows of the online filter's state x[b, j, row] (level, velocity): the three axes, then
 # the indicator filters of the shared errors (docs/robust.md)
 X_CARRIED = 3  # the carried samples' shared error sd
@@ -421,7 +426,10 @@ def gate_frame(
     tol_rel = pf[P_TOL_REL]
     if online and use_bones and tidx % BONE_REFRESH == 0:
         for j in range(J):
-            if h_cnt[j, W_N] >= BONE_MIN_COUNT:
+            n = h_cnt[j, W_N]
+            if n >= BONE_MIN_COUNT or (
+                n >= BONE_MIN_EARLY and tt - sf[j, S_L_FIRST] >= BONE_MIN_SECONDS
+            ):
                 sf[j, S_L_CUR] = _window_median(h_val, h_mult, h_cnt, j)
     for k in range(J):
         j = order[k]
@@ -482,6 +490,8 @@ def gate_frame(
                 # the usual push, done here: the new length and the leaving one outside
                 # the band (_bone_push), only counted
                 n, pos = h_cnt[j, W_N], h_cnt[j, W_POS]
+                if n == 0:  # the window's first length (again after a re-lock)
+                    sf[j, S_L_FIRST] = tt
                 lo, hi = h_val[j, W_LO], h_val[j, W_HI]
                 old = h_val[j, pos]
                 full = n == BONE_WINDOW
