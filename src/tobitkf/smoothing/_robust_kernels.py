@@ -460,8 +460,8 @@ def gate_frame(
         tol = tol_abs + tol_rel * Lj  # NaN without a bone length (yet): no bone rule
         if use_bones:
             bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
-            m = int(pj[j, J_MIRROR])
-            if mirror and not bone_ok and m >= 0:
+            m = int(pj[j, J_MIRROR]) if mirror and not bone_ok else -1
+            if m >= 0:
                 # the mirror rule: when the length learnt for the other side's bone
                 # disagrees with this one's (learnt while the limb was failing, at the
                 # stream's start), it is a second reference
