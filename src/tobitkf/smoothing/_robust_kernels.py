@@ -36,6 +36,11 @@ BONE_MIN_COUNT = 15
 #: so that a stream at a lower rate is not left without a bone gate for longer
 BONE_MIN_SECONDS = 0.5
 BONE_MIN_EARLY = 5
+#: the chain rule's same step (gate rule 3) is to within the child's bone tolerance per
+#: frame of this length (30 fps, where the rule was designed): the child's own turn about
+#: its parent within one frame grows with the frame's length, so a longer frame allows
+#: proportionally more
+CHAIN_FRAME = 1.0 / 30.0
 #: the online bone length is refreshed every this many frames
 BONE_REFRESH = 5
 #: distinct lengths the window keeps sorted about its median (:func:`_bone_push`)
@@ -470,14 +475,16 @@ def gate_frame(
                     bone_ok = not (abs(blen - Lm) > tol_abs + tol_rel * Lm)
         if step_ok and not parent_acc and has_prev and sb[pp, B_PREV_ACC]:
             # the parent's rejection starts at this step: a joint that made the same step
-            # (to within its bone's tolerance; a step larger than that) kept its bone to
-            # the parent's impossible place, so it shares the failure
+            # (to within its bone's tolerance per 30 fps frame; a parent's step larger
+            # than the tolerance) kept its bone to the parent's impossible place, so it
+            # shares the failure
             dp0 = y[pp, 0] - yprev[pp, 0]
             dp1 = y[pp, 1] - yprev[pp, 1]
             dp2 = y[pp, 2] - yprev[pp, 2]
             d_own = _dist(y[j, 0] - yprev[j, 0], y[j, 1] - yprev[j, 1], y[j, 2] - yprev[j, 2],
                           dp0, dp1, dp2)  # fmt: skip
-            if _dist(dp0, dp1, dp2, 0.0, 0.0, 0.0) > tol and d_own <= tol:
+            same = tol * max(1.0, dt_prev / CHAIN_FRAME)
+            if _dist(dp0, dp1, dp2, 0.0, 0.0, 0.0) > tol and d_own <= same:
                 step_ok = False
         ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
         acc[j] = ok
