@@ -66,10 +66,44 @@ def test_cli_benchmark_at_another_rate():
     [
         (["--fps", "0"], "0"),
         (["--fps", "-30"], "-30"),
-        (["--kind", "pose2d", "--fps", "15"], "--fps is for --kind kinect"),
+        (["--kind", "pose2d", "--fps", "0"], "0"),
     ],
 )
 def test_cli_benchmark_refuses_a_bad_rate(args, message):
     res = CliRunner().invoke(app, ["benchmark", "--duration", "2", *args])
     assert res.exit_code != 0
     assert message in res.output
+
+
+@pytest.mark.parametrize("fps", [15.0, 30.0, 60.0])
+def test_pose2d_episodes_keep_their_rate_and_duration(fps):
+    # episodes start at `rate` per frame at 30 fps and last `length` frames at 30 fps: at
+    # another rate, as many per second (a Poisson count: 300 expected over 1000 s, sd
+    # 17; within 5 sd) and as many seconds long
+    from tobitkf.evaluation.pose2d import _runs
+
+    per30 = fps / 30.0
+    T = int(30000 * per30)  # 1000 s
+    runs = _runs(np.random.default_rng(0), T, 0.01, (6, 6), per30)
+    assert abs(len(runs) - 300) < 5 * np.sqrt(300)
+    assert {b - a for a, b in runs if b < T} == {round(6 * per30)}
+
+
+def test_pose2d_at_30_fps_draws_as_before():
+    # per30 = 1: the draws of the function without the scaling, frame for frame
+    from tobitkf.evaluation.pose2d import _runs
+
+    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
+    want = []
+    for t in np.flatnonzero(rng_b.random(500) < 0.02):
+        n = int(rng_b.integers(3, 21))
+        want.append((int(t), min(500, int(t) + n)))
+    assert _runs(rng_a, 500, 0.02, (3, 20)) == want
+
+
+def test_cli_pose2d_benchmark_at_another_rate():
+    res = CliRunner().invoke(app, ["benchmark", "--kind", "pose2d", "--fps", "15", "--duration",
+                                   "3", "--methods", "raw", "--json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    settings = json.loads(res.output)[0]["settings"]
+    assert settings["fps"] == 15.0 and settings["n_frames"] == 45

@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -23,6 +24,7 @@ from tobitkf.smoothing.robust_scale import (
     _running_median,
     nanpercentile_last,
     recording_gates,
+    speed_frames,
 )
 
 
@@ -41,11 +43,18 @@ def _reference(ys, steps, parents, n_dims):
             sigma = np.full(J, np.nan)
         sigma = _fill(_fill(sigma, _nanmedian(_fill(sigma, np.nan))), tiny)
         if T >= 2:
+            # speeds over about 1/30 s, and a running median of about 5 frames at 30 fps
+            pos = steps[1:][np.isfinite(steps[1:]) & (steps[1:] > 0)]
+            per30 = (1 / 30) / np.median(pos) if pos.size else 1.0
+            lag = min(max(1, round(per30)), T - 1)
+            w = round(MEDIAN_WINDOW * per30)
+            window = max(MEDIAN_WINDOW, w + 1 if w % 2 == 0 else w)
             dt = steps[1:, None, None]
-            v = (y[1:] - y[:-1]) / dt[..., None]
+            dl = np.array([steps[1 + t : 1 + t + lag].sum() for t in range(T - lag)])
+            v = (y[lag:] - y[:-lag]) / dl[:, None, None, None]
             speed = np.sqrt(np.sum(v * v, axis=-1))
             q90 = nanpercentile_last(speed.transpose(2, 0, 1).reshape(J, -1), 90)
-            ym = _running_median(y, MEDIAN_WINDOW)
+            ym = _running_median(y, window)
             vm = (ym[1:] - ym[:-1]) / dt[..., None]
             flat = vm.transpose(2, 0, 1, 3).reshape(J, -1, n_dims)
             sm = np.sqrt(np.sum(flat * flat, axis=-1))
@@ -74,17 +83,41 @@ def _reference(ys, steps, parents, n_dims):
     missing=st.sampled_from([0.0, 0.2, 0.7, 1.0]),
     still=st.booleans(),
     seed=st.integers(0, 2**16),
+    rate=st.sampled_from([15.0, 30.0, 60.0, 120.0]),
 )
-def test_the_gates_are_the_references(T, B, J, dims, missing, still, seed):
+def test_the_gates_are_the_references(T, B, J, dims, missing, still, seed, rate):
     rng = np.random.default_rng(seed)
     y = np.cumsum(rng.normal(0, 3, (T, B, J, dims)), axis=0) + 100 * rng.random((1, B, J, 1))
     if still and T:  # joints that never move (a recording that may be all still)
         frozen = rng.random(J) < 0.5
         y[:, :, frozen] = y[:1, :, frozen]
     y[rng.random((T, B, J)) < missing] = np.nan
-    steps = np.full(T, 1 / 30) * rng.uniform(0.5, 1.5, T)
+    steps = np.full(T, 1 / rate) * rng.uniform(0.5, 1.5, T)
     parents = [-1] + [int(rng.integers(0, j)) for j in range(1, J)]
     got = recording_gates(y, steps, parents, dims)
     want = _reference(y, steps, parents, dims)
     for k in want:  # (the bone gates' parameters are not computed differently)
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_v_max_does_not_grow_with_the_frame_rate(seed):
+    # a keypoint moving the same way (peak speed about 314 px/s) with 2 px of white noise,
+    # recorded at 30, 60 and 120 fps: the frame-to-frame step of the faster recordings is
+    # more of the noise (2 px at 120 fps is 340 px/s per axis), which taken as speed
+    # would widen the speed gate; measured over steps of 1/30 s, v_max stays that of 30
+    # fps (over seeds it moves by about 1 %)
+    vmax = {}
+    for fps in (30.0, 60.0, 120.0):
+        rng = np.random.default_rng(seed)
+        t = np.arange(int(20 * fps)) / fps
+        y = np.stack([100 * np.sin(np.pi * t), 50 * np.cos(0.6 * np.pi * t)], -1)
+        y = (y + rng.normal(0, 2.0, y.shape))[:, None, None, :]
+        vmax[fps] = recording_gates(y, np.full(len(t), 1 / fps), [-1], 2)["v_max"][0]
+    assert vmax[60.0] == pytest.approx(vmax[30.0], rel=0.05)
+    assert vmax[120.0] == pytest.approx(vmax[30.0], rel=0.05)
+    assert speed_frames(np.full(10, 1 / 30)) == (1, MEDIAN_WINDOW)
+    assert speed_frames(np.full(10, 1 / 15)) == (1, MEDIAN_WINDOW)
+    assert speed_frames(np.full(10, 1 / 60)) == (2, 11)
+    assert speed_frames(np.full(10, 1 / 120)) == (4, 21)
+    assert speed_frames(np.full(10, 1 / 50)) == (2, 9)  # 8.3 frames: 8, made odd

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import tobitkf as tk
-from tobitkf.smoothing.untangle import RATIO, _assign, _runs_to_undo, untangle
+from tobitkf.smoothing.untangle import NEAR_FACTOR, RATIO, _assign, _runs_to_undo, untangle
 
 
 def _nanmedian(d):
@@ -63,12 +63,16 @@ def _reference(
         left = np.array([a for a, _ in pairs], dtype=np.intp)
         right = np.array([b for _, b in pairs], dtype=np.intp)
         state = np.zeros((B, P), dtype=bool)
-        last = np.full(ys.shape[1:], np.nan)  # corrected
+        last = np.full(ys.shape[1:], np.nan)  # corrected, plausible steps only
+        age = np.zeros(ys.shape[1:3], dtype=int)  # frames since each was stored
         bi, pi = np.nonzero(np.ones((B, P), dtype=bool))
+        step = (near - margin) / NEAR_FACTOR if np.isfinite(near) else 0.0
         for t in range(T):
             y = yo[t]
             yl, yr = y[:, left], y[:, right]
             ll, lr_ = last[:, left], last[:, right]
+            # the plausible step from a reference grows with the frames since it was stored
+            nl, nr = near + step * age[:, left], near + step * age[:, right]
             # a joint of the pair counts when it and both last samples are there (a pair
             # with one joint missing is still decided by the other)
             kl, sl = np.linalg.norm(yl - ll, axis=-1), np.linalg.norm(yl - lr_, axis=-1)
@@ -76,8 +80,8 @@ def _reference(
             # ... and its evidence is plausible: one of the two choices is a step that
             # happens (a glitch in the last sample makes both choices far: no evidence)
             with np.errstate(invalid="ignore"):
-                okl = np.isfinite(kl) & np.isfinite(sl) & (np.minimum(kl, sl) <= near)
-                okr = np.isfinite(kr) & np.isfinite(sr) & (np.minimum(kr, sr) <= near)
+                okl = np.isfinite(kl) & np.isfinite(sl) & ((kl <= nl) | (sl <= nr))
+                okr = np.isfinite(kr) & np.isfinite(sr) & ((kr <= nr) | (sr <= nl))
             keep = np.where(okl, kl, 0.0) + np.where(okr, kr, 0.0)
             swap = np.where(okl, sl, 0.0) + np.where(okr, sr, 0.0)
             keep[~okl & ~okr] = np.nan
@@ -89,6 +93,16 @@ def _reference(
             m = state[bi, pi]
             yc[bi[m], left[pi[m]]] = y[bi[m], right[pi[m]]]
             yc[bi[m], right[pi[m]]] = y[bi[m], left[pi[m]]]
+            # a pair's joint whose corrected sample is no plausible step from its
+            # reference (a glitch) keeps the reference, one frame older
+            js = np.concatenate([left, right])
+            d = np.linalg.norm(yc[:, js] - last[:, js], axis=-1)
+            with np.errstate(invalid="ignore"):
+                far = d > near + step * age[:, js]
+            had = ~np.isnan(last[:, js, 0])
+            hold = far | (np.isnan(d) & had)
+            age[:, js] = np.where(hold, age[:, js] + 1, 0)
+            yc[:, js] = np.where(hold[..., None], last[:, js], yc[:, js])
             _last_valid(yc, last)
         exchanged &= _runs_to_undo(exchanged, max_frames)
     return order, exchanged

@@ -164,3 +164,62 @@ def test_when_the_stream_is_not_untangled():
     live = tk.LiveSmoother(a.topology, fps=30, gates_from=a, untangle=False)
     live.update(a.positions[0])
     assert live.swapped is None
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_a_glitch_of_both_wrists_at_once_is_no_reference(causal):
+    """Both wrists glitch in the same frames: the left one onto the right wrist's place
+    (two frames), the right one 300 px away (eight). The left one's samples look like an
+    exchange, the right one's count for neither side (too far from both). The exchange
+    must end when the left wrist is back: the glitches are no reference for the frames
+    after them. (When every sample was a reference, the right wrist's glitch became the
+    left side's last sample and the exchange lasted to the end of the recording, shorter
+    than MAX_SWAP_S after it.)"""
+    (_, a), _ = _two_people(T=140)
+    p = a.positions.copy()
+    p[100:102, 1] = p[100:102, 2] + np.array([8.0, 5.0])
+    p[100:108, 2] += np.array([0.0, 300.0])
+    margin, near, max_frames = untangle_stats(p[:, None], a.times())
+    pairs = list(a.topology.symmetry)
+    if causal:
+        _, exch = _causal(p[:, None], pairs, margin, near, max_frames)
+    else:
+        _, exch = untangle(p[:, None], np.isnan(p[:, None]).any(-1), pairs, margin,
+                           max_frames=max_frames, near=near)  # fmt: skip
+    flags = exch[:, 0, 0]
+    assert not flags[:100].any()
+    assert not flags[102:].any()
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_a_reference_grows_stale_and_is_taken_again(causal):
+    """The left wrist is missing for 30 frames while it moves 150 px away, and comes back
+    there: too far from its last sample for one frame's step, so that sample stays its
+    reference for a while. The step allowed from a reference grows with the frames since
+    it was stored, so the wrist is taken again. Thirty frames later the right wrist
+    glitches for one frame onto the place the left one left: no exchange (with the left
+    wrist's reference still the place it left, the glitch looked like a left wrist and
+    the pair was exchanged)."""
+    from test_pose2d import TOPO
+
+    rng = np.random.default_rng(0)
+    T = 160
+    t = np.arange(T)
+    p = np.zeros((T, 3, 2))
+    p[:, 0] = [400.0, 200.0]  # neck
+    p[:, 1, 0] = 250.0 + np.clip(t - 50, 0, 30) * 5.0  # the left wrist moves 150 px ...
+    p[:, 1, 1] = 300.0
+    p[:, 2] = [700.0, 300.0]  # the right wrist stays
+    p += rng.normal(0, 1.5, p.shape)
+    p[50:80, 1] = np.nan  # ... while it is missing
+    p[110, 2] = [252.0, 301.0]  # the right wrist's glitch
+    a = tk.SkeletonSequence(p, TOPO, fps=30.0, units="px")
+    margin, near, max_frames = untangle_stats(p[:, None], a.times())
+    assert near < 150  # the wrist's return is not one plausible step
+    pairs = list(TOPO.symmetry)
+    if causal:
+        _, exch = _causal(p[:, None], pairs, margin, near, max_frames)
+    else:
+        _, exch = untangle(p[:, None], np.isnan(p[:, None]).any(-1), pairs, margin,
+                           max_frames=max_frames, near=near)  # fmt: skip
+    assert not exch.any()

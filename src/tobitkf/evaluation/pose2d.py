@@ -25,6 +25,12 @@ sample (:data:`POSE2D_LABELS`):
 ``id_swap``
     the two people's keypoints exchanged for 5–30 frames (a tracker's identity switch).
 
+Rates are per frame and lengths in frames at 30 fps, a video's usual rate; a recording at
+another rate (``fps`` of :func:`run_pose2d_benchmark`, ``tobitkf benchmark --kind pose2d
+--fps``) gets the same episodes per second, each as many seconds long
+(``round(length · fps / 30)`` frames, at least 1); jitter stays per sample. At 30 fps the
+draws are exactly those of a model without this scaling.
+
 :func:`run_pose2d_benchmark` smooths both people with every method and scores each
 against its truth: RMSE in pixels by label. ``tobitkf benchmark --kind pose2d`` prints
 it (docs/pose.md). The corruption rates are set from the failure modes the pose-
@@ -122,11 +128,16 @@ def project(positions: Array, model: Pose2DModel) -> Array:
     return np.stack([u, v], axis=-1)
 
 
-def _runs(rng: np.random.Generator, T: int, rate: float, length: tuple[int, int]) -> list:
-    """Episode (start, stop) pairs: starts with probability ``rate`` per frame."""
+def _runs(
+    rng: np.random.Generator, T: int, rate: float, length: tuple[int, int], per30: float = 1.0
+) -> list:
+    """Episode (start, stop) pairs: starts with probability ``rate`` per frame at 30 fps,
+    ``length`` frames at 30 fps; ``per30`` the recording's frames per frame at 30 fps."""
     out = []
-    for t in np.flatnonzero(rng.random(T) < rate):
+    for t in np.flatnonzero(rng.random(T) < rate / per30):
         n = int(rng.integers(length[0], length[1] + 1))
+        if per30 != 1.0:  # the same duration at the recording's rate (30 fps: as drawn)
+            n = max(1, round(n * per30))
         out.append((int(t), min(T, int(t) + n)))
     return out
 
@@ -140,6 +151,7 @@ def corrupt_pose2d(
     rng = np.random.default_rng(seed)
     true = np.stack([s.positions for s in truth], axis=1)  # (T, B, J, 2)
     T, B, J, _ = true.shape
+    per30 = float(truth[0].fps or 30.0) / 30.0
     topo = truth[0].topology
     hands = np.zeros(J, bool)
     hands[topo.joint_groups()["hands"]] = True
@@ -149,7 +161,7 @@ def corrupt_pose2d(
     labels = np.zeros((T, B, J), dtype=np.int8)
     for b in range(B):
         for j in range(J):
-            for t0, t1 in _runs(rng, T, m.glitch_rate, m.glitch_length):
+            for t0, t1 in _runs(rng, T, m.glitch_rate, m.glitch_length, per30):
                 confident = rng.random() < m.confident_share
                 if rng.random() < 0.5:  # part confusion: on another keypoint
                     k = int(rng.choice([i for i in range(J) if i != j]))
@@ -163,18 +175,18 @@ def corrupt_pose2d(
                 lo_hi = m.confident_confidence if confident else m.glitch_confidence
                 conf[t0:t1, b, j] = rng.uniform(*lo_hi, size=t1 - t0)
                 labels[t0:t1, b, j] = 2 if confident else 1
-            for t0, t1 in _runs(rng, T, m.missing_rate, m.missing_length):
+            for t0, t1 in _runs(rng, T, m.missing_rate, m.missing_length, per30):
                 pos[t0:t1, b, j] = np.nan
                 conf[t0:t1, b, j] = np.nan
                 labels[t0:t1, b, j] = 3
         for left, right in topo.symmetry:
-            for t0, t1 in _runs(rng, T, m.lr_swap_rate, m.lr_swap_length):
+            for t0, t1 in _runs(rng, T, m.lr_swap_rate, m.lr_swap_length, per30):
                 a = pos[t0:t1, b, left].copy()
                 pos[t0:t1, b, left] = pos[t0:t1, b, right]
                 pos[t0:t1, b, right] = a
                 labels[t0:t1, b, [left, right]] = 4
     if B == 2:
-        for t0, t1 in _runs(rng, T, m.id_swap_rate, m.id_swap_length):
+        for t0, t1 in _runs(rng, T, m.id_swap_rate, m.id_swap_length, per30):
             pos[t0:t1] = pos[t0:t1, ::-1].copy()
             conf[t0:t1] = conf[t0:t1, ::-1].copy()
             labels[t0:t1] = 5
@@ -190,13 +202,15 @@ def corrupt_pose2d(
     return seqs, labels
 
 
-def _truth(motion: str, duration: float, seed: int, model: Pose2DModel) -> list[SkeletonSequence]:
-    """Two people's true pixel tracks, and the camera's metres per pixel."""
+def _truth(
+    motion: str, duration: float, seed: int, model: Pose2DModel, fps: float = 30.0
+) -> list[SkeletonSequence]:
+    """Two people's true pixel tracks at ``fps``."""
     from tobitkf.evaluation.synthetic import generate_motion
 
     people = []
     for k, shift in enumerate((-model.separation_m / 2, model.separation_m / 2)):
-        s = generate_motion(motion, duration=duration, seed=seed * 1000 + k)
+        s = generate_motion(motion, duration=duration, seed=seed * 1000 + k, fps=fps)
         p = s.positions.copy()
         p[..., 0] += shift - np.nanmean(p[..., 0])
         people.append(s.replace(positions=project(p, model), units="px", body_id=f"person{k}",
@@ -263,17 +277,21 @@ def run_pose2d_benchmark(
     duration: float = 10.0,
     model: Pose2DModel | None = None,
     outputs: dict[str, Any] | None = None,
+    fps: float = 30.0,
 ) -> Pose2DTable:
     """Corrupt two people's projected motion (:func:`corrupt_pose2d`), smooth them with
     every method (a method is a name or an :mod:`~tobitkf.evaluation.scores` spec), and
-    score every estimate against the truth: RMSE in pixels, overall and by label."""
+    score every estimate against the truth: RMSE in pixels, overall and by label. ``fps``:
+    the video's frame rate (the episodes keep their duration; module docstring)."""
+    if not fps > 0:
+        raise ValueError(f"the frame rate must be > 0, got {fps}")
     m = model or Pose2DModel()
-    truth = _truth(motion, duration, seed, m)
+    truth = _truth(motion, duration, seed, m, fps)
     noisy, labels = corrupt_pose2d(truth, m, seed=seed)
     from tobitkf.evaluation.synthetic import generate_motion
 
-    depth = float(np.nanmean(generate_motion(motion, duration=duration, seed=seed * 1000)
-                             .positions[..., 2]))  # fmt: skip
+    depth = float(np.nanmean(generate_motion(motion, duration=duration, seed=seed * 1000,
+                                             fps=fps).positions[..., 2]))  # fmt: skip
     metres_per_px = depth / m.focal_px
     true = np.stack([s.positions for s in truth], axis=1)
     rows = []
@@ -298,6 +316,7 @@ def run_pose2d_benchmark(
             "seed": seed,
             "motion": motion,
             "duration_s": duration,
+            "fps": fps,
             "n_frames": truth[0].n_frames,
             "metres_per_px": metres_per_px,
             "model": m.to_dict(),

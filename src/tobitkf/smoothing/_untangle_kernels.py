@@ -67,34 +67,51 @@ def keep_last(y: np.ndarray, last: np.ndarray) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _plausible(near: float, margin: float, age: int, factor: float) -> float:
+    """The longest plausible step from a reference stored ``age`` frames before the last
+    one: ``near`` (``factor`` typical steps plus the noise's ``margin``), and a typical
+    step, ``(near - margin) / factor``, more for each frame since; infinite without
+    statistics."""
+    if not math.isfinite(near):
+        return math.inf
+    return near + (near - margin) / factor * age
+
+
+@njit(cache=True, nogil=True)
 def pair_step(
     yo: np.ndarray,
     last: np.ndarray,
+    age: np.ndarray,
     state: np.ndarray,
     run: np.ndarray,
     left: np.ndarray,
     right: np.ndarray,
     margin: float,
     near: float,
+    near_factor: float,
     ratio: float,
     max_frames: int,
     yc: np.ndarray,
 ) -> None:
     """One frame of the left/right loop for one identity: its samples ``yo (J, D)``
-    against ``last (J, D)``, its last samples with the pairs corrected (updated), into
+    against ``last (J, D)``, its last samples with the pairs corrected that were a
+    plausible step (updated; ``age (J,)``: frames since each was stored, updated;
+    ``near_factor``: the typical steps ``near`` allows beyond the margin), into
     ``state (P,)``, whether each pair is exchanged (updated). ``run (P,)`` counts the
     frames each pair has been exchanged; one exchanged for more than ``max_frames`` is
     taken as detected again (the causal form; offline, ``max_frames`` is never reached).
     ``yc (J, D)``: work."""
     for p in range(left.shape[0]):
         lj, rj = left[p], right[p]
+        nl = _plausible(near, margin, age[lj], near_factor)
+        nr = _plausible(near, margin, age[rj], near_factor)
         kl = _distance(yo[lj], last[lj])
         sl = _distance(yo[lj], last[rj])
         kr = _distance(yo[rj], last[rj])
         sr = _distance(yo[rj], last[lj])
         # a joint counts when both choices are measured and one is a plausible step
-        okl = math.isfinite(kl) and math.isfinite(sl) and min(kl, sl) <= near
-        okr = math.isfinite(kr) and math.isfinite(sr) and min(kr, sr) <= near
+        okl = math.isfinite(kl) and math.isfinite(sl) and (kl <= nl or sl <= nr)
+        okr = math.isfinite(kr) and math.isfinite(sr) and (kr <= nr or sr <= nl)
         # (with neither joint counting, both are 0 and nothing is clear)
         keep = (kl if okl else 0.0) + (kr if okr else 0.0)
         swap = (sl if okl else 0.0) + (sr if okr else 0.0)
@@ -103,15 +120,39 @@ def pair_step(
         elif keep < ratio * swap and swap - keep > margin:
             state[p] = False
         run[p] = run[p] + 1 if state[p] else 0
-        if run[p] > max_frames:
+        if run[p] > max_frames:  # taken as detected: the loop goes on from these samples
             state[p] = False
-            run[p] = 0
+            run[p] = -1
     yc[:] = yo
     for p in range(left.shape[0]):
         if state[p]:
             for k in range(yo.shape[1]):
                 yc[left[p], k] = yo[right[p], k]
                 yc[right[p], k] = yo[left[p], k]
+    # a pair's joint keeps its reference where its corrected sample is not a plausible
+    # step from it (a glitch is no reference: the next frames are compared with the
+    # sample before it), except where an exchange was just taken as detected; every
+    # other sample is stored as it comes
+    for p in range(left.shape[0]):
+        rebase = run[p] < 0
+        run[p] = max(run[p], 0)
+        for j in (left[p], right[p]):
+            d = _distance(yc[j], last[j])
+            if rebase and not math.isnan(yc[j, 0]):
+                age[j] = 0
+            elif math.isnan(d):  # no sample, or no reference yet
+                if math.isnan(last[j, 0]):
+                    age[j] = 0
+                else:
+                    age[j] += 1
+                    for k in range(yo.shape[1]):
+                        yc[j, k] = last[j, k]
+            elif d > _plausible(near, margin, age[j], near_factor):
+                age[j] += 1
+                for k in range(yo.shape[1]):
+                    yc[j, k] = last[j, k]
+            else:
+                age[j] = 0
     keep_last1(yc, last)
 
 
@@ -122,6 +163,7 @@ def pair_exchanges(
     right: np.ndarray,
     margin: float,
     near: float,
+    near_factor: float,
     ratio: float,
     exchanged: np.ndarray,
 ) -> None:
@@ -134,12 +176,13 @@ def pair_exchanges(
     state = np.zeros((B, P), dtype=np.bool_)
     run = np.zeros((B, P), dtype=np.int64)
     last = np.full((B, J, D), np.nan)
+    age = np.zeros((B, J), dtype=np.int64)
     yc = np.empty((J, D))
     never = T + 1  # offline, long exchanges are taken back afterwards (untangle())
     for t in range(T):
         for b in range(B):
-            pair_step(yo[t, b], last[b], state[b], run[b], left, right, margin, near, ratio,
-                      never, yc)  # fmt: skip
+            pair_step(yo[t, b], last[b], age[b], state[b], run[b], left, right, margin, near,
+                      near_factor, ratio, never, yc)  # fmt: skip
             exchanged[t, b] = state[b]
 
 

@@ -14,6 +14,11 @@ bodies of one call pooled, joint by joint; see docs/robust.md, "Keypoints in any
 * ``v_max`` (per joint): ``V_MAX_FACTOR`` (4) times the joint's 90th percentile of
   frame-to-frame speed, and at least the median of that over the joints (a joint that
   hardly moved in the recording may still move as fast as the others);
+* above 30 fps, where these were set, the running median spans the same time (its
+  frames rounded, plus one if even), and the speeds of ``v_max`` are measured over steps
+  of ``SPEED_STEP`` (1/30 s: two frames at 60 fps), not over a frame: a faster
+  recording's frame-to-frame step is more of its noise, which taken as speed widened the
+  gate; at 30 fps and below both are as they were (:func:`speed_frames`);
 * ``margin`` and ``bone_tol_abs``: ``MARGIN_SDS`` (3) standard deviations of the
   distance between two noisy samples, ``3 σ √(2 D)`` with σ the median ``noise_sd``;
 * the bone gate, 3-D: ``bone_tol_rel`` = ``BONE_TOL_SPREAD`` (4) times the median over
@@ -54,6 +59,7 @@ __all__ = [
     "GATE_PARAMS",
     "MARGIN_SDS",
     "MEDIAN_WINDOW",
+    "SPEED_STEP",
     "STREAM_FIRST",
     "STREAM_LAST",
     "V_MAX_FACTOR",
@@ -65,16 +71,21 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: v_max = V_MAX_FACTOR x the joint's 90th percentile of frame-to-frame speed (the
+#: v_max = V_MAX_FACTOR x the joint's 90th percentile of speed over SPEED_STEP (the
 #: physical defaults are 5-17 times the typical speed of their region)
 V_MAX_FACTOR = 4.0
+#: speeds are measured over steps of about this long, s (one frame at 30 fps, where the
+#: factors were set; the frames of a faster recording are summed into such steps: its
+#: frame-to-frame step is more of its noise)
+SPEED_STEP = 1.0 / 30.0
 #: margin = MARGIN_SDS standard deviations of the distance between two noisy samples
 MARGIN_SDS = 3.0
 #: bone_tol_rel = BONE_TOL_SPREAD x the median relative spread of the bone lengths
 BONE_TOL_SPREAD = 4.0
 #: the longest plausible 2-D bone: this times the 95th percentile of its lengths
 BONE_MAX_FACTOR = 1.1
-#: frames of the running median the typical speed is measured on
+#: frames of the running median the typical speed is measured on (above 30 fps: the
+#: frames in the time these are at 30 fps, rounded, plus one if even)
 MEDIAN_WINDOW = 5
 #: consistency factor of the median absolute deviation for a normal distribution
 _MAD = 1.4826
@@ -167,6 +178,31 @@ def _running_median(y: Array, window: int) -> Array:
     return out.reshape(y.shape)
 
 
+def speed_frames(steps: Array) -> tuple[int, int]:
+    """``(lag, window)`` for a recording whose frames come ``steps (T,)`` s after the one
+    before (the first ignored; the median step counts): the frames in a step of
+    ``SPEED_STEP`` (at least 1) and the running median's window: the frames in the time of
+    ``MEDIAN_WINDOW`` frames at 30 fps, rounded, plus one if even (at least
+    ``MEDIAN_WINDOW``); ``(1,
+    MEDIAN_WINDOW)`` at 30 fps and below, and without a usable step."""
+    s = np.asarray(steps, dtype=float)[1:]
+    s = s[np.isfinite(s) & (s > 0)]
+    if not s.size:
+        return 1, MEDIAN_WINDOW
+    frames = SPEED_STEP / float(np.median(s))
+    lag = max(1, round(frames))
+    window = round(MEDIAN_WINDOW * frames)
+    window = max(MEDIAN_WINDOW, window + 1 - window % 2)
+    return int(lag), int(window)
+
+
+def _sums(a: Array, n: int) -> Array:
+    """Sums of ``n`` consecutive values of ``a`` (``a`` itself for 1)."""
+    if n == 1:
+        return a
+    return np.lib.stride_tricks.sliding_window_view(a, n).sum(axis=-1)
+
+
 def _projected_bone_centres(y: Array, parents: Any) -> Array:
     """(B, J) half the longest plausible projected length of each bone: a 2-D bone is
     never longer than the limb itself (foreshortening only shortens it), so the bone gate
@@ -246,14 +282,17 @@ def recording_gates(ys: Array, steps: Array, parents: Any, n_dims: int) -> dict[
         extent = _nanmedian(np.abs(y - _nanmedian(y, axis=(0, 1))[None, None]))
         sigma = _fill(sigma, 1e-9 * float(extent) if np.isfinite(extent) and extent > 0 else 1e-9)
     if T >= 2:
+        lag, window = speed_frames(steps)
+        lag = min(lag, T - 1)
         dt = steps[1:, None, None]
-        v = (y[1:] - y[:-1]) / dt[..., None]  # (T-1, B, J, D)
+        dl = _sums(steps[1:], lag)[:, None, None]  # the time of each step of lag frames
+        v = (y[lag:] - y[:-lag]) / dl[..., None]  # (T-lag, B, J, D)
         speed = np.sqrt(np.sum(v * v, axis=-1))  # NaN where a sample is missing
         with _quiet():
             q90 = nanpercentile_last(speed.transpose(2, 0, 1).reshape(J, -1), 90)
         # the typical speed from the running median of the positions, which a glitch of
-        # up to MEDIAN_WINDOW // 2 frames does not move, and without its top 2 %
-        ym = _running_median(y, MEDIAN_WINDOW)
+        # up to window // 2 frames does not move, and without its top 2 %
+        ym = _running_median(y, window)
         vm = (ym[1:] - ym[:-1]) / dt[..., None]
         flat = vm.transpose(2, 0, 1, 3).reshape(J, -1, n_dims)
         sm = np.sqrt(np.sum(flat * flat, axis=-1))

@@ -20,7 +20,14 @@ joints of each left/right pair) that continue the previous frame best:
 
 Each frame is compared with the samples assigned last (so the end of a swap is found
 as its start was); when neither choice is clearly better, the previous frame's choice
-stands. Most of a recording is right as detected: a stretch reassigned for longer than
+stands. A joint of a pair whose sample, as assigned, is no plausible step from its
+last one keeps that last one (a glitch is no reference: otherwise a glitch of both
+joints at once, one onto the other's place, anchored an exchange that lasted until
+``MAX_SWAP_S``); the plausible step grows by a typical step (the recording's 95th
+percentile of frame-to-frame steps) for each frame since the reference was stored, so
+a joint that moved while it was missing is taken again.
+
+Most of a recording is right as detected: a stretch reassigned for longer than
 ``MAX_SWAP_S`` (2 s) is taken as a spurious exchange (after a gap the last samples are
 stale) and left as detected.
 
@@ -202,7 +209,8 @@ def untangle(
         yo = np.ascontiguousarray(ys[np.arange(T)[:, None], order])  # identity order
         left = np.array([a for a, _ in pairs], dtype=np.intp)
         right = np.array([b for _, b in pairs], dtype=np.intp)
-        k.pair_exchanges(yo, left, right, float(margin), float(near), RATIO, exchanged)
+        k.pair_exchanges(yo, left, right, float(margin), float(near), NEAR_FACTOR, RATIO,
+                         exchanged)  # fmt: skip
         exchanged &= _runs_to_undo(exchanged, max_frames)
     return order, exchanged
 
@@ -247,11 +255,12 @@ class _Identity:
     """What the causal loops keep of one identity: its last assigned samples, its last
     samples with the pairs corrected, which pairs are exchanged and for how long."""
 
-    __slots__ = ("last", "plast", "run", "state")
+    __slots__ = ("last", "page", "plast", "run", "state")
 
     def __init__(self, J: int, D: int, P: int) -> None:
         self.last = np.full((J, D), np.nan)
         self.plast = np.full((J, D), np.nan)
+        self.page = np.zeros(J, dtype=np.int64)
         self.state = np.zeros(P, dtype=np.bool_)
         self.run = np.zeros(P, dtype=np.int64)
 
@@ -324,9 +333,9 @@ class StreamUntangler:
         if P:
             yc = np.empty((J, D))
             for a, ident in enumerate(idents):
-                k.pair_step(y[order[a]], ident.plast, ident.state, ident.run, self.left,
-                            self.right, self.margin, self.near, RATIO, self.max_frames,
-                            yc)  # fmt: skip
+                k.pair_step(y[order[a]], ident.plast, ident.page, ident.state, ident.run,
+                            self.left, self.right, self.margin, self.near, NEAR_FACTOR,
+                            RATIO, self.max_frames, yc)  # fmt: skip
                 exchanged[a] = ident.state
         return order, exchanged
 

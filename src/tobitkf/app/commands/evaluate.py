@@ -353,15 +353,14 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     default=30.0,
     show_default=True,
     type=click.FloatRange(min=0, min_open=True),
-    help="Frame rate of the recording (kinect kind): the motion is generated or the BVH "
-    "resampled at it, and failures keep their duration in seconds.",
+    help="Frame rate of the recording: the motion is generated (or the BVH resampled) "
+    "at it, and failures keep their duration in seconds.",
 )
 def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind, fps):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
     if kind == "pose2d":
-        if fps != 30.0:
-            _fail("--fps is for --kind kinect; the pose2d benchmark is at 30 fps")
-        _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown)
+        _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown,
+                          fps)  # fmt: skip
         return
     from tobitkf.evaluation.benchmark import run_benchmark, seed_ball, seed_spread
     from tobitkf.evaluation.evaluate import default_methods
@@ -416,7 +415,8 @@ def _over_seeds(label: str, seed: int, seeds: int, run: Any) -> list[Any]:
     return tables
 
 
-def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown):
+def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown,
+                      fps=30.0):  # fmt: skip
     """``benchmark --kind pose2d``: the 2-D pose-estimator benchmark (docs/pose.md)."""
     from tobitkf.evaluation.pose2d import (
         POSE2D_METHODS,
@@ -432,7 +432,9 @@ def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, a
         "pose2d benchmark",
         seed,
         seeds,
-        lambda s: run_pose2d_benchmark(seed=s, methods=specs, motion=motion, duration=duration),
+        lambda s: run_pose2d_benchmark(
+            seed=s, methods=specs, motion=motion, duration=duration, fps=fps
+        ),
     )
     if as_json:
         click.echo(dumps([t.to_dict() for t in tables]))
