@@ -97,7 +97,27 @@ def test_the_command_line_refuses_bad_settings(capsys):
         (["a.txt", "--every", "0", "--truth-replace", "a", "b"], "--every"),
         (["a.txt", "--noise", "-0.01", "--truth-replace", "a", "b"], "--noise"),
         (["a.txt", "--seeds", "1", "--truth-replace", "a", "b"], "--seeds"),
+        (["a.txt", "--drop", "1.5", "--truth-replace", "a", "b"], "--drop"),
     ):
         with pytest.raises(SystemExit):
             main(argv)
         assert msg in capsys.readouterr().err
+
+
+def test_dropped_frames_are_a_random_share_and_keep_the_ends():
+    # each frame dropped with probability 0.3: 1998 inner frames, so the kept share has
+    # sd sqrt(0.21 / 1998) = 1 %; within 5 of them. The first and last frames stay, the
+    # timestamps of the others are kept (irregular steps)
+    track, truth = _pair(2000)
+    keep = _tool().drop_frames(track, 0.3, 4)
+    assert keep[0] and keep[-1]
+    assert abs(keep[1:-1].mean() - 0.7) < 0.05
+    assert not np.array_equal(keep, _tool().drop_frames(track, 0.3, 5))
+    # raw at the frames kept scores those samples only
+    got = _tool().pooled_rmse([(track, truth)], ["raw"], drop=0.3, seed=4)["raw"]
+    err = np.linalg.norm(track.positions[keep] - truth[keep], axis=-1)
+    assert got == pytest.approx(np.sqrt(np.nanmean(err**2)), rel=1e-12)
+    lines = _tool().table([(track, truth)], ["raw"], 1, [], 2, 100.0, "cm", [0.3])
+    assert lines[-1].startswith("| 30 % of frames dropped at random, 2 seeds | ")
+    with pytest.raises(ValueError, match="fraction"):
+        _tool().drop_frames(track, 1.0, 0)

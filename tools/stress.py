@@ -12,13 +12,17 @@ for each (docs/robust.md, "Stress tests on the real recordings"):
 * ``--noise SD ...``: white noise of SD per axis (in the track's units: metres for a
   Kinect) is added to every present sample before smoothing (a noisier sensor or a
   person further from it), once per seed (``--seeds``: 0, 1, ...); mean ± standard
-  deviation over the seeds. The truth is not changed.
+  deviation over the seeds. The truth is not changed;
+* ``--drop FRACTION``: that fraction of the frames is dropped at random (the first and
+  the last kept), the others keep their timestamps (a sensor or a computer too busy to
+  deliver every frame: irregular steps of one, two or more frames); scored at the
+  frames kept, once per seed.
 
 The truth is registered once, on the recording as it is; a changed recording is scored
 against it at the same frames.
 
     python tools/stress.py TRACK... --truth-replace OLD NEW [--every 2] [--noise 0.005 0.01]
-                           [--seeds 3] [--methods raw,kf+rts,robust,robust_online]
+                           [--drop 0.2] [--seeds 3] [--methods raw,kf+rts,robust,robust_online]
 """
 
 from __future__ import annotations
@@ -65,6 +69,16 @@ def with_noise(track: tk.SkeletonSequence, sd: float, seed: int) -> tk.SkeletonS
     return track.replace(positions=track.positions + rng.normal(0.0, sd, track.positions.shape))
 
 
+def drop_frames(track: tk.SkeletonSequence, fraction: float, seed: int) -> np.ndarray:
+    """The frames kept when ``fraction`` of them are dropped at random (each with that
+    probability; the first and the last always kept), as a boolean mask (T,)."""
+    if not 0 <= fraction < 1:
+        raise ValueError(f"drop_frames: the fraction must be in [0, 1), got {fraction}")
+    keep = np.random.default_rng(seed).random(track.n_frames) >= fraction
+    keep[0] = keep[-1] = True
+    return keep
+
+
 def _sse(method: str, track: tk.SkeletonSequence, truth: np.ndarray) -> tuple[float, int]:
     """Sum of squared position errors and the number of samples scored (both finite);
     ``method`` is a method spec of ``tobitkf evaluate`` ("raw", "kf+rts", "robust", ...)."""
@@ -80,14 +94,24 @@ def pooled_rmse(
     *,
     every: int = 1,
     noise: float = 0.0,
+    drop: float = 0.0,
     seed: int = 0,
 ) -> dict[str, float]:
     """Pooled RMSE (the track's units) of each method over ``(track, truth (T, J, D))``
-    pairs, each track cut to every ``every``-th frame (all phases pooled) and given white
-    noise of ``noise`` per axis (``seed``; one generator per recording and phase, seeded
-    ``seed``)."""
+    pairs, each track cut to every ``every``-th frame (all phases pooled), given white
+    noise of ``noise`` per axis, and with ``drop`` of its frames dropped (``seed``; one
+    generator per recording and phase, seeded ``seed``)."""
     tot = {m: [0.0, 0] for m in methods}
     for track, truth in pairs:
+        if drop > 0:
+            keep = drop_frames(track, drop, seed)
+            track = track.replace(
+                positions=track.positions[keep],
+                timestamps=track.times()[keep],
+                tracking_state=None if track.tracking_state is None else track.tracking_state[keep],
+                confidence=None if track.confidence is None else track.confidence[keep],
+            )
+            truth = truth[keep]
         for phase in range(every):
             t = every_nth(track, every, phase) if every > 1 else track
             if noise > 0:
@@ -120,6 +144,7 @@ def table(
     seeds: int,
     scale: float,
     unit: str,
+    drops: Sequence[float] = (),
 ) -> list[str]:
     """The markdown table's lines: one row per condition, one column per method."""
     fps = pairs[0][0].fps
@@ -135,6 +160,11 @@ def table(
         rows.append((
             f"+ {sd * scale:g} {unit} white noise per axis, {seeds} seeds",
             [pooled_rmse(pairs, methods, noise=sd, seed=s) for s in range(seeds)],
+        ))  # fmt: skip
+    for fr in drops:
+        rows.append((
+            f"{100 * fr:g} % of frames dropped at random, {seeds} seeds",
+            [pooled_rmse(pairs, methods, drop=fr, seed=s) for s in range(seeds)],
         ))  # fmt: skip
     out = [
         f"| condition | {' | '.join(methods)} |",
@@ -161,7 +191,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=int, default=2, help="keep every N-th frame (1: off)")
     ap.add_argument("--noise", type=float, nargs="*", default=[0.005, 0.01],
                     help="white noise per axis, the track's units (m for a Kinect)")  # fmt: skip
-    ap.add_argument("--seeds", type=int, default=3, help="noise draws per level")
+    ap.add_argument("--drop", type=float, nargs="*", default=[0.2],
+                    help="fractions of the frames dropped at random")  # fmt: skip
+    ap.add_argument("--seeds", type=int, default=3, help="draws per noise level and drop")
     ap.add_argument("--methods", default=",".join(METHODS))
     args, (old, new) = parse_with_truth_replace(ap, argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -169,7 +201,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--every must be at least 1, got {args.every}")
     if any(not sd > 0 for sd in args.noise):
         ap.error(f"--noise levels must be > 0, got {args.noise}")
-    if args.noise and args.seeds < 2:
+    if any(not 0 < fr < 1 for fr in args.drop):
+        ap.error(f"--drop fractions must be in (0, 1), got {args.drop}")
+    if (args.noise or args.drop) and args.seeds < 2:
         ap.error(f"--seeds must be at least 2 (a mean ± sd), got {args.seeds}")
     pairs = []
     for path in args.tracks:
@@ -181,7 +215,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Pooled RMSE against the truth, {unit} ({len(pairs)} recordings); "
           f"`{tk.DEFAULT_METHOD}` and `{tk.DEFAULT_LIVE_METHOD}` with their change "
           "against raw in the same condition:\n")  # fmt: skip
-    print("\n".join(table(pairs, methods, args.every, args.noise, args.seeds, scale, unit)))
+    print("\n".join(table(pairs, methods, args.every, args.noise, args.seeds, scale, unit,
+                          args.drop)))  # fmt: skip
     return 0
 
 
