@@ -183,8 +183,8 @@ def speed_frames(steps: Array) -> tuple[int, int]:
     before (the first ignored; the median step counts): the frames in a step of
     ``SPEED_STEP`` (at least 1) and the running median's window: the frames in the time of
     ``MEDIAN_WINDOW`` frames at 30 fps, rounded, plus one if even (at least
-    ``MEDIAN_WINDOW``); ``(1,
-    MEDIAN_WINDOW)`` at 30 fps and below, and without a usable step."""
+    ``MEDIAN_WINDOW``); ``(1, MEDIAN_WINDOW)`` at 30 fps and below, and without a usable
+    step."""
     s = np.asarray(steps, dtype=float)[1:]
     s = s[np.isfinite(s) & (s > 0)]
     if not s.size:

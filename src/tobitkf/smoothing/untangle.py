@@ -253,7 +253,8 @@ def untangle_stats(ys: Array, times: Array) -> tuple[float, float, int]:
 
 class _Identity:
     """What the causal loops keep of one identity: its last assigned samples, its last
-    samples with the pairs corrected, which pairs are exchanged and for how long."""
+    samples with the pairs corrected that were a plausible step and how many frames ago
+    each was stored, which pairs are exchanged and for how long."""
 
     __slots__ = ("last", "page", "plast", "run", "state")
 
