@@ -1,7 +1,7 @@
-"""The methods on real recordings made harder: a lower frame rate, a noisier sensor.
+"""The methods on real recordings made harder: lower rate, added noise, dropped frames.
 
 Recordings with ground truth (a skeleton track and its simultaneous mocap, paired as
-``tobitkf evaluate`` pairs them) are smoothed as recorded and then changed in two ways a
+``tobitkf evaluate`` pairs them) are smoothed as recorded and then changed in three ways a
 user's recordings may differ from ours, and the pooled RMSE against the truth is printed
 for each (docs/robust.md, "Stress tests on the real recordings"):
 
