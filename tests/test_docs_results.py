@@ -3,14 +3,12 @@ that names the command printing it, and the blocks say what the commands print n
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import pytest
 
-from conftest import data_file
+from conftest import data_file, tool_module
 
 ROOT = Path(__file__).resolve().parents[1]
 # files whose every results table must be generated (more join as they are converted)
@@ -20,13 +18,7 @@ RESULT_COLUMNS = {"method", "recording", "rmse", "filter", "estimate", "matrix"}
 
 
 def _tool():
-    if "docs_results" not in sys.modules:
-        path = ROOT / "tools" / "docs_results.py"
-        spec = importlib.util.spec_from_file_location("docs_results", path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules["docs_results"] = mod  # dataclasses look their module up there
-        spec.loader.exec_module(mod)
-    return sys.modules["docs_results"]
+    return tool_module("docs_results")
 
 
 def _outside_blocks(text: str) -> str:

@@ -4,24 +4,13 @@ by the bone gate's rule (docs/robust.md, "Where the remaining KERAAL error is").
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import tool_module
 
 
 def _tool():
-    if "error_breakdown" not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            "error_breakdown", ROOT / "tools" / "error_breakdown.py"
-        )
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules["error_breakdown"] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules["error_breakdown"]
+    return tool_module("error_breakdown")
 
 
 def _chain(T: int = 30) -> np.ndarray:

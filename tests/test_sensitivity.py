@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import pytest
 
+from conftest import tool_module
 from tobitkf.smoothing.robust import ONLINE_DEFAULTS, ROBUST_DEFAULTS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,12 +23,7 @@ BENCHMARK = "tobitkf benchmark --seeds 5 --markdown"
 
 
 def _load(name: str):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod  # dataclasses look their module up there
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
+    return tool_module(name)
 
 
 def test_every_parameter_is_swept_or_said_why_not():

@@ -1,28 +1,17 @@
-"""tools/stress.py: the real recordings at a lower rate and with added noise
-(docs/robust.md, "Stress tests on the real recordings")."""
+"""tools/stress.py: the real recordings at a lower rate, with added noise and with
+dropped frames (docs/robust.md, "Stress tests on the real recordings")."""
 
 from __future__ import annotations
-
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import tobitkf as tk
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import tool_module
 
 
 def _tool():
-    if "stress" not in sys.modules:
-        sys.path.insert(0, str(ROOT / "tools"))
-        spec = importlib.util.spec_from_file_location("stress", ROOT / "tools" / "stress.py")
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules["stress"] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules["stress"]
+    return tool_module("stress")
 
 
 def _pair(T: int = 61, seed: int = 0):
