@@ -42,23 +42,31 @@ METHODS = ("raw", "kf+rts", "robust", "robust_online")
 DEFAULTS = (tk.DEFAULT_METHOD, tk.DEFAULT_LIVE_METHOD)
 
 
-def every_nth(track: tk.SkeletonSequence, every: int, phase: int) -> tk.SkeletonSequence:
-    """Frames ``phase, phase + every, ...`` of ``track`` as a recording of its own (the
-    per-frame arrays sliced, the nominal rate divided by ``every``)."""
-    if every < 1 or not 0 <= phase < every:
-        raise ValueError(f"every_nth: need every >= 1 and 0 <= phase < every, got {every}, {phase}")
-    sl = slice(phase, None, every)
+def _frames(
+    track: tk.SkeletonSequence, index: slice | np.ndarray, **changes
+) -> tk.SkeletonSequence:
+    """The frames ``index`` of ``track`` as a recording of its own: every per-frame array
+    taken at them, then ``changes``."""
 
     def cut(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else a[sl]
+        return None if a is None else a[index]
 
-    return track.replace(
-        positions=track.positions[sl],
-        timestamps=cut(track.timestamps),
-        tracking_state=cut(track.tracking_state),
-        confidence=cut(track.confidence),
-        fps=None if track.fps is None else track.fps / every,
-    )
+    arrays = {
+        "positions": track.positions[index],
+        "timestamps": cut(track.timestamps),
+        "tracking_state": cut(track.tracking_state),
+        "confidence": cut(track.confidence),
+    }
+    return track.replace(**{**arrays, **changes})
+
+
+def every_nth(track: tk.SkeletonSequence, every: int, phase: int) -> tk.SkeletonSequence:
+    """Frames ``phase, phase + every, ...`` of ``track`` as a recording of its own (the
+    nominal rate divided by ``every``)."""
+    if every < 1 or not 0 <= phase < every:
+        raise ValueError(f"every_nth: need every >= 1 and 0 <= phase < every, got {every}, {phase}")
+    fps = None if track.fps is None else track.fps / every
+    return _frames(track, slice(phase, None, every), fps=fps)
 
 
 def with_noise(track: tk.SkeletonSequence, sd: float, seed: int) -> tk.SkeletonSequence:
@@ -105,12 +113,8 @@ def pooled_rmse(
     for track, truth in pairs:
         if drop > 0:
             keep = drop_frames(track, drop, seed)
-            track = track.replace(
-                positions=track.positions[keep],
-                timestamps=track.times()[keep],
-                tracking_state=None if track.tracking_state is None else track.tracking_state[keep],
-                confidence=None if track.confidence is None else track.confidence[keep],
-            )
+            # the frames kept keep their times (from the nominal rate when none are stated)
+            track = _frames(track, keep, timestamps=track.times()[keep])
             truth = truth[keep]
         for phase in range(every):
             t = every_nth(track, every, phase) if every > 1 else track
