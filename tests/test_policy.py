@@ -1083,7 +1083,9 @@ def test_a_long_chain_is_smoothed():
     J = 1000
     topo = tk.Topology.from_names([f"j{i}" for i in range(J)], parents=[-1, *range(J - 1)])
     rng = np.random.default_rng(0)
-    pos = np.cumsum(rng.normal(0, 0.005, (60, J, 3)), axis=0) + np.arange(J)[None, :, None] * 0.05
+    # 5 mm bones: 5 m in all (a body whose joints lay tens of metres from their centre
+    # would not be in metres, smoothing/body_scale.py)
+    pos = np.cumsum(rng.normal(0, 0.005, (60, J, 3)), axis=0) + np.arange(J)[None, :, None] * 0.005
     for method in ROBUST:
         out = tk.smooth(tk.SkeletonSequence(positions=pos, topology=topo, fps=30.0), method)
         assert np.isfinite(out.positions).all()

@@ -41,6 +41,8 @@ class Job:
     input_fps: float | None = None
     #: skeleton (topology name) for an input that names none (an array's joints 0, 1, ...)
     input_topology: str | None = None
+    #: length unit for an input that states none (a CSV without sidecar, an array)
+    input_units: str | None = None
 
 
 @dataclass(frozen=True)
@@ -269,6 +271,7 @@ def plan_jobs(
     overwrite: bool = False,
     input_fps: float | None = None,
     input_topology: str | None = None,
+    input_units: str | None = None,
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
@@ -334,7 +337,15 @@ def plan_jobs(
             continue
         taken.update({f.resolve(): src for f in files})
         jobs.append(
-            Job(src, out, fmt, input_format, input_fps=input_fps, input_topology=input_topology)
+            Job(
+                src,
+                out,
+                fmt,
+                input_format,
+                input_fps=input_fps,
+                input_topology=input_topology,
+                input_units=input_units,
+            )
         )
     return jobs, refused
 
@@ -401,16 +412,25 @@ def _with_topology(sequences: list[Any], name: str | None) -> list[Any]:
     return with_unstated(sequences, topology=name, option="--topology")
 
 
+def _with_units(sequences: list[Any], units: str | None) -> list[Any]:
+    """The sequences in ``units`` where the file stated no length unit."""
+    from tobitkf.io.unstated import with_unstated
+
+    return with_unstated(sequences, units=units)
+
+
 def _unused_settings(sequences: list[Any]) -> list[str]:
     """The run settings this file did not use (its own rate, its own skeleton): a re-run
     with other values of them need not redo it (:mod:`tobitkf.app.manifest`)."""
-    from tobitkf.io.unstated import names_no_skeleton, states_no_rate
+    from tobitkf.io.unstated import names_no_skeleton, states_no_rate, states_no_units
 
     unused = []
     if not any(states_no_rate(s) for s in sequences):
         unused.append("input_fps")
     if not any(names_no_skeleton(s) for s in sequences):
         unused.append("input_topology")
+    if not any(states_no_units(s) for s in sequences):
+        unused.append("input_units")
     return unused
 
 
@@ -439,6 +459,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
             raise ValueError("the file holds no skeleton")
         unused = _unused_settings(sequences)
         sequences = _with_topology(sequences, job.input_topology)
+        sequences = _with_units(sequences, job.input_units)
         sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

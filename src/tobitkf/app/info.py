@@ -20,5 +20,20 @@ def describe(path: str | Path, format: str = "auto") -> dict[str, Any]:
         "path": str(path),
         "format": fmt,
         "bodies": len(sequences),
-        "sequences": [describe_sequence(s) for s in sequences],
+        "sequences": [{**describe_sequence(s), **_size(s)} for s in sequences],
     }
+
+
+def _size(seq: Any) -> dict[str, Any]:
+    """``size_problem``: why the smoothers would refuse the body's size (a track in
+    millimetres read as metres, :mod:`tobitkf.smoothing.body_scale`), else nothing."""
+    from tobitkf.smoothing.body_scale import check_body_scale
+    from tobitkf.smoothing.keypoints import length_scale
+
+    scale = length_scale(seq.units)
+    pos = seq.positions[:, None] * (1.0 if scale is None else scale)
+    try:
+        check_body_scale(pos, metres=scale is not None)
+    except ValueError as exc:
+        return {"size_problem": str(exc)}
+    return {}

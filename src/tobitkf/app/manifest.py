@@ -98,13 +98,15 @@ def run_settings(
     input_format: str = "auto",
     input_fps: float | None = None,
     input_topology: str | None = None,
+    input_units: str | None = None,
 ) -> dict[str, Any]:
     """What an output depends on besides its input: method, complete parameters
     (defaults filled in and validated, ``offline`` and the formats included) and the
     tobitkf version, as stored in the manifest. ``offline`` is whether the output used
     later frames (``--offline``, or a method that is offline by itself), as the output's
     provenance says; ``input_fps`` the rate given to inputs that state none,
-    ``input_topology`` the skeleton given to inputs that name none."""
+    ``input_topology`` the skeleton given to inputs that name none, ``input_units`` the
+    length unit given to inputs that state none."""
     from tobitkf.core.version import __version__
     from tobitkf.smoothing.api import COMMON_KEYWORDS, check_params, get_method
 
@@ -116,6 +118,8 @@ def run_settings(
         full["input_fps"] = float(input_fps)
     if input_topology is not None:
         full["input_topology"] = input_topology
+    if input_units is not None:
+        full["input_units"] = input_units
     full["output_format"] = output_format
     return {"method": method, "params": _plain(full), "tobitkf_version": __version__}
 

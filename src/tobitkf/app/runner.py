@@ -102,6 +102,7 @@ def plan_run(
     overwrite: bool = False,
     fps: float | None = None,
     topology: str | None = None,
+    units: str | None = None,
 ) -> Plan:
     """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
     :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
@@ -120,6 +121,7 @@ def plan_run(
             input_format=input_format,
             input_fps=fps,
             input_topology=topology,
+            input_units=units,
         )
         return Plan(list(jobs), refused, Discovered([]))
     from tobitkf.io import detect_format
@@ -135,6 +137,7 @@ def plan_run(
         overwrite=overwrite,
         input_fps=fps,
         input_topology=topology,
+        input_units=units,
     )
     return Plan(list(jobs), refused, found)
 
@@ -192,6 +195,7 @@ def run_planned(
     on_compile: Callable[[], Any] | None = None,
     fps: float | None = None,
     topology: str | None = None,
+    units: str | None = None,
 ) -> list[FileSummary]:
     """Run planned jobs with the output folder's manifest; summaries in job order, then
     the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
@@ -205,7 +209,8 @@ def run_planned(
     ``fps``: the frame rate the jobs give inputs that state none (recorded in the
     manifest's settings, so that another rate redoes them; a file with its own rate
     or timestamps is not redone for it). ``topology``: the skeleton (a topology name) the
-    jobs give inputs that name none, recorded alike.
+    jobs give inputs that name none, recorded alike; ``units``: the length unit given to
+    inputs that state none, alike.
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
@@ -219,6 +224,7 @@ def run_planned(
         input_format=input_format,
         input_fps=fps,
         input_topology=topology,
+        input_units=units,
     )
     with Manifest(outdir) as manifest:
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
@@ -284,6 +290,7 @@ def smooth_files(
     on_done: Callable[[FileSummary], None] | None = None,
     fps: float | None = None,
     topology: str | None = None,
+    units: str | None = None,
 ) -> list[FileSummary]:
     """Smooth every recording in ``inputs`` (files or folders, searched recursively) into
     ``out_dir``, as ``tobitkf smooth`` does, and return one summary per input.
@@ -305,6 +312,9 @@ def smooth_files(
         they are smoothed as 30 fps, and their summaries say so.
     topology : skeleton (a name of :func:`tobitkf.available_topologies`) of inputs that
         name none (an array's joints ``0``, ``1``, ...); files naming their own keep it.
+    units : length unit (``"mm"``, ``"cm"``, ``"m"``, ``"px"``) of inputs that state none
+        (a CSV without its sidecar, read as metres in 3-D; a ``.npy`` array, unknown);
+        files stating their own keep it.
 
     Returns
     -------
@@ -320,6 +330,10 @@ def smooth_files(
         from tobitkf.skeleton.topology import get_topology
 
         topology = get_topology(topology).name  # KeyError naming the known ones
+    from tobitkf.skeleton.sequence import KNOWN_UNITS
+
+    if units is not None and units not in KNOWN_UNITS:
+        raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)}, got {units!r}")
     params = dict(params or {})
     offline = bool(params.pop("offline", False)) or offline
     if isinstance(inputs, (str, os.PathLike)):
@@ -334,6 +348,7 @@ def smooth_files(
         overwrite=overwrite,
         fps=fps,
         topology=topology,
+        units=units,
     )
     refused = [
         *plan.refused,
@@ -354,4 +369,5 @@ def smooth_files(
         on_done=on_done,
         fps=fps,
         topology=topology,
+        units=units,
     )

@@ -77,6 +77,7 @@ from tobitkf.io._text import (
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
+from tobitkf.io.unstated import UNITS_UNSTATED
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
 
@@ -368,6 +369,8 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
             if INTEGER.fullmatch(body_id):
                 body_id = int(body_id)
         metadata: dict[str, Any] = {"source": str(path), "format": "csv"}
+        if "units" not in side:  # assumed (metres in 3-D): --units may say otherwise
+            metadata[UNITS_UNSTATED] = True
         provenance = entry.get("provenance", side.get("provenance"))
         if provenance is not None:
             metadata["provenance"] = provenance

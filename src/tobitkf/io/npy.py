@@ -32,6 +32,7 @@ import numpy as np
 from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, option_rate, size_text
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
+from tobitkf.io.unstated import UNITS_UNSTATED
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
 from tobitkf.skeleton.topology import UNNAMED, Topology, available_topologies, get_topology
 
@@ -127,6 +128,7 @@ def read_npy(
     topology = side.get("topology") if topology is None else topology
     fps = side.get("fps") if fps is None else fps
     units = side.get("units") if units is None else units
+    unstated = units is None  # unknown: --units may say what it is
     try:
         arr = np.load(p, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
@@ -166,7 +168,10 @@ def read_npy(
                 fps=fps,
                 body_id=b if bodies.shape[1] > 1 else None,
                 units=units,
-                metadata={"reader_warnings": list(notes)} if notes else {},
+                metadata={
+                    **({"reader_warnings": list(notes)} if notes else {}),
+                    **({UNITS_UNSTATED: True} if unstated else {}),
+                },
             )
         )
     return sequences

@@ -1,10 +1,12 @@
-"""What a file does not state, given by its user: the frame rate and the skeleton.
+"""What a file does not state, given by its user: the frame rate, the skeleton, the unit.
 
 A ``.npy`` array, a keypoint table or an MMPose file of an unknown model may name no
 skeleton (joints ``0``, ``1``, ...; or one the reader guessed from the keypoint count)
-and state no frame rate. :func:`with_unstated` gives them the ones the user names
-(``tobitkf smooth / evaluate / report --topology NAME --fps HZ``) and leaves a file that
-states its own as it is.
+and state no frame rate; a ``.npy`` array or a CSV without its sidecar states no length
+unit (the reader's ``metadata["units_unstated"]``: unknown for the array, metres assumed
+for a 3-D CSV). :func:`with_unstated` gives them the ones the user names (``tobitkf
+smooth / evaluate / report --topology NAME --fps HZ --units mm``) and leaves a file
+that states its own as it is.
 """
 
 from __future__ import annotations
@@ -14,7 +16,16 @@ from collections.abc import Sequence
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import UNNAMED, get_topology
 
-__all__ = ["names_no_skeleton", "states_no_rate", "with_unstated"]
+__all__ = [
+    "UNITS_UNSTATED",
+    "names_no_skeleton",
+    "states_no_rate",
+    "states_no_units",
+    "with_unstated",
+]
+
+#: metadata key a reader sets when the file states no length unit
+UNITS_UNSTATED = "units_unstated"
 
 
 def names_no_skeleton(seq: SkeletonSequence) -> bool:
@@ -28,16 +39,23 @@ def states_no_rate(seq: SkeletonSequence) -> bool:
     return seq.fps is None and seq.timestamps is None
 
 
+def states_no_units(seq: SkeletonSequence) -> bool:
+    """The file states no length unit (its reader assumed one, or none)."""
+    return bool(seq.metadata.get(UNITS_UNSTATED))
+
+
 def with_unstated(
     sequences: Sequence[SkeletonSequence],
     *,
     fps: float | None = None,
     topology: str | None = None,
     option: str = "topology",
+    units: str | None = None,
 ) -> list[SkeletonSequence]:
     """The sequences with frame rate ``fps`` where they state none (nor timestamps) and
     skeleton ``topology`` (a name, :func:`~tobitkf.skeleton.topology.get_topology`) where
-    they name none; what a file states itself is kept. ``option``: how an error names
+    they name none, and length unit ``units`` (``"mm"``, ``"px"``, ...) where they state
+    none; what a file states itself is kept. ``option``: how an error names
     the skeleton's setting (``"--topology"`` on the command line).
 
     Raises
@@ -60,5 +78,8 @@ def with_unstated(
             s = s.replace(topology=topo, metadata={**meta, "reader_warnings": notes})
         if fps is not None and states_no_rate(s):
             s = s.replace(fps=fps)
+        if units is not None and states_no_units(s):
+            meta = {k: v for k, v in s.metadata.items() if k != UNITS_UNSTATED}
+            s = s.replace(units=units, metadata=meta)
         out.append(s)
     return out

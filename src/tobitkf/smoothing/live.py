@@ -53,6 +53,7 @@ from tobitkf.smoothing.api import (
     method_names,
     run_method,
 )
+from tobitkf.smoothing.body_scale import check_body_scale
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
@@ -519,6 +520,7 @@ class LiveSmoother:
         self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
         self._time: float | None = None  # the timestamp of the frame being stepped
+        self._size_checked = False  # a length unit: the body's size said it is metres
         self.n_frames = 0
         self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
         self._untangling: LiveUntangle | None = None  # set at the first frame
@@ -682,6 +684,13 @@ class LiveSmoother:
         batch_states = None if states is None else (states[None] if single else states)
         if self._scale != 1.0:  # centimetres or millimetres: the method works in metres
             batch_pos = batch_pos * self._scale
+        if not self._size_checked:  # as the batch run (api.run_method), on each frame
+            # until one shows a body; gates measured on the stream or on a sample use no
+            # physical constant, whatever the unit
+            measured = self._stream_gates or self._gates_dims is not None
+            metres = not measured and length_scale(self._stream_units(pos.shape[-1])) is not None
+            size = check_body_scale(batch_pos[None], metres=metres)
+            self._size_checked = bool(np.isfinite(size).any())
         batch_pos = pad_third_axis(batch_pos)  # 2-D: a third axis of zeros, dropped below
         ys, missing = measurements(batch_pos, batch_states)
         if conf is not None:  # below the threshold: missing, for every method (as smooth)

@@ -169,6 +169,13 @@ def _topology_option(help: str) -> Any:
     )
 
 
+def _units_option(help: str) -> Any:
+    """``--units``: the length unit of inputs that state none."""
+    from tobitkf.skeleton.sequence import KNOWN_UNITS
+
+    return click.option("--units", type=click.Choice(sorted(KNOWN_UNITS)), help=help)
+
+
 def _os_reason(exc: OSError) -> str:
     if isinstance(exc, PermissionError):
         return "permission denied"
@@ -332,9 +339,11 @@ def _load_one(
     *,
     fps: float | None = None,
     topology: str | None = None,
+    units: str | None = None,
 ):
-    """The first body of ``path``, with ``--fps`` / ``--topology`` where the file states
-    no rate / names no skeleton (:func:`tobitkf.io.unstated.with_unstated`)."""
+    """The first body of ``path``, with ``--fps`` / ``--topology`` / ``--units`` where the
+    file states no rate / names no skeleton / states no length unit
+    (:func:`tobitkf.io.unstated.with_unstated`)."""
     from tobitkf.app.batch import readable_problem
     from tobitkf.io import load
     from tobitkf.io.unstated import with_unstated
@@ -347,7 +356,7 @@ def _load_one(
     except (ValueError, OSError, ImportError) as exc:
         _fail(f"cannot read {what} {path}: {exc}")
     try:
-        seqs = with_unstated(seqs, fps=fps, topology=topology, option="--topology")
+        seqs = with_unstated(seqs, fps=fps, topology=topology, option="--topology", units=units)
     except ValueError as exc:
         _fail(f"{what} {path}: {exc}")
     if not seqs:

@@ -43,6 +43,9 @@ def info(path, input_format, as_json):
         if body.get("dt_range"):
             lo, med, hi = body["dt_range"]
             console.print(f"  time steps: min {lo:.4f} s, median {med:.4f} s, max {hi:.4f} s")
+        console.print(f"  units: {_units(body)}")
+        if body.get("size_problem"):
+            console.print(f"  [red]size[/red]: {escape(body['size_problem'])}")
         for note in body["reader_warnings"]:
             console.print(f"  [yellow]reader[/yellow]: {escape(note)}")
         if body.get("tracking_states"):
@@ -55,6 +58,13 @@ def info(path, input_format, as_json):
             rows,
             digits=3,
         )
+
+
+def _units(body: dict) -> str:
+    units = body["units"] or "unknown"
+    if body["units_stated"]:
+        return units
+    return f"{units} (the file states none; smooth, evaluate and report take --units)"
 
 
 def _rate(body: dict) -> str:

@@ -18,6 +18,7 @@ from tobitkf.app.commands._common import (
     _progress,
     _ticking,
     _topology_option,
+    _units_option,
     _writable_file,
     _writable_folder,
     app,
@@ -124,6 +125,10 @@ def _for_units(specs: list[Any], track: Any, path: str) -> tuple[list[Any], str]
     "Skeleton of each TRACK that names none (a .npy array's joints 0, 1, ...; MMPose "
     "output of an unknown model), e.g. h36m17 or coco17; files naming their own keep it."
 )
+@_units_option(
+    "Length unit of each TRACK that states none (a CSV without its sidecar, read as "
+    "metres in 3-D; a .npy array), e.g. mm; files stating their own keep it."
+)
 def evaluate(
     tracks,
     truths,
@@ -138,6 +143,7 @@ def evaluate(
     truth_format,
     fps,
     topology,
+    units,
 ):
     """Score smoothing methods on TRACK against motion capture (or without it).
 
@@ -179,7 +185,7 @@ def evaluate(
         task = progress.add_task("evaluating", total=len(tracks) * len(method_specs), now="")
         for i, path in enumerate(tracks):
             progress.update(task, description=f"{Path(path).name} ({i + 1}/{len(tracks)})")
-            track = _load_one(path, "track", input_format, fps=fps, topology=topology)
+            track = _load_one(path, "track", input_format, fps=fps, topology=topology, units=units)
             run_specs = method_specs
             if not methods:  # the defaults, less those that cannot smooth this track
                 run_specs, _note = _for_units(method_specs, track, path)
@@ -266,7 +272,10 @@ def _scaled(value: Any, factor: float) -> Any:
     "Frame rate (Hz) of TRACK if it states none; a file with its own rate or timestamps keeps it."
 )
 @_topology_option("Skeleton of TRACK if it names none, e.g. h36m17 or coco17.")
-def report(track, truth, output, methods, pairs, no_gif, input_format, truth_format, fps, topology):
+@_units_option("Length unit of TRACK if it states none (a CSV without its sidecar), e.g. mm.")
+def report(
+    track, truth, output, methods, pairs, no_gif, input_format, truth_format, fps, topology, units
+):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
     from tobitkf.app.report import summary_rows, track_report
     from tobitkf.evaluation.evaluate import default_methods
@@ -274,7 +283,7 @@ def report(track, truth, output, methods, pairs, no_gif, input_format, truth_for
     specs = _method_list(methods) or default_methods()
     _need_matplotlib("the report's figures")
     _writable_file(output, "the report")  # before seconds of evaluating and drawing
-    raw = _load_one(track, "track", input_format, fps=fps, topology=topology)
+    raw = _load_one(track, "track", input_format, fps=fps, topology=topology, units=units)
     mocap = _load_one(truth, "truth", truth_format) if truth else None
     notes = []
     if not methods:  # the defaults, less those that cannot smooth this track's units

@@ -23,6 +23,7 @@ from tobitkf.app.commands._common import (
     _RegistryChoice,
     _sigterm_as_interrupt,
     _topology_option,
+    _units_option,
     _writable_folder,
     _writable_formats,
     app,
@@ -77,6 +78,11 @@ from tobitkf.core.jsonable import dumps
     "Skeleton of inputs that name none (a .npy array's joints 0, 1, ...; MMPose "
     "output of an unknown model), e.g. h36m17 or coco17 (an unknown name lists the "
     "others); files naming their own keep it."
+)
+@_units_option(
+    "Length unit of inputs that state none (a CSV without its sidecar, read as metres "
+    "in 3-D; a .npy array): the robust gates are physical speeds and lengths, so a "
+    "track in millimetres needs --units mm. Files stating their own keep it."
 )
 @click.option(
     "--overwrite",
@@ -143,6 +149,7 @@ def smooth(
     input_format,
     fps,
     topology,
+    units,
     overwrite,
     params,
     noise_from,
@@ -196,6 +203,7 @@ def smooth(
             overwrite=overwrite,
             fps=fps,
             topology=topology,
+            units=units,
         )
     except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
@@ -251,6 +259,7 @@ def smooth(
                     on_compile=None if as_json else _compiling_notice(method),
                     fps=fps,
                     topology=topology,
+                    units=units,
                 )
             except ManifestBusy as exc:
                 _fail(str(exc))
