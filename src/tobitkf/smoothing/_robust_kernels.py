@@ -134,6 +134,29 @@ def _copy2(dst: np.ndarray, src: np.ndarray) -> None:
 
 
 @_jit
+def _shell_path(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float,
+                r: float) -> float:  # fmt: skip
+    """The shortest path from A to B (offsets from the parent) that keeps outside the
+    ball of radius ``r`` about the parent: the straight chord, or, where the chord would
+    pass closer than ``r`` (the bone shorter than it can be), the two tangents and the arc
+    between them. The chord when ``r <= 0`` or A or B is not outside the ball (a bone
+    already that short: no bound beyond the chord)."""
+    a = _dist(a0, a1, a2, 0.0, 0.0, 0.0)
+    b = _dist(b0, b1, b2, 0.0, 0.0, 0.0)
+    d0, d1, d2 = b0 - a0, b1 - a1, b2 - a2
+    chord = _dist(d0, d1, d2, 0.0, 0.0, 0.0)
+    if not (r > 0.0 and a > r and b > r and chord > 0.0):
+        return chord
+    t = -(a0 * d0 + a1 * d1 + a2 * d2) / (chord * chord)
+    t = min(1.0, max(0.0, t))
+    if _dist(a0 + t * d0, a1 + t * d1, a2 + t * d2, 0.0, 0.0, 0.0) >= r:
+        return chord
+    c = min(1.0, max(-1.0, (a0 * b0 + a1 * b1 + a2 * b2) / (a * b)))
+    arc = math.acos(c) - math.acos(r / a) - math.acos(r / b)
+    return math.sqrt(a * a - r * r) + math.sqrt(b * b - r * r) + r * max(arc, 0.0)
+
+
+@_jit
 def _finite3(a0: float, a1: float, a2: float) -> bool:
     return math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2)
 
@@ -473,6 +496,27 @@ def gate_frame(
                 Lm = sf[m, S_L_CUR]
                 if math.isfinite(Lm) and abs(Lj - Lm) > tol_abs + tol_rel * min(Lj, Lm):
                     bone_ok = not (abs(blen - Lm) > tol_abs + tol_rel * Lm)
+        if (has_prev and not is_root and sb[j, B_PREV_ACC] and math.isfinite(tol)
+                and _finite3(yprev[pp, 0], yprev[pp, 1], yprev[pp, 2])
+                and _finite3(y[pp, 0], y[pp, 1], y[pp, 2])
+                and _finite3(yprev[j, 0], yprev[j, 1], yprev[j, 2])):  # fmt: skip
+            # the path of the step (rule 1, the bone kept): a bone does not shrink below
+            # the shortest length the bone gate accepts, so about its parent the joint
+            # went around, not across, that ball; what the parent moved may have carried
+            # it part of the way. The step was accepted last frame, so the speed gate
+            # is this step's.
+            path = _shell_path(
+                yprev[j, 0] - yprev[pp, 0],
+                yprev[j, 1] - yprev[pp, 1],
+                yprev[j, 2] - yprev[pp, 2],
+                y[j, 0] - y[pp, 0],
+                y[j, 1] - y[pp, 1],
+                y[j, 2] - y[pp, 2],
+                Lj - tol,
+            ) - _dist(y[pp, 0], y[pp, 1], y[pp, 2], yprev[pp, 0], yprev[pp, 1], yprev[pp, 2])
+            if path > vmax * dt_prev + margin:
+                step_ok = False
+                gate_ok = False
         if step_ok and not parent_acc and has_prev and sb[pp, B_PREV_ACC]:
             # the parent's rejection starts at this step: a joint that made the same step
             # (to within its bone's tolerance per 30 fps frame; a parent's step larger

@@ -18,7 +18,10 @@ A valid measurement ``y_j(t)`` is *accepted* when
    ``y_j(s)``: ``|y_j(t) - y_j(s)| <= v_max_j (t - s) + margin``.  ``v_max`` is a
    physical bound by body region (hands 8, arms 5, torso 3, legs 10 m/s); the gate grows
    with the time since the last accepted sample, so a joint that really moved faster
-   than ``v_max`` is re-acquired a frame or two later instead of being lost;
+   than ``v_max`` is re-acquired a frame or two later instead of being lost. A step from
+   the previous frame's accepted sample is measured along the path the joint took about
+   its parent, which keeps outside the shortest bone the bone gate accepts (a turn
+   about the parent goes around, not across), less what the parent moved;
 2. **bone gate** — if its parent was accepted in this frame, the bone to the parent has
    its normal length: ``| |y_j - y_parent| - L_j | <= bone_tol_abs + bone_tol_rel L_j``
    with ``L_j`` the recording's median bone length (offline) or the median of the
