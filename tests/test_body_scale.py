@@ -238,3 +238,19 @@ def test_a_single_point_is_judged_by_its_motion_and_a_still_one_is_left_alone():
         tk.smooth(tk.SkeletonSequence(positions=point * 1e-150, topology=topo, fps=30.0))
     with pytest.raises(ValueError, match="reaches"):
         tk.smooth(tk.SkeletonSequence(positions=point + 1e60, topology=topo, fps=30.0))
+
+
+@pytest.mark.parametrize("method", ["robust", "robust_online", "kf"])
+def test_a_lone_huge_sample_is_a_glitch_not_a_refusal(method):
+    """The size is read on 16 frames spread over the recording; a single 1e200 sample in
+    another frame is a glitch: the output stays finite (and robust rejects it)."""
+    seq = generate_motion("arms", duration=4.0, seed=13)
+    sampled = np.linspace(0, seq.n_frames - 1, 16).round().astype(int)
+    frame = next(f for f in range(50, 60) if f not in sampled)
+    pos = seq.positions.copy()
+    pos[frame, 7, 0] = 1e200
+    out = tk.smooth(seq.replace(positions=pos), method=method)
+    assert np.isfinite(out.positions).all()
+    if method.startswith("robust"):
+        assert out.metadata["diagnostics"]["rejected"][frame, 7]
+        assert np.abs(out.positions).max() < 10.0

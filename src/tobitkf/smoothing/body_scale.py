@@ -20,8 +20,12 @@ whose samples spread (:func:`body_extent`: over its joints and frames together, 
 single moving point has one too) less than :data:`MIN_BODY_RADIUS` but more than
 nothing, or any of whose coordinates exceeds :data:`MAX_BODY_RADIUS` in magnitude
 (``1e-50`` and ``1e50`` units: their fourth powers are still ordinary doubles), is
-refused with the reason. A body that does not move and has one point (all its samples
-equal) is left alone: there is nothing to square.
+refused with the reason. Both are read on :data:`MAX_FRAMES` frames spread over the
+recording, as the size in metres is: a body that size is so in every frame, and a lone
+sample beyond the bound elsewhere is a glitch (the robust gates reject it, and every
+method's output stays finite). A body that
+does not move and has one point (all its samples equal) is left alone: there is nothing
+to square.
 
 :func:`check_body_scale` raises a :class:`ValueError` that says which and how to fix it
 (every method's batch run and the live smoother call it); :func:`body_radius` is the
@@ -110,10 +114,13 @@ def check_body_scale(ys: NDArray[np.floating], metres: bool) -> NDArray[np.float
 
     The message names the body, its size and how to fix it (the unit it looks like).
     """
-    peak = np.nanmax(np.abs(ys), axis=(0, 2, 3), initial=0.0)
+    y = _frames(ys)  # what follows reads these frames only: its cost does not grow with T
+    # (a lone huge sample elsewhere is a glitch, for the gates; a body is huge everywhere)
+    peak = np.fmax(np.fmax.reduce(y, axis=(0, 2, 3)), -np.fmin.reduce(y, axis=(0, 2, 3)))
+    peak = np.nan_to_num(peak, nan=0.0)  # a body with no sample
     huge = peak > MAX_BODY_RADIUS
     # the spread of the bodies within bounds (beyond them the norms would overflow)
-    extent = body_extent(np.where(huge[None, :, None, None], 0.0, ys))
+    extent = body_extent(np.where(huge[None, :, None, None], 0.0, y))
     small = (extent > 0) & (extent < MIN_BODY_RADIUS)
     beyond = np.flatnonzero(small | huge)
     if len(beyond):
@@ -126,7 +133,7 @@ def check_body_scale(ys: NDArray[np.floating], metres: bool) -> NDArray[np.float
             f"a unit in which a body spreads more than {MIN_BODY_RADIUS:g} and no "
             f"coordinate exceeds {MAX_BODY_RADIUS:g}"
         )
-    radius = body_radius(ys)
+    radius = body_radius(y)
     with np.errstate(invalid="ignore"):
         bad = np.flatnonzero(metres & (radius > MAX_BODY_RADIUS_M))
     if not len(bad):
