@@ -254,3 +254,17 @@ def test_a_lone_huge_sample_is_a_glitch_not_a_refusal(method):
     if method.startswith("robust"):
         assert out.metadata["diagnostics"]["rejected"][frame, 7]
         assert np.abs(out.positions).max() < 10.0
+
+
+def test_an_npz_states_the_unit_its_source_csv_did_not(tmp_path):
+    """Read from a CSV without its sidecar (metres assumed), smoothed and saved as NPZ:
+    the NPZ states its unit, so --units does not apply to it."""
+    seq = generate_motion("arms", duration=1.0, seed=14)
+    tk.save(seq, tmp_path / "a.csv")
+    (tmp_path / "a.json").unlink()
+    read = tk.load(tmp_path / "a.csv")[0]
+    assert states_no_units(read)
+    tk.save(tk.smooth(read), tmp_path / "b.npz")
+    back = tk.load(tmp_path / "b.npz")[0]
+    assert back.units == "m" and not states_no_units(back)
+    assert with_unstated([back], units="mm")[0].units == "m"

@@ -420,7 +420,7 @@ def _with_units(sequences: list[Any], units: str | None) -> list[Any]:
 
 
 def _unused_settings(sequences: list[Any]) -> list[str]:
-    """The run settings this file did not use (its own rate, its own skeleton): a re-run
+    """The run settings this file did not use (its own rate, skeleton, unit): a re-run
     with other values of them need not redo it (:mod:`tobitkf.app.manifest`)."""
     from tobitkf.io.unstated import names_no_skeleton, states_no_rate, states_no_units
 

@@ -39,6 +39,7 @@ import numpy as np
 from tobitkf.io._text import MAX_INPUT_BYTES, check_positions, check_rate, size_text
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
+from tobitkf.io.unstated import UNITS_UNSTATED
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -149,7 +150,11 @@ def write_npz(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             "units": s.units,
             "topology_name": topo.name,
             "up_axis": topo.up_axis,
-            "metadata": _encode(s.metadata, meta_arrays, p),
+            # the file states the units: whether the reader of the source had to assume
+            # them does not go with it
+            "metadata": _encode(
+                {k: v for k, v in s.metadata.items() if k != UNITS_UNSTATED}, meta_arrays, p
+            ),
         }
         for key, arr in meta_arrays.items():
             if arr.dtype == object:
