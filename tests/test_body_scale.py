@@ -37,7 +37,7 @@ def _star(r: float, centre=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 def test_the_radius_of_a_body_built_with_one():
     frames = np.stack([_star(0.4, (1.0, 2.0, 3.0)), _star(0.2), _star(0.3)])  # (3, 6, 3)
-    # per frame the median distance is the star's r; over frames the median of 0.4, 0.2, 0.3
+    # per frame the mean distance is the star's r; over frames the median of 0.4, 0.2, 0.3
     assert body_radius(frames[:, None])[0] == pytest.approx(0.3, abs=1e-12)
 
 
