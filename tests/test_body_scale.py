@@ -268,3 +268,14 @@ def test_an_npz_states_the_unit_its_source_csv_did_not(tmp_path):
     back = tk.load(tmp_path / "b.npz")[0]
     assert back.units == "m" and not states_no_units(back)
     assert with_unstated([back], units="mm")[0].units == "m"
+
+
+def test_the_delayed_smoother_refuses_at_its_first_run():
+    """DelayedSmoother runs the batch method on its window from ``delay`` after the first
+    frame on: a track in millimetres taken as metres is refused there, with the reason."""
+    seq = generate_motion("arms", duration=2.0, seed=15)
+    d = tk.DelayedSmoother(seq.topology, delay=0.5)
+    with pytest.raises(ValueError, match="look like millimetres"):
+        for t in range(seq.n_frames):
+            d.update(seq.positions[t] * 1000)
+    assert t == round(0.5 * 30)  # the frame of its first run
