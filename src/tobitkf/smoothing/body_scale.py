@@ -57,8 +57,9 @@ MAX_BODY_RADIUS_M = 10.0
 #: a margin
 MIN_BODY_RADIUS = 1e-50
 MAX_BODY_RADIUS = 1e50
-#: about where a person's joints lie (m) from their centre (the message's comparison)
-TYPICAL_BODY_RADIUS_M = 0.3
+#: about where a person's joints lie (m) from their centre, on average (the message's
+#: comparison): a standing adult's 25 Kinect joints, head and feet included
+TYPICAL_BODY_RADIUS_M = 0.4
 #: frames read per body at most, evenly spread (a body's size is in every frame)
 MAX_FRAMES = 16
 
