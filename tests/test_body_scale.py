@@ -50,6 +50,8 @@ def test_missing_joints_and_bodies_do_not_count():
     assert r[0] == pytest.approx(0.5, abs=1e-12)
     assert np.isnan(r[1])
     check_body_scale(y, metres=True)  # a body with no radius is not refused
+    assert np.isnan(check_body_scale(np.zeros((0, 2, 6, 3)), metres=True)).all()  # no frame
+    assert check_body_scale(np.zeros((3, 0, 6, 3)), metres=True).shape == (0,)  # no body
 
 
 @settings(max_examples=40, deadline=None)

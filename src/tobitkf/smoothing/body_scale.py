@@ -115,6 +115,8 @@ def check_body_scale(ys: NDArray[np.floating], metres: bool) -> NDArray[np.float
 
     The message names the body, its size and how to fix it (the unit it looks like).
     """
+    if ys.size == 0:  # no frame (or no joint): no size to judge
+        return np.full(ys.shape[1], np.nan)
     y = _frames(ys)  # what follows reads these frames only: its cost does not grow with T
     # (a lone huge sample elsewhere is a glitch, for the gates; a body is huge everywhere)
     peak = np.fmax(np.fmax.reduce(y, axis=(0, 2, 3)), -np.fmin.reduce(y, axis=(0, 2, 3)))
