@@ -405,18 +405,12 @@ def _with_rate(sequences: list[Any], fps: float | None) -> tuple[list[Any], tupl
     return sequences, ("the file states no frame rate: smoothed as 30 fps (give --fps)",)
 
 
-def _with_topology(sequences: list[Any], name: str | None) -> list[Any]:
-    """The sequences with topology ``name`` where the file named no skeleton."""
+def _with_given(sequences: list[Any], topology: str | None, units: str | None) -> list[Any]:
+    """The sequences with topology ``topology`` where the file named no skeleton and in
+    ``units`` where it stated no length unit."""
     from tobitkf.io.unstated import with_unstated
 
-    return with_unstated(sequences, topology=name, option="--topology")
-
-
-def _with_units(sequences: list[Any], units: str | None) -> list[Any]:
-    """The sequences in ``units`` where the file stated no length unit."""
-    from tobitkf.io.unstated import with_unstated
-
-    return with_unstated(sequences, units=units)
+    return with_unstated(sequences, topology=topology, units=units, option="--topology")
 
 
 def _unused_settings(sequences: list[Any]) -> list[str]:
@@ -458,8 +452,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         if not sequences:
             raise ValueError("the file holds no skeleton")
         unused = _unused_settings(sequences)
-        sequences = _with_topology(sequences, job.input_topology)
-        sequences = _with_units(sequences, job.input_units)
+        sequences = _with_given(sequences, job.input_topology, job.input_units)
         sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
