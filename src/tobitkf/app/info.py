@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from tobitkf.io import detect_format, load
+from tobitkf.io.unstated import states_no_units
 from tobitkf.skeleton.describe import describe_sequence
 
 __all__ = ["describe"]
@@ -20,7 +21,12 @@ def describe(path: str | Path, format: str = "auto") -> dict[str, Any]:
         "path": str(path),
         "format": fmt,
         "bodies": len(sequences),
-        "sequences": [{**describe_sequence(s), **_size(s)} for s in sequences],
+        "sequences": [
+            # units_stated: False where the reader assumed the unit (a CSV without its
+            # sidecar) or has none (an array)
+            {**describe_sequence(s), "units_stated": not states_no_units(s), **_size(s)}
+            for s in sequences
+        ],
     }
 
 

@@ -34,8 +34,6 @@ def describe_sequence(seq: SkeletonSequence) -> dict[str, Any]:
         "missing_percent": 100.0 * float(missing.mean()) if missing.size else 0.0,
         "has_timestamps": seq.timestamps is not None,
         "units": seq.units,
-        # the reader assumed the unit (a CSV without its sidecar) or has none (an array)
-        "units_stated": not seq.metadata.get("units_unstated"),
         # what the reader said about the file (e.g. C3D entries it left out)
         "reader_warnings": [str(w) for w in seq.metadata.get("reader_warnings") or ()],
     }

@@ -520,7 +520,7 @@ class LiveSmoother:
         self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
         self._time: float | None = None  # the timestamp of the frame being stepped
-        self._size_checked = False  # a length unit: the body's size said it is metres
+        self._size_checked = False  # a frame with a body has passed check_body_scale
         self.n_frames = 0
         self._stream = _StreamGates()  # gates_from="stream", a stream of arrays
         self._untangling: LiveUntangle | None = None  # set at the first frame
