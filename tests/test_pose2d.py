@@ -153,3 +153,49 @@ def test_metric_methods_report_their_sd_in_pixels():
         assert o.units == "px"
         np.testing.assert_allclose(o.positions, r.positions / m, rtol=1e-12)
         np.testing.assert_allclose(o.std, r.std / m, rtol=1e-12)
+
+
+def _crossing(fps=15.0, T=30, cross=10.5, speed=60.0, seed=0):
+    """A neck and two wrists at ``fps``: the wrists move at ``speed`` px per frame in
+    opposite directions along x and cross at frame ``cross`` (a hand passing the other
+    in front of the body), 4 px apart in y; the truth and a noisy SkeletonSequence."""
+    rng = np.random.default_rng(seed)
+    f = np.arange(T, dtype=float)
+    x = speed * (f - cross)
+    pos = np.zeros((T, 3, 2))
+    pos[:, 0] = [400.0, 200.0]
+    pos[:, 1, 0], pos[:, 1, 1] = 400.0 + x, 300.0
+    pos[:, 2, 0], pos[:, 2, 1] = 400.0 - x, 304.0
+    noisy = pos + rng.normal(size=pos.shape) * 1.5
+    return pos, SkeletonSequence(noisy, TOPO, fps=fps, units="px")
+
+
+def test_wrists_that_cross_in_a_frame_are_not_exchanged():
+    """Two joints of a pair that pass each other between two frames (at 15 fps a
+    hand's motion is tens of pixels per frame) are each nearer the other's last sample
+    after the crossing: by position alone the crossing is an exchange, and the labels
+    were then exchanged from there on. Each joint is compared with where its own motion
+    takes it (its last sample moved on by its last step): nothing is exchanged."""
+    truth, seq = _crossing()
+    (u,), info = untangle_sequences([seq])
+    assert not info[0]["lr_swapped"].any()
+    np.testing.assert_array_equal(u.positions, seq.positions)
+    assert np.abs(u.positions - truth).max() < 10  # each wrist on its own track
+    # a real swap of the crossing wrists, after they crossed, is still undone exactly
+    p = seq.positions.copy()
+    p[16:21, 1], p[16:21, 2] = seq.positions[16:21, 2], seq.positions[16:21, 1]
+    (u,), info = untangle_sequences([seq.replace(positions=p)])
+    assert np.flatnonzero(info[0]["lr_swapped"][:, 0]).tolist() == list(range(16, 21))
+    np.testing.assert_array_equal(u.positions, seq.positions)
+
+
+def test_the_motion_across_a_gap_is_per_frame():
+    """A wrist missing for two frames just before the crossing: its step across the gap
+    is three frames' motion, and its velocity is that step over three frames (taken as
+    one frame's, it would overshoot by two frames' motion at the crossing and read the
+    crossing as an exchange)."""
+    _, seq = _crossing(T=30, cross=12.5)
+    p = seq.positions.copy()
+    p[9:11, 1] = np.nan
+    _, info = untangle_sequences([seq.replace(positions=p)])
+    assert not info[0]["lr_swapped"].any()

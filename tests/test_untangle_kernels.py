@@ -65,12 +65,18 @@ def _reference(
         state = np.zeros((B, P), dtype=bool)
         last = np.full(ys.shape[1:], np.nan)  # corrected, plausible steps only
         age = np.zeros(ys.shape[1:3], dtype=int)  # frames since each was stored
+        vel = np.full(ys.shape[1:], np.nan)  # per frame, when stored after a reference
         bi, pi = np.nonzero(np.ones((B, P), dtype=bool))
         step = (near - margin) / NEAR_FACTOR if np.isfinite(near) else 0.0
+        js = np.concatenate([left, right])
         for t in range(T):
             y = yo[t]
+            # where each joint is expected: its reference moved on by the velocity it was
+            # stored with at the last frame (none after a hold or without one)
+            moving = (age == 0)[..., None] & ~np.isnan(vel)
+            pred = np.where(moving, last + np.where(moving, vel, 0.0), last)
             yl, yr = y[:, left], y[:, right]
-            ll, lr_ = last[:, left], last[:, right]
+            ll, lr_ = pred[:, left], pred[:, right]
             # the plausible step from a reference grows with the frames since it was stored
             nl, nr = near + step * age[:, left], near + step * age[:, right]
             # a joint of the pair counts when it and both last samples are there (a pair
@@ -93,14 +99,17 @@ def _reference(
             m = state[bi, pi]
             yc[bi[m], left[pi[m]]] = y[bi[m], right[pi[m]]]
             yc[bi[m], right[pi[m]]] = y[bi[m], left[pi[m]]]
-            # a pair's joint whose corrected sample is no plausible step from its
-            # reference (a glitch) keeps the reference, one frame older
-            js = np.concatenate([left, right])
-            d = np.linalg.norm(yc[:, js] - last[:, js], axis=-1)
+            # a pair's joint whose corrected sample is no plausible step from where it
+            # was expected (a glitch) keeps the reference, one frame older; one stored
+            # anew after a reference gets the velocity of its step (per frame since)
+            d = np.linalg.norm(yc[:, js] - pred[:, js], axis=-1)
             with np.errstate(invalid="ignore"):
                 far = d > near + step * age[:, js]
             had = ~np.isnan(last[:, js, 0])
             hold = far | (np.isnan(d) & had)
+            fresh = ~np.isnan(d) & ~far
+            gap = (age[:, js] + 1)[..., None]
+            vel[:, js] = np.where(fresh[..., None], (yc[:, js] - last[:, js]) / gap, vel[:, js])
             age[:, js] = np.where(hold, age[:, js] + 1, 0)
             yc[:, js] = np.where(hold[..., None], last[:, js], yc[:, js])
             _last_valid(yc, last)
@@ -171,3 +180,54 @@ def test_identity_costs_are_the_median_distances():
         identity_costs(y, last, cost, np.empty(J))
         want = _nanmedian(np.linalg.norm(y[None, :] - last[:, None], axis=-1))
         np.testing.assert_array_equal(cost, want)
+
+
+def _pair_frames(frames, max_frames=1000, margin=1.0, near=np.inf):
+    """``pair_step`` over ``frames (T, J, D)`` of one identity whose joints 0 and 1 are
+    a pair: the state after each frame (velocities, ages, exchanged)."""
+    from tobitkf.smoothing._untangle_kernels import pair_step
+
+    _, J, D = frames.shape
+    last, age = np.full((J, D), np.nan), np.zeros(J, dtype=np.int64)
+    vel = np.full((J, D), np.nan)
+    state, run = np.zeros(1, dtype=np.bool_), np.zeros(1, dtype=np.int64)
+    left, right = np.array([0]), np.array([1])
+    out = []
+    yc, pred = np.empty((J, D)), np.empty((J, D))
+    for y in frames:
+        pair_step(np.ascontiguousarray(y), last, age, vel, state, run, left, right, margin,
+                  near, NEAR_FACTOR, RATIO, max_frames, yc, pred)  # fmt: skip
+        out.append((vel.copy(), age.copy(), bool(state[0])))
+    return out
+
+
+def test_a_pair_joint_velocity_is_its_step_per_frame():
+    """Stored after a reference ``n`` frames old, a joint's velocity is its step over
+    ``n`` (a gap of two missing frames: the step over three); it is unknown at the
+    first sample, and held (not used) while the joint is missing."""
+    f = np.zeros((6, 2, 2))
+    f[:, 0, 0] = [0.0, 10.0, np.nan, np.nan, 40.0, 50.0]
+    f[2:4, 0, 1] = np.nan
+    f[:, 1] = [500.0, 0.0]
+    states = _pair_frames(f)
+    assert np.isnan(states[0][0][0]).all()
+    np.testing.assert_array_equal(states[1][0][0], [10.0, 0.0])
+    assert states[3][1][0] == 2  # missing twice: its reference is two frames old
+    np.testing.assert_array_equal(states[4][0][0], [10.0, 0.0])  # (40 - 10) / 3
+    np.testing.assert_array_equal(states[4][0][1], [0.0, 0.0])
+    assert not any(s[2] for s in states)
+
+
+def test_a_rebased_pair_has_no_velocity():
+    """An exchange held longer than ``max_frames`` is taken as detected: the references
+    jump to the samples as they come, and a step across sides is no velocity."""
+    T = 12
+    f = np.zeros((T, 2, 2))
+    f[:, 0, 0] = 100.0 + 2.0 * np.arange(T)  # left moves right slowly
+    f[:, 1, 0] = 300.0 - 2.0 * np.arange(T)  # right moves left slowly
+    f[4:, [0, 1]] = f[4:, [1, 0]]  # exchanged from frame 4 on
+    states = _pair_frames(f, max_frames=3)
+    exchanged = [s[2] for s in states]
+    assert exchanged[4:7] == [True, True, True] and not exchanged[7]  # taken as detected
+    assert np.isnan(states[7][0][:2]).all()
+    np.testing.assert_array_equal(states[8][0][0], [-2.0, 0.0])  # its own step again

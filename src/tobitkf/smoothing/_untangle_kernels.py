@@ -78,10 +78,22 @@ def _plausible(near: float, margin: float, age: int, factor: float) -> float:
 
 
 @njit(cache=True, nogil=True)
+def _predicted(last: np.ndarray, age: np.ndarray, vel: np.ndarray, j: int, k: int) -> float:
+    """Where joint ``j``'s reference is expected this frame, axis ``k``: the reference
+    moved on by its velocity when it was stored at the last frame and has one, else the
+    reference itself (after a glitch or a gap the velocity is old)."""
+    v = vel[j, k]
+    if age[j] == 0 and not math.isnan(v):
+        return last[j, k] + v
+    return last[j, k]
+
+
+@njit(cache=True, nogil=True)
 def pair_step(
     yo: np.ndarray,
     last: np.ndarray,
     age: np.ndarray,
+    vel: np.ndarray,
     state: np.ndarray,
     run: np.ndarray,
     left: np.ndarray,
@@ -92,23 +104,31 @@ def pair_step(
     ratio: float,
     max_frames: int,
     yc: np.ndarray,
+    pred: np.ndarray,
 ) -> None:
     """One frame of the left/right loop for one identity: its samples ``yo (J, D)``
     against ``last (J, D)``, its last samples with the pairs corrected that were a
     plausible step (updated; ``age (J,)``: frames since each was stored, updated;
-    ``near_factor``: the typical steps ``near`` allows beyond the margin), into
-    ``state (P,)``, whether each pair is exchanged (updated). ``run (P,)`` counts the
-    frames each pair has been exchanged; one exchanged for more than ``max_frames`` is
-    taken as detected again (the causal form; offline, ``max_frames`` is never reached).
-    ``yc (J, D)``: work."""
+    ``vel (J, D)``: the pair joints' velocity per frame when they were stored, NaN
+    unknown, updated; ``near_factor``: the typical steps ``near`` allows beyond the
+    margin), into ``state (P,)``, whether each pair is exchanged (updated). ``run (P,)``
+    counts the frames each pair has been exchanged; one exchanged for more than
+    ``max_frames`` is taken as detected again (the causal form; offline, ``max_frames``
+    is never reached). ``yc (J, D)``: work; ``pred (J, D)``: work, where each pair joint
+    is expected (:func:`_predicted`), which the samples are compared with."""
+    D = yo.shape[1]
+    for p in range(left.shape[0]):
+        for j in (left[p], right[p]):
+            for k in range(D):
+                pred[j, k] = _predicted(last, age, vel, j, k)
     for p in range(left.shape[0]):
         lj, rj = left[p], right[p]
         nl = _plausible(near, margin, age[lj], near_factor)
         nr = _plausible(near, margin, age[rj], near_factor)
-        kl = _distance(yo[lj], last[lj])
-        sl = _distance(yo[lj], last[rj])
-        kr = _distance(yo[rj], last[rj])
-        sr = _distance(yo[rj], last[lj])
+        kl = _distance(yo[lj], pred[lj])
+        sl = _distance(yo[lj], pred[rj])
+        kr = _distance(yo[rj], pred[rj])
+        sr = _distance(yo[rj], pred[lj])
         # a joint counts when both choices are measured and one is a plausible step
         okl = math.isfinite(kl) and math.isfinite(sl) and (kl <= nl or sl <= nr)
         okr = math.isfinite(kr) and math.isfinite(sr) and (kr <= nr or sr <= nl)
@@ -130,28 +150,33 @@ def pair_step(
                 yc[left[p], k] = yo[right[p], k]
                 yc[right[p], k] = yo[left[p], k]
     # a pair's joint keeps its reference where its corrected sample is not a plausible
-    # step from it (a glitch is no reference: the next frames are compared with the
-    # sample before it), except where an exchange was just taken as detected; every
-    # other sample is stored as it comes
+    # step from where it was expected (a glitch is no reference: the next frames are
+    # compared with the sample before it), except where an exchange was just taken as
+    # detected; every other sample is stored as it comes, and a pair joint stored anew
+    # gets the velocity of its step from the reference it replaces (per frame since)
     for p in range(left.shape[0]):
         rebase = run[p] < 0
         run[p] = max(run[p], 0)
         for j in (left[p], right[p]):
-            d = _distance(yc[j], last[j])
+            d = _distance(yc[j], pred[j])
             if rebase and not math.isnan(yc[j, 0]):
                 age[j] = 0
+                for k in range(D):  # the step from the reference crosses sides
+                    vel[j, k] = math.nan
             elif math.isnan(d):  # no sample, or no reference yet
                 if math.isnan(last[j, 0]):
                     age[j] = 0
                 else:
                     age[j] += 1
-                    for k in range(yo.shape[1]):
+                    for k in range(D):
                         yc[j, k] = last[j, k]
             elif d > _plausible(near, margin, age[j], near_factor):
                 age[j] += 1
-                for k in range(yo.shape[1]):
+                for k in range(D):
                     yc[j, k] = last[j, k]
             else:
+                for k in range(D):
+                    vel[j, k] = (yc[j, k] - last[j, k]) / (age[j] + 1)
                 age[j] = 0
     keep_last1(yc, last)
 
@@ -177,12 +202,14 @@ def pair_exchanges(
     run = np.zeros((B, P), dtype=np.int64)
     last = np.full((B, J, D), np.nan)
     age = np.zeros((B, J), dtype=np.int64)
+    vel = np.full((B, J, D), np.nan)
     yc = np.empty((J, D))
+    pred = np.empty((J, D))
     never = T + 1  # offline, long exchanges are taken back afterwards (untangle())
     for t in range(T):
         for b in range(B):
-            pair_step(yo[t, b], last[b], age[b], state[b], run[b], left, right, margin, near,
-                      near_factor, ratio, never, yc)  # fmt: skip
+            pair_step(yo[t, b], last[b], age[b], vel[b], state[b], run[b], left, right,
+                      margin, near, near_factor, ratio, never, yc, pred)  # fmt: skip
             exchanged[t, b] = state[b]
 
 

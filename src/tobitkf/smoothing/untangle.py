@@ -13,15 +13,21 @@ joints of each left/right pair) that continue the previous frame best:
   identity exchange when the assignment of least total cost (Hungarian) costs less than
   ``RATIO`` (0.5) times keeping every body and at least ``margin`` less;
 * left/right pairs: a frame exchanges a pair when exchanging it costs less than
-  ``RATIO`` times keeping it (sum of the two distances to the last samples) and at least
-  ``margin`` less; a joint of the pair counts only when one of its two choices is a
-  plausible step (``NEAR_FACTOR`` (3) times the recording's 95th percentile of steps):
-  after a glitch both are far, and the other joint decides.
+  ``RATIO`` times keeping it (sum of the two distances to where the two joints are
+  expected) and at least ``margin`` less; a joint of the pair counts only when one of
+  its two choices is a plausible step (``NEAR_FACTOR`` (3) times the recording's 95th
+  percentile of steps): after a glitch both are far, and the other joint decides.
+  A joint is expected where its last sample and its last step take it (the step over
+  the frames between its last two stored samples, per frame), or at its last sample
+  when that was not stored at the frame before (after a glitch or a gap its motion is
+  old). Two joints of a pair that pass each other between two frames (two hands
+  crossing, the ankles in a walk, at a low frame rate) are each nearer the other's last
+  sample afterwards; by position alone that is an exchange, by their motion it is not.
 
 Each frame is compared with the samples assigned last (so the end of a swap is found
 as its start was); when neither choice is clearly better, the previous frame's choice
-stands. A joint of a pair whose sample, as assigned, is no plausible step from its
-last one keeps that last one (a glitch is no reference: otherwise a glitch of both
+stands. A joint of a pair whose sample, as assigned, is no plausible step from where it
+was expected keeps its last one (a glitch is no reference: otherwise a glitch of both
 joints at once, one onto the other's place, anchored an exchange that lasted until
 ``MAX_SWAP_S``); the plausible step grows by a typical step (the recording's 95th
 percentile of frame-to-frame steps) for each frame since the reference was stored, so
@@ -253,15 +259,16 @@ def untangle_stats(ys: Array, times: Array) -> tuple[float, float, int]:
 
 class _Identity:
     """What the causal loops keep of one identity: its last assigned samples, its last
-    samples with the pairs corrected that were a plausible step and how many frames ago
-    each was stored, which pairs are exchanged and for how long."""
+    samples with the pairs corrected that were a plausible step, how many frames ago
+    each was stored and its velocity then, which pairs are exchanged and for how long."""
 
-    __slots__ = ("last", "page", "plast", "run", "state")
+    __slots__ = ("last", "page", "plast", "pvel", "run", "state")
 
     def __init__(self, J: int, D: int, P: int) -> None:
         self.last = np.full((J, D), np.nan)
         self.plast = np.full((J, D), np.nan)
         self.page = np.zeros(J, dtype=np.int64)
+        self.pvel = np.full((J, D), np.nan)
         self.state = np.zeros(P, dtype=np.bool_)
         self.run = np.zeros(P, dtype=np.int64)
 
@@ -332,11 +339,11 @@ class StreamUntangler:
             k.keep_last1(y[order[a]], ident.last)
         exchanged = np.zeros((B, P), dtype=bool)
         if P:
-            yc = np.empty((J, D))
+            yc, pred = np.empty((J, D)), np.empty((J, D))
             for a, ident in enumerate(idents):
-                k.pair_step(y[order[a]], ident.plast, ident.page, ident.state, ident.run,
-                            self.left, self.right, self.margin, self.near, NEAR_FACTOR,
-                            RATIO, self.max_frames, yc)  # fmt: skip
+                k.pair_step(y[order[a]], ident.plast, ident.page, ident.pvel, ident.state,
+                            ident.run, self.left, self.right, self.margin, self.near,
+                            NEAR_FACTOR, RATIO, self.max_frames, yc, pred)  # fmt: skip
                 exchanged[a] = ident.state
         return order, exchanged
 
