@@ -15,7 +15,13 @@ from tobitkf.evaluation.pose2d import (
 )
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
-from tobitkf.smoothing.untangle import MAX_SWAP_S, untangle_sequences
+from tobitkf.smoothing.untangle import (
+    MAX_SWAP_S,
+    settle,
+    untangle,
+    untangle_sequences,
+    untangle_stats,
+)
 
 NAMES = ("neck", "left_wrist", "right_wrist")
 TOPO = Topology.from_names(NAMES, edges=[(0, 1), (0, 2)])
@@ -199,3 +205,86 @@ def test_the_motion_across_a_gap_is_per_frame():
     p[9:11, 1] = np.nan
     _, info = untangle_sequences([seq.replace(positions=p)])
     assert not info[0]["lr_swapped"].any()
+
+
+def _untangle_pair(p, near=np.inf, **kw):
+    """The left/right exchanges of one person's wrists ``p (T, 3, 2)`` offline, with
+    the recording's own margin and ``max_frames``."""
+    margin, _, max_frames = untangle_stats(p[:, None], np.arange(len(p)) / 30.0)
+    _, exch = untangle(p[:, None], np.isnan(p[:, None]).any(-1), list(TOPO.symmetry), margin,
+                       max_frames=max_frames, near=near, **kw)  # fmt: skip
+    return exch[:, 0, 0]
+
+
+def test_a_swap_that_begins_after_a_glitch_is_undone():
+    """The 2-D benchmark's seed 1 at 15 fps: the second person's right hand tip
+    glitches 114 px off for two frames (a plausible step at that rate), then the two
+    hand tips are swapped for eight frames. Forwards in time the glitch is the right
+    tip's reference when the swap starts, so neither choice is clearly nearer; the
+    swapped samples become the references, and the swap's end looks like the start of
+    one, exchanged for 23 frames of clean samples. Backwards in time the end is the
+    start, with no glitch beside it. Offline both passes are made, and where they differ
+    the labelling with the shorter tracks is kept: the frames the corruption swapped
+    (and the glitch's two, which decide nothing either way)."""
+    model = Pose2DModel()
+    truth = _truth("mixed", 10.0, 1, model, 15.0)
+    noisy, labels = corrupt_pose2d(truth, model, seed=1)
+    ys = np.stack([s.positions for s in noisy], axis=1)
+    pairs = list(noisy[0].topology.symmetry)
+    joints = noisy[0].topology.joints
+    p = next(k for k, (lj, _) in enumerate(pairs) if joints[lj] == "HandTipLeft")
+    margin, near, max_frames = untangle_stats(ys, noisy[0].times())
+    swapped = np.flatnonzero((labels[:, 1, pairs[p][0]] == 4) & (labels[:, 1, pairs[p][1]] == 4))
+    assert swapped.tolist() == list(range(119, 127))
+    runs = {}
+    for both_ways in (False, True):
+        order, exch = untangle(ys, np.isnan(ys).any(-1), pairs, margin, max_frames=max_frames,
+                               near=near, both_ways=both_ways)  # fmt: skip
+        assert (order[100:] == np.arange(2)).all()  # no identity switch there
+        runs[both_ways] = np.flatnonzero(exch[:, 1, p]).tolist()
+    assert runs[False] == list(range(127, 150))  # (what it was)
+    # every swapped frame undone, and no frame exchanged where both tips are clean (the
+    # glitch's own frames decide nothing either way)
+    lj, rj = pairs[p]
+    clean = np.flatnonzero((labels[:, 1, lj] == 0) & (labels[:, 1, rj] == 0))
+    assert set(swapped) <= set(runs[True]) and not set(clean) & set(runs[True])
+
+
+def test_a_recording_that_begins_swapped_is_undone():
+    """Forwards in time the first frame is taken as right; a recording whose wrists are
+    exchanged in its first ten frames then looked right there, and its whole rest
+    exchanged (longer than ``MAX_SWAP_S``, so left as detected). Backwards, the swap is
+    ten frames long. Both labellings give tracks of the same length: the one that
+    exchanges fewer frames is kept."""
+    (_, a), _ = _people(T=200)
+    p = a.positions.copy()
+    p[:10, 1], p[:10, 2] = a.positions[:10, 2], a.positions[:10, 1]
+    assert not _untangle_pair(p, both_ways=False).any()
+    assert np.flatnonzero(_untangle_pair(p)).tolist() == list(range(10))
+
+
+def test_settle_keeps_the_shorter_tracks():
+    """:func:`settle` by hand: two wrists 100 px apart and still, the passes differing
+    over frames 3..8; the labelling whose tracks jump more (each jump 100 px per wrist)
+    loses whichever pass made it; agreeing frames are kept; tracks of the same length
+    within the margin: fewer exchanged frames."""
+    T = 10
+    yo = np.zeros((T, 1, 3, 2))
+    yo[:, 0, 2, 0] = 100.0  # the right wrist at x = 100, the left at 0
+    yo[3:6, 0, [1, 2]] = yo[3:6, 0, [2, 1]]  # exchanged as detected in 3..5
+    right = np.zeros((T, 1, 1), bool)
+    right[3:6] = True
+    wrong = np.zeros((T, 1, 1), bool)
+    wrong[6:8] = True  # another pass: exchanged 6..7 instead (two jumps more)
+    left, rgt = np.array([1]), np.array([2])
+    np.testing.assert_array_equal(settle(yo, right, wrong, left, rgt, 1.0), right)
+    np.testing.assert_array_equal(settle(yo, wrong, right, left, rgt, 1.0), right)
+    both = right | wrong  # agreeing with `right` where they agree
+    np.testing.assert_array_equal(settle(yo, both, both, left, rgt, 1.0), both)
+    still = np.zeros((T, 1, 3, 2))  # the wrists at one place: every labelling as long
+    many, few = np.ones((T, 1, 1), bool), right
+    np.testing.assert_array_equal(settle(still, many, few, left, rgt, 1.0), few)
+    np.testing.assert_array_equal(settle(still, few, many, left, rgt, 1.0), few)
+    # shorter by less than the margin is no shorter: fewer exchanged frames decide
+    np.testing.assert_array_equal(settle(yo, right, wrong, left, rgt, 1000.0), wrong)
+    np.testing.assert_array_equal(settle(yo, wrong, right, left, rgt, 1000.0), wrong)

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 import tobitkf as tk
-from tobitkf.smoothing.untangle import NEAR_FACTOR, RATIO, _assign, _runs_to_undo, untangle
+from tobitkf.smoothing.untangle import (
+    NEAR_FACTOR,
+    RATIO,
+    _assign,
+    _runs_to_undo,
+    settle,
+    untangle,
+)
 
 
 def _nanmedian(d):
@@ -34,6 +41,7 @@ def _reference(
     bodies=True,
     max_frames=60,
     near=np.inf,
+    undo=True,
 ):
     T, B = missing.shape[:2]
     pairs = [(int(a), int(b)) for a, b in pairs]
@@ -113,7 +121,8 @@ def _reference(
             age[:, js] = np.where(hold, age[:, js] + 1, 0)
             yc[:, js] = np.where(hold[..., None], last[:, js], yc[:, js])
             _last_valid(yc, last)
-        exchanged &= _runs_to_undo(exchanged, max_frames)
+        if undo:
+            exchanged &= _runs_to_undo(exchanged, max_frames)
     return order, exchanged
 
 
@@ -159,11 +168,38 @@ def test_the_compiled_loops_decide_as_numpy(seed, B, dims, apart):
     cases = ((6, np.inf), (6, 16), (20, np.inf), (60, np.inf))
     for margin, near in ((m * unit, n * unit) for m, n in cases):
         want = _reference(ys, missing, pairs, margin, max_frames=45, near=near)
-        got = untangle(ys, missing, pairs, margin, max_frames=45, near=near)
+        got = untangle(ys, missing, pairs, margin, max_frames=45, near=near, both_ways=False)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
     if B > 1 and apart:  # the data do exercise both loops
         assert (want[0] != np.arange(B)).any() and want[1].any()
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("B", [1, 2])
+@pytest.mark.parametrize("dims", [2, 3])
+def test_offline_settles_the_forward_and_the_backward_pass(seed, B, dims):
+    """Offline (``both_ways``), the left/right exchanges are the NumPy loop's forwards
+    and its backwards in time (the loop run on the frames reversed), settled by
+    :func:`settle`, and then the runs longer than ``max_frames`` undone."""
+    ys, missing, pairs = _people(seed, B, dims, True)
+    unit = 1.0 if dims == 2 else 0.0025
+    margin, near = 6 * unit, 16 * unit
+    T = len(ys)
+    order, _ = _reference(ys, missing, pairs, margin, max_frames=45, near=near)
+    yo = ys[np.arange(T)[:, None], order]
+    mo = np.isnan(yo).any(axis=-1)
+    kw = {"bodies": False, "max_frames": 45, "near": near, "undo": False}
+    _, fwd = _reference(yo, mo, pairs, margin, **kw)
+    _, bwd = _reference(yo[::-1].copy(), mo[::-1].copy(), pairs, margin, **kw)
+    left = np.array([a for a, _ in pairs])
+    right = np.array([b for _, b in pairs])
+    want = settle(yo, fwd, bwd[::-1], left, right, margin)
+    want &= _runs_to_undo(want, 45)
+    got = untangle(ys, missing, pairs, margin, max_frames=45, near=near)
+    np.testing.assert_array_equal(got[0], order)
+    np.testing.assert_array_equal(got[1], want)
+    assert (fwd != bwd[::-1]).any()  # the passes differ somewhere: settle decides
 
 
 def test_identity_costs_are_the_median_distances():

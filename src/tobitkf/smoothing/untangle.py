@@ -33,6 +33,16 @@ joints at once, one onto the other's place, anchored an exchange that lasted unt
 percentile of frame-to-frame steps) for each frame since the reference was stored, so
 a joint that moved while it was missing is taken again.
 
+Offline, the left/right loop runs backwards in time too (:func:`settle`). One pass
+misses a swap where its start is unclear (a glitch of one joint just before it: the
+glitch is that joint's reference when the swap starts), then takes the swap's end for
+the start of one; the other pass meets that end first, as its start. Where the two
+passes differ, the labelling under which the pair's two tracks are shorter (by more
+than ``margin``, counting the steps into and out of the stretch) is kept, and the one
+that exchanges fewer frames when neither is. A swap under way at the start of the
+recording is undone too: forwards its first frame is taken as right, backwards its
+last.
+
 Most of a recording is right as detected: a stretch reassigned for longer than
 ``MAX_SWAP_S`` (2 s) is taken as a spurious exchange (after a gap the last samples are
 stale) and left as detected.
@@ -57,9 +67,9 @@ exchanged, and at the first the loops go over the frames so far, returned as det
 so that a swap under way is seen from its start) or on a sample recording of the
 set-up; and a swap is undone for its first ``MAX_SWAP_S`` only: after that the frames
 are taken as detected, and the loop goes on from them as if nothing had been exchanged
-(offline, a longer swap is left as detected from its start). With the same statistics
-and no swap longer than that, the decisions are the offline ones
-(``tests/test_untangle_stream.py``).
+(offline, a longer swap is left as detected from its start); and there is no backward
+pass. With the same statistics and no swap longer than that, the decisions are the
+offline forward pass's (``tests/test_untangle_stream.py``).
 """
 
 from __future__ import annotations
@@ -78,6 +88,7 @@ __all__ = [
     "StreamUntangler",
     "StreamUntangling",
     "check_untangle",
+    "settle",
     "untangle",
     "untangle_sequences",
     "untangle_stats",
@@ -168,6 +179,7 @@ def untangle(
     bodies: bool = True,
     max_frames: int = 60,
     near: float = np.inf,
+    both_ways: bool = True,
 ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per-frame body order and left/right exchanges that undo swaps (module docstring).
 
@@ -182,6 +194,9 @@ def untangle(
     max_frames : longest swap undone.
     near : longest plausible frame-to-frame step of a joint: a joint of a pair is
         evidence only when one of its two choices is within it.
+    both_ways : decide the left/right exchanges backwards in time too, and settle where
+        the two passes differ (:func:`settle`); ``False``: forwards only, as the causal
+        form decides.
 
     Returns
     -------
@@ -217,8 +232,50 @@ def untangle(
         right = np.array([b for _, b in pairs], dtype=np.intp)
         k.pair_exchanges(yo, left, right, float(margin), float(near), NEAR_FACTOR, RATIO,
                          exchanged)  # fmt: skip
+        if both_ways:  # and backwards in time: where the two differ, the smoother labels
+            back = np.zeros_like(exchanged)
+            k.pair_exchanges(np.ascontiguousarray(yo[::-1]), left, right, float(margin),
+                             float(near), NEAR_FACTOR, RATIO, back)  # fmt: skip
+            exchanged = settle(yo, exchanged, back[::-1], left, right, float(margin))
         exchanged &= _runs_to_undo(exchanged, max_frames)
     return order, exchanged
+
+
+def settle(
+    yo: Array, fwd: NDArray[np.bool_], bwd: NDArray[np.bool_], left: Any, right: Any, margin: float
+) -> NDArray[np.bool_]:
+    """The left/right exchanges of the two passes in time (``fwd``, ``bwd`` (T, B, P) of
+    ``yo (T, B, J, D)``, identity order), settled: where they agree, theirs; over each
+    stretch where they differ, the labelling under which the pair's two tracks are
+    shorter by more than ``margin``, from the frame before the stretch to the frame
+    after it (so the steps into and out of it count); when neither is, the one that
+    exchanges fewer frames (most of a recording is right as detected), and the forward
+    one when they exchange as many."""
+    out = fwd.copy()
+    T = fwd.shape[0]
+    for b, p in zip(*np.nonzero((fwd != bwd).any(axis=0)), strict=True):
+        differ = np.concatenate([[0], (fwd[:, b, p] != bwd[:, b, p]).astype(np.int8), [0]])
+        edges = np.flatnonzero(np.diff(differ))
+        for a, e in zip(edges[::2], edges[1::2], strict=True):
+            lo, hi = max(a - 1, 0), min(e + 1, T)
+            yl, yr = yo[lo:hi, b, left[p]], yo[lo:hi, b, right[p]]
+            f, w = fwd[lo:hi, b, p], bwd[lo:hi, b, p]
+            cf, cw = _labelled_length(yl, yr, f), _labelled_length(yl, yr, w)
+            if cw < cf - margin or (abs(cw - cf) <= margin and w.sum() < f.sum()):
+                out[lo:hi, b, p] = w
+    return out
+
+
+def _labelled_length(yl: Array, yr: Array, exchanged: NDArray[np.bool_]) -> float:
+    """The length of a pair's two tracks ``(n, D)`` with the frames ``exchanged (n,)``
+    exchanged: the steps between consecutive present samples of each, summed."""
+    c = exchanged[:, None]
+    total = 0.0
+    for y in (np.where(c, yr, yl), np.where(c, yl, yr)):
+        z = y[~np.isnan(y).any(axis=-1)]
+        if len(z) > 1:
+            total += float(np.linalg.norm(np.diff(z, axis=0), axis=-1).sum())
+    return total
 
 
 def apply(a: Array, order: NDArray[np.intp], exchanged: NDArray[np.bool_], pairs: Any) -> Array:
