@@ -64,7 +64,7 @@ from tobitkf.skeleton.sequence import SkeletonSequence
 # the built-in methods register themselves when imported
 from tobitkf.smoothing import baselines as _baselines  # noqa: F401
 from tobitkf.smoothing import kalman_methods as _kalman_methods  # noqa: F401
-from tobitkf.smoothing import robust as _robust  # noqa: F401
+from tobitkf.smoothing import robust as _robust
 from tobitkf.smoothing.arrays import sequence_from_array
 from tobitkf.smoothing.body_scale import check_body_scale
 from tobitkf.smoothing.keypoints import (
@@ -186,7 +186,7 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
     """Call a method's runner and check what it returns (a user's method may be wrong)."""
     # a body a thousand times too large is not in metres (unless the gates are measured
     # on the recording, whatever its unit); 1e-150 is in no unit
-    physical = inp.units == "m" and params.get("gates") not in ("recording", "stream")
+    physical = inp.units == "m" and not _robust.gates_measured(params)
     check_body_scale(inp.ys, metres=physical)
     if spec.check_data is not None:
         spec.check_data(params, inp.n_dims, inp.units)

@@ -395,6 +395,12 @@ def _sample_inputs(
     return inferred, rinf, _guesses(inferred, inferred_bones, n_dims)
 
 
+def gates_measured(params: Mapping[str, Any]) -> bool:
+    """Whether the gates were asked to be measured on the data (``gates``: on the
+    recording or on the frames so far), whatever the data's unit."""
+    return params.get("gates") in ("recording", "stream")
+
+
 def use_recording_gates(params: dict[str, Any], units: str | None) -> bool:
     """Whether the metric parameters come from the recording (``gates``, ``units``)."""
     gates = params.get("gates", "auto")
