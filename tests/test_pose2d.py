@@ -288,3 +288,17 @@ def test_settle_keeps_the_shorter_tracks():
     # shorter by less than the margin is no shorter: fewer exchanged frames decide
     np.testing.assert_array_equal(settle(yo, right, wrong, left, rgt, 1000.0), wrong)
     np.testing.assert_array_equal(settle(yo, wrong, right, left, rgt, 1000.0), wrong)
+
+
+@pytest.mark.parametrize("people", [1, 2])
+@pytest.mark.parametrize("method", ["robust", "robust_online", "kf"])
+def test_a_recording_with_no_frame_in_pixels(people, method):
+    """No frame: nothing to untangle, and every method returns no frame, as it does for
+    the same recording in metres (the untangling's run lengths once failed to reshape
+    an empty array)."""
+    seqs = [SkeletonSequence(np.zeros((0, 3, 2)), TOPO, fps=30.0, units="px", body_id=k)
+            for k in range(people)]  # fmt: skip
+    out = tk.smooth(seqs, method=method)
+    assert [o.positions.shape for o in out] == [(0, 3, 2)] * people
+    _, info = untangle_sequences(seqs)
+    assert info[0]["lr_swapped"].shape == (0, 1)

@@ -150,8 +150,9 @@ def _runs_to_undo(changed: NDArray[np.bool_], max_frames: int) -> NDArray[np.boo
     """Frames of the runs of ``changed`` (along axis 0) no longer than ``max_frames``."""
     out = np.zeros_like(changed)
     T = changed.shape[0]
-    flat = changed.reshape(T, -1)
-    res = out.reshape(T, -1)
+    width = int(np.prod(changed.shape[1:]))  # (-1 cannot be inferred from no frame)
+    flat = changed.reshape(T, width)
+    res = out.reshape(T, width)
     for k in range(flat.shape[1]):
         col = flat[:, k]
         if not col.any():
