@@ -125,6 +125,32 @@ def test_writer_from_plain_sequence(tmp_path):
     assert p.read_text().split("\n")[-2] == "0"  # last frame: no body
 
 
+@pytest.mark.parametrize(("units", "per_metre"), [("m", 1.0), ("cm", 100.0), ("mm", 1000.0)])
+def test_writer_converts_lengths_to_metres(tmp_path, units, per_metre):
+    """The file holds metres (NTU RGB+D's camera space): a sequence in centimetres or
+    millimetres is written converted (it was written as its numbers, read back as
+    metres 100 or 1000 times too large), and read back as the metres it stands for."""
+    rng = np.random.default_rng(5)
+    metres = rng.normal(scale=0.5, size=(3, 25, 3))
+    s = SkeletonSequence(metres * per_metre, "kinect_v2", units=units)
+    p = tmp_path / f"x_{units}.skeleton"
+    save(s, p)
+    (r,) = load(p)
+    assert r.units == "m"
+    np.testing.assert_allclose(r.positions, metres, rtol=0, atol=1e-6)  # (the text's digits)
+
+
+def test_writer_refuses_what_is_not_metres_in_3d(tmp_path):
+    """2-D keypoints and 3-D positions in unknown units have no NTU form: a clear error,
+    not numpy's reshape message nor numbers labelled as metres."""
+    pos = np.zeros((2, 25, 3))
+    with pytest.raises(ValueError, match="positions are 2-D"):
+        save(SkeletonSequence(pos[..., :2], "kinect_v2", units="px"), tmp_path / "a.skeleton")
+    with pytest.raises(ValueError, match="units are None"):
+        save(SkeletonSequence(pos, "kinect_v2", units=None), tmp_path / "b.skeleton")
+    assert not (tmp_path / "a.skeleton").exists() and not (tmp_path / "b.skeleton").exists()
+
+
 def test_writer_rejects_non_kinect_v2(tmp_path):
     s = SkeletonSequence(np.zeros((2, 21, 3)), "kinect_v2_21")
     with pytest.raises(ValueError, match="25 Kinect V2 joints"):

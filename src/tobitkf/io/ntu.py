@@ -268,9 +268,19 @@ def _frames_array(meta: dict, key: str, shape: tuple[int, ...]) -> np.ndarray | 
     return None
 
 
+def _in_metres(s: SkeletonSequence) -> SkeletonSequence:
+    """``s`` (in a length unit) with its positions and standard deviations in metres."""
+    k = s.metres_per_unit
+    assert k is not None  # checked by the caller
+    std = None if s.std is None else s.std * k
+    return s.replace(positions=s.positions * k, std=std, units="m")
+
+
 def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
     """Write sequences (one per body, all with the same number of frames and 25 Kinect V2
-    joints) as an NTU ``.skeleton`` file.
+    joints, 3-D in a length unit) as an NTU ``.skeleton`` file, whose positions are
+    metres: a sequence in centimetres or millimetres is converted, one in pixels or
+    unknown units refused.
 
     Fields other than x, y, z come from the metadata written by :func:`read_ntu` when
     present (so a read file is written back exactly), otherwise: depth/colour pixels 0,
@@ -305,6 +315,18 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
             raise ValueError(
                 f"all bodies must have the same number of frames; found {F} and {s.n_frames}"
             )
+        if s.n_dims != 3:
+            raise ValueError(
+                f"NTU files hold 3-D camera-space joints in metres; the positions are "
+                f"{s.n_dims}-D; use format='csv' or 'npz'"
+            )
+        if s.metres_per_unit is None:
+            raise ValueError(
+                f"NTU files hold metres; the sequence's units are {s.units!r}: give its "
+                "length unit (seq.replace(units='m'), 'cm' or 'mm'), or use format='csv' or 'npz'"
+            )
+    # the file holds metres: a sequence in centimetres or millimetres is converted
+    seqs = [s if s.units == "m" else _in_metres(s) for s in seqs]
     prepared = []
     used_ids: set[int] = set()
     for k, s in enumerate(seqs):
