@@ -100,6 +100,30 @@ def test_save_dispatch(tmp_path):
         save([np.zeros(3)], tmp_path / "a.csv")
 
 
+NO_FRAME_REFUSED = [
+    ("csv", "e.csv"),
+    ("deeplabcut", "e.h5"),
+    ("mmpose", "e.json"),
+    ("trc", "e.trc"),
+    ("c3d", "e.c3d"),
+]
+
+
+@pytest.mark.parametrize(("fmt", "name"), NO_FRAME_REFUSED)
+def test_no_frame_is_refused_where_it_cannot_be_read_back(tmp_path, fmt, name):
+    """A recording with no frame written as CSV, DeepLabCut, MMPose, TRC or C3D gave a
+    file its own reader refuses (or, for C3D, ezc3d's error); the writer now refuses it,
+    writes nothing, and says which format keeps it: NPZ, whose empty recording reads
+    back."""
+    empty = SkeletonSequence(np.zeros((0, 25, 3)), "kinect_v2", fps=30.0, units="m")
+    with pytest.raises(ValueError, match=r"no frame.*format='npz'"):
+        save(empty, tmp_path / name, format=fmt)
+    assert not (tmp_path / name).exists()
+    save(empty, tmp_path / "e.npz")
+    (back,) = load(tmp_path / "e.npz")
+    assert back.positions.shape == (0, 25, 3)
+
+
 def test_register_custom_format(tmp_path):
     def reader(path):
         v = np.loadtxt(path).reshape(-1, 1, 3)

@@ -42,7 +42,7 @@ from tobitkf.io._pose import (
     sequences_from_arrays,
 )
 from tobitkf.io.errors import ReadError
-from tobitkf.io.registry import register_format
+from tobitkf.io.registry import register_format, require_frames
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = [
@@ -223,6 +223,8 @@ def write_deeplabcut(
     """Write sequences (one per individual) as a DeepLabCut ``.h5`` or ``.csv`` (by the
     suffix; module docstring)."""
     p = Path(path)
+    sequences = list(sequences)
+    require_frames(sequences, "DeepLabCut")
     df = dlc_frame(sequences, scorer)
     if p.suffix.lower() == ".csv":
         df.to_csv(p)

@@ -76,7 +76,7 @@ from tobitkf.io._text import (
     read_lines,
 )
 from tobitkf.io.errors import ReadError
-from tobitkf.io.registry import register_format
+from tobitkf.io.registry import register_format, require_frames
 from tobitkf.io.unstated import UNITS_UNSTATED
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology, available_topologies, get_topology
@@ -547,6 +547,7 @@ def write_csv(
     seqs = list(sequences)
     if not seqs:
         raise ValueError("write_csv needs at least one sequence")
+    require_frames(seqs, "CSV")
     if sep not in _SEPARATORS:
         raise ValueError(f"sep must be one of {_SEPARATORS}, found {sep!r}")
     names = seqs[0].joint_names

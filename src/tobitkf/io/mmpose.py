@@ -40,7 +40,7 @@ from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
 from tobitkf.io._text import check_output_size, check_positions, option_rate
 from tobitkf.io.errors import ReadError
-from tobitkf.io.registry import register_format
+from tobitkf.io.registry import register_format, require_frames
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import (
     COCO17_JOINTS,
@@ -293,6 +293,7 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
     seqs = list(sequences)
     if not seqs:
         raise ValueError("no sequence to write")
+    require_frames(seqs, "MMPose")
     shape = {(s.n_joints, s.n_dims) for s in seqs}
     if len(shape) > 1:
         raise ValueError(f"MMPose instances share one keypoint layout; found {sorted(shape)}")

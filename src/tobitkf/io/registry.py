@@ -130,6 +130,16 @@ def register_format(
     return spec
 
 
+def require_frames(sequences: Iterable[SkeletonSequence], fmt: str) -> None:
+    """Refuse a recording with no frame for a format whose files cannot be read back
+    without one (a ``ValueError`` naming the format), instead of writing such a file."""
+    if all(s.n_frames == 0 for s in sequences):
+        raise ValueError(
+            f"the recording has no frame, and {fmt} files without one cannot be read back "
+            "(format='npz' keeps an empty recording)"
+        )
+
+
 def unregister_format(name: str) -> None:
     """Remove a registered format (and its aliases)."""
     _FORMATS.pop(name, None)
