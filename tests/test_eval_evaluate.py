@@ -97,6 +97,37 @@ def test_world_offsets_and_a_late_start_are_recovered(track) -> None:
     assert tab.scores[0].rmse < 3e-3
 
 
+def test_a_marker_the_mocap_never_saw_is_left_out_quietly(track) -> None:
+    """A mocap marker missing in every frame (one never placed) leaves its joint unscored
+    and the others as before, with no numpy warning about an empty slice: the time
+    alignment picks its signals by their spread, and a pair with the missing marker has
+    none."""
+    import warnings
+
+    mocap = _mocap(track, t=np.array([0.2, 0.0, 0.0]))
+    positions = mocap.positions.copy()
+    positions[:, 3] = np.nan  # the head's marker
+    mocap = mocap.replace(positions=positions)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        gt = prepare_truth(track, mocap, pairs=TABLE, time="fit", offset_mode="none")
+    assert abs(gt.fitted_time_alignment.offset_s) < 0.005
+    assert np.isnan(gt.positions[:, 3]).all()
+    tab = evaluate_methods(track, gt, ["raw"])
+    assert tab.scores[0].rmse < 2e-3
+
+
+def test_a_mocap_with_one_marker_is_refused_with_the_reason(track) -> None:
+    """With one marker measured there is no distance between joints to align the
+    times by: the error says so (it was the aligner's "no offset gives enough
+    overlap")."""
+    mocap = _mocap(track)
+    positions = np.full_like(mocap.positions, np.nan)
+    positions[:, 0] = mocap.positions[:, 0]
+    with pytest.raises(ValueError, match="no two paired joints are measured together"):
+        prepare_truth(track, mocap.replace(positions=positions), pairs=TABLE, time="fit")
+
+
 def test_registration_held_fixed_and_glitches_classified(track) -> None:
     mocap = _mocap(track, R=Rotation.from_euler("x", -90, degrees=True).as_matrix())
     bad = track.positions.copy()

@@ -8,6 +8,7 @@ transform plus per-pair offsets is fitted on the raw track and held fixed.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -226,7 +227,16 @@ def prepare_truth(
     jp = [(a, b) for n, a in enumerate(sorted(set(ji))) for b in sorted(set(ji))[n + 1 :]]
     sig_t = distance_signals(y, jp)
     sig_m = distance_signals(m_full, jp)
-    sel = np.argsort(-np.nan_to_num(np.nanstd(sig_m, axis=0)))[:n_signals]
+    if not (np.isfinite(sig_t).any(axis=0) & np.isfinite(sig_m).any(axis=0)).any():
+        raise ValueError(
+            "no two paired joints are measured together in both the track and the motion "
+            "capture: the time alignment (and the registration) needs the distances between "
+            "joints; check the pairing (--pairs) and that the mocap file holds the markers"
+        )
+    with warnings.catch_warnings():  # a pair the truth never measures has no spread
+        warnings.simplefilter("ignore", RuntimeWarning)
+        spread = np.nan_to_num(np.nanstd(sig_m, axis=0))
+    sel = np.argsort(-spread)[:n_signals]
     if fit_rate and rate_range is None:
         rate_range = (0.6 * rate, 1.6 * rate) if is_uiprmd else (0.75 * rate, 1.1 * rate)
     fitted = fit_time_alignment(
