@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from tobitkf.io.errors import OptionError
+from tobitkf.io.registry import require_frames
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
 
 #: the length units a marker file can declare, in metres
@@ -16,7 +17,8 @@ def one_3d_sequence(
 ) -> tuple[SkeletonSequence, str, float]:
     """The single 3-D sequence a ``fmt`` file holds, the file's units and the factor from
     the sequence's units to them. A sequence in unknown units needs ``units``, which then
-    labels the numbers without converting them."""
+    labels the numbers without converting them; one with no frame is refused (the
+    readers refuse such a file)."""
     seqs = list(sequences)
     if len(seqs) != 1:
         raise ValueError(
@@ -33,8 +35,11 @@ def one_3d_sequence(
             raise ValueError(
                 "the sequence's units are unknown: pass units='m', 'cm' or 'mm' to label them"
             )
-        return seq, units, 1.0
-    if seq.units not in MARKER_UNITS:
-        raise ValueError(f"{fmt} holds lengths; the sequence's units are {seq.units!r}")
-    units = units or seq.units
-    return seq, units, KNOWN_UNITS[seq.units] / MARKER_UNITS[units]
+        factor = 1.0
+    else:
+        if seq.units not in MARKER_UNITS:
+            raise ValueError(f"{fmt} holds lengths; the sequence's units are {seq.units!r}")
+        units = units or seq.units
+        factor = KNOWN_UNITS[seq.units] / MARKER_UNITS[units]
+    require_frames(seqs, fmt)
+    return seq, units, factor

@@ -23,7 +23,7 @@ import numpy as np
 
 from tobitkf.io._marker_writer import one_3d_sequence
 from tobitkf.io.c3d import _import_c3d
-from tobitkf.io.registry import get_format, register_format, require_frames
+from tobitkf.io.registry import get_format, register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = ["write_c3d"]
@@ -56,7 +56,6 @@ def write_c3d(
         ``units``, which labels them without conversion.
     """
     seq, units, scale = one_3d_sequence(sequences, "C3D", "points", units)
-    require_frames([seq], "C3D")
     labels = [_check_label(n) for n in seq.joint_names]
     if seq.fps is not None:
         rate = float(seq.fps)

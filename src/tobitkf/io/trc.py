@@ -51,7 +51,7 @@ from tobitkf.io._text import (
     read_lines,
 )
 from tobitkf.io.errors import ReadError
-from tobitkf.io.registry import register_format, require_frames
+from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
@@ -198,7 +198,6 @@ def write_trc(
         are, labelled ``units`` (which is then required).
     """
     seq, units, scale = one_3d_sequence(sequences, "TRC", "markers", units)
-    require_frames([seq], "TRC")
     names = [_check_name(n) for n in seq.joint_names]
     rate = _rate(seq)
     T, M = seq.n_frames, seq.n_joints
