@@ -34,9 +34,8 @@ def _size(seq: Any) -> dict[str, Any]:
     """``size_problem``: why the smoothers would refuse the body's size (a track in
     millimetres read as metres, :mod:`tobitkf.smoothing.body_scale`), else nothing."""
     from tobitkf.smoothing.body_scale import check_body_scale
-    from tobitkf.smoothing.keypoints import length_scale
 
-    scale = length_scale(seq.units)
+    scale = seq.metres_per_unit
     pos = seq.positions[:, None] * (1.0 if scale is None else scale)
     try:
         check_body_scale(pos, metres=scale is not None)
