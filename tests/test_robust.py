@@ -24,12 +24,14 @@ from tobitkf.smoothing.robust_gating import (
 FPS = 30.0
 
 
-def _skeleton_motion(T: int = 240, seed: int = 0, wave_speed: float = 0.0) -> np.ndarray:
+def _skeleton_motion(T: int = 240, seed: int = 0, wave_speed: float = 0.0,
+                     bones: dict | None = None) -> np.ndarray:  # fmt: skip
     """A rigid Kinect V2 skeleton (constant bones) swaying slowly; optional right-arm wave.
 
     Built by forward kinematics from fixed bone vectors so bone lengths are exactly
     constant; ``wave_speed`` (m/s) swings the right forearm about the elbow so the right
-    hand reaches roughly that peak speed.
+    hand reaches roughly that peak speed. ``bones``: joint name -> its bone vector from
+    its parent, m, in place of the random ones.
     """
     topo = get_topology("kinect_v2")
     rng = np.random.default_rng(seed)
@@ -47,6 +49,8 @@ def _skeleton_motion(T: int = 240, seed: int = 0, wave_speed: float = 0.0) -> np
         ("HandTipRight", (0.06, 0.01, 0.0)),
         ("ThumbRight", (0.03, 0.04, 0.0)),
     ):
+        offs[topo.index(name)] = off
+    for name, off in (bones or {}).items():
         offs[topo.index(name)] = off
     for j in topo_order(topo):
         p = topo.parents[j]

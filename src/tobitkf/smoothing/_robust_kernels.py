@@ -459,6 +459,45 @@ def gate_frame(
                 n >= BONE_MIN_EARLY and tt - sf[j, S_L_FIRST] >= BONE_MIN_SECONDS
             ):
                 sf[j, S_L_CUR] = _window_median(h_val, h_mult, h_cnt, j)
+    # the bone gate's blame (rule 2): a joint whose bones to two or more of its children
+    # are broken while those children went on as before (accepted last frame, their own
+    # step inside their speed gate, their bone to where the joint was last accepted
+    # intact) is the one that failed: one failure, not two. It counts where the joint's
+    # step starts the break, and while its rejection lasts
+    blame = np.zeros(J, dtype=np.int64)
+    if use_bones and has_prev:
+        # a child counts only if it has children of its own: the end of a chain (a
+        # hand tip, a thumb) is where trackers place joints worst
+        inner = np.zeros(J, dtype=np.bool_)
+        for g in range(J):
+            if parents[g] >= 0:
+                inner[parents[g]] = True
+        for c in range(J):
+            p = parents[c]
+            if p < 0 or not sb[c, B_PREV_ACC] or not inner[c]:
+                continue
+            Lc = sf[c, S_L_CUR] if online else L_fixed[c]
+            if not math.isfinite(Lc):
+                continue
+            if not (_finite3(y[c, 0], y[c, 1], y[c, 2]) and _finite3(y[p, 0], y[p, 1], y[p, 2])
+                    and _finite3(yprev[c, 0], yprev[c, 1], yprev[c, 2])):  # fmt: skip
+                continue
+            tol_c = tol_abs + tol_rel * Lc
+            if _dist(y[c, 0], y[c, 1], y[c, 2], yprev[c, 0], yprev[c, 1], yprev[c, 2]) > (
+                    pj[c, J_VMAX] * dt_prev + margin):  # fmt: skip
+                continue
+            blen_c = _dist(y[c, 0], y[c, 1], y[c, 2], y[p, 0], y[p, 1], y[p, 2])
+            if not (abs(blen_c - Lc) > tol_c):
+                continue
+            # ... and kept to where the parent was last accepted: the parent's move broke it
+            # (where the parent was accepted last frame, its step starts the break)
+            if not (abs(_dist(y[c, 0], y[c, 1], y[c, 2], last[p, 0], last[p, 1], last[p, 2])
+                        - Lc) <= tol_c):  # fmt: skip
+                continue
+            if not sb[p, B_PREV_ACC] and not (tt - sf[p, S_REJ_SINCE] <= max_reject):
+                # the parent's rejection goes on past max_reject: no lock-out
+                continue
+            blame[p] += 1
     for k in range(J):
         j = order[k]
         p = parents[j]
@@ -531,6 +570,8 @@ def gate_frame(
             if _dist(dp0, dp1, dp2, 0.0, 0.0, 0.0) > tol and d_own <= same:
                 step_ok = False
         ok = valid and ((gate_ok and (bone_ok if parent_acc else step_ok)) or relock)
+        if blame[j] >= 2:
+            ok = False
         acc[j] = ok
         if online and use_bones:
             # a re-lock means the learnt bone length was wrong: learn it again

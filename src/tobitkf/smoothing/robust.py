@@ -28,7 +28,12 @@ A valid measurement ``y_j(t)`` is *accepted* when
    lengths seen so far (online; in 3-D, when the length learnt for the bone's mirror
    image disagrees with its own, a bone that keeps the mirror's is accepted too, so a
    limb failing at a stream's start does not teach the gate a wrong length for good).
-   A wrong bone is blamed on the distal joint;
+   A wrong bone is blamed on the distal joint, unless a joint's bones to two or more
+   children with children of their own broke while those children went on as before
+   (accepted in the previous frame, a step inside their speed gate, their bone to the
+   joint's last accepted place intact): then the joint is
+   the one rejected, at the frame its own step starts the break and while its
+   rejection lasts (up to ``max_reject``);
 3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
    joint is accepted only if it was accepted in the previous frame and did not jump
    (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
