@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import builtins
 import io
+import json
 import os
 import shutil
 import stat
@@ -248,6 +249,27 @@ def test_methods_and_fit_print_units(tmp_path):
     save([_recording()], tmp_path / "a.csv", format="csv")
     res = _invoke("fit", tmp_path / "a.csv")
     assert res.exit_code == 0 and "m²" in res.output
+
+
+def test_fit_takes_units_and_refuses_keypoints(tmp_path):
+    # the same recording written in millimetres, without its sidecar (read as metres
+    # unless told): --units mm gives the metre recording's fit
+    rec = _recording()
+    save([rec], tmp_path / "m.csv", format="csv")
+    save([rec.replace(positions=rec.positions * 1000.0, units="mm")], tmp_path / "mm.csv",
+         format="csv")  # fmt: skip
+    for side in tmp_path.glob("mm*.json"):
+        side.unlink()
+    runs = [_invoke("fit", tmp_path / "m.csv", "--json"),
+            _invoke("fit", tmp_path / "mm.csv", "--units", "mm", "--json")]  # fmt: skip
+    assert all(r.exit_code == 0 for r in runs), [r.output for r in runs]
+    q_m, q_mm = (next(iter(json.loads(r.output).values()))["Q"] for r in runs)
+    np.testing.assert_allclose(q_mm, q_m, rtol=1e-3)  # the CSVs' digits; a wrong unit: 1e6
+    # 2-D keypoints: refused with the reason and what to use instead
+    (tmp_path / "px.csv").write_text("time,Head_x,Head_y\n0.0,10,20\n0.033,11,21\n")
+    res = _invoke("fit", tmp_path / "px.csv")
+    _clean_failure(res, "2-D keypoints")
+    assert "tobitkf smooth" in " ".join(res.output.split())
 
 
 # --------------------------------------------------------------------------- point 11

@@ -422,6 +422,29 @@ def test_skeleton_fit_validation(kwargs, match):
         fit_skeleton_noise(np.zeros((5, 3)))
 
 
+def test_skeleton_fit_takes_the_sequences_length_unit():
+    # the same body in millimetres is fitted in metres: the same Q as the metre recording;
+    # in pixels or unknown units, or as 2-D keypoints, it is refused with the reason
+    from tobitkf.skeleton.sequence import SkeletonSequence
+    from tobitkf.skeleton.topology import get_topology
+
+    topo = get_topology("kinect_v2")
+    rng = np.random.default_rng(3)
+    pos = rng.uniform(-0.5, 0.5, (topo.n_joints, 3)) + np.cumsum(
+        rng.normal(scale=0.01, size=(40, topo.n_joints, 3)), axis=0)  # fmt: skip
+    metres = SkeletonSequence(positions=pos, topology=topo, fps=30.0)
+    mm = metres.replace(positions=pos * 1000.0, units="mm")
+    kw = {"form": "gaussian", "compute_stderr": False}
+    a, b = fit_skeleton_noise(metres, **kw), fit_skeleton_noise(mm, **kw)
+    np.testing.assert_allclose(b.Q, a.Q, rtol=1e-6)
+    for units, what in (("px", "pixels"), (None, "unknown units")):
+        with pytest.raises(ValueError, match=f"positions in {what}.*metres"):
+            fit_skeleton_noise(mm.replace(units=units), **kw)
+    flat = SkeletonSequence(positions=pos[..., :2] * 100, topology=topo, fps=30.0)
+    with pytest.raises(ValueError, match=r"2-D keypoints.*tobitkf smooth"):
+        fit_skeleton_noise(flat, **kw)
+
+
 def test_skeleton_fixed_limits_without_censoring_match_gaussian():
     """Identity: TKF^c with limits never reached is the KF, so the fits agree."""
     rng = np.random.default_rng(8)

@@ -250,7 +250,9 @@ def fit_skeleton_noise(
     ----------
     sequence : (T, J, 3) positions in metres (NaN = missing), or an object with a
         ``positions`` attribute of that shape (e.g. ``tobitkf.SkeletonSequence``);
-        ``joint_names`` is used for the keys of the per-joint result when present.
+        ``joint_names`` is used for the keys of the per-joint result when present. A
+        ``SkeletonSequence`` in centimetres or millimetres is fitted in metres; one in
+        pixels or unknown units, or with 2-D keypoints, is refused with the reason.
     per_joint : one fit per joint instead of one shared Q.
     c : (3,) adaptive half-widths in metres per frame (the defaults are for 30 fps: scale
         them for other frame rates).
@@ -266,8 +268,24 @@ def fit_skeleton_noise(
     NoiseFit (shared Q) or ``{joint name or index: NoiseFit}`` when ``per_joint``.
     """
     pos = np.asarray(getattr(sequence, "positions", sequence), dtype=float)
+    if pos.ndim == 3 and pos.shape[-1] == 2:
+        raise ValueError(
+            "the paper's skeleton noise model is 3-D, in metres, and these are 2-D "
+            "keypoints (x, y); to smooth them, use tobitkf.smooth or `tobitkf smooth`, "
+            "whose robust method fits the noise of each recording in its own units"
+        )
     if pos.ndim != 3 or pos.shape[-1] != 3:
         raise ValueError(f"skeleton positions must be (T, J, 3), got shape {pos.shape}")
+    if hasattr(sequence, "metres_per_unit"):  # a SkeletonSequence: its unit, in metres
+        k = sequence.metres_per_unit
+        if k is None:
+            what = "pixels" if sequence.units == "px" else "unknown units"
+            raise ValueError(
+                f"positions in {what}: the paper's skeleton noise model (its limits c and "
+                "R) is in metres; give the recording's length unit (--units on the "
+                "command line, SkeletonSequence.replace(units=...) in Python)"
+            )
+        pos = pos * k
     J = pos.shape[1]
     jn = getattr(sequence, "joint_names", None)
     if callable(jn):  # a method rather than a property

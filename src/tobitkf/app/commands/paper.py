@@ -14,6 +14,7 @@ from tobitkf.app.commands._common import (
     _load_one,
     _need_matplotlib,
     _progress,
+    _units_option,
     _writable_folder,
     app,
     console,
@@ -198,17 +199,22 @@ def likelihood_cmd(datasets, seed, limits, as_json, as_markdown):
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @click.option("--markdown", "as_markdown", is_flag=True, help="Print one Markdown row per fit.")
 @_input_format_option("--format", help="Input format of every PATH.")
-def fit(paths, per_joint, q_structure, fit_r, form, as_json, as_markdown, input_format):
+@_units_option(
+    "Length unit of the PATHs that state none (a CSV without its sidecar, read as metres "
+    "in 3-D; a .npy array), e.g. mm: the fit is in metres."
+)
+def fit(paths, per_joint, q_structure, fit_r, form, as_json, as_markdown, input_format, units):
     """Maximum-likelihood estimate of the process noise Q of skeleton recordings.
 
-    Q and R are variances of positions in m² (Q per frame step of the recording)."""
+    Q and R are variances of positions in m² (Q per frame step of the recording); a
+    recording in centimetres or millimetres is fitted in metres. 3-D skeletons only."""
     from tobitkf.smoothing.fit import fit_skeleton_noise
 
     results: dict[str, Any] = {}
     rows: list[tuple[str, Any]] = []  # (label, fit) for --markdown
     quiet = as_json or as_markdown
     for path in paths:
-        seq = _load_one(path, "recording", input_format)
+        seq = _load_one(path, "recording", input_format, units=units)
         kwargs: dict[str, Any] = {
             "per_joint": per_joint,
             "q_structure": q_structure,
