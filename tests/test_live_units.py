@@ -116,8 +116,11 @@ def test_bad_gates_and_units_are_refused():
     _, y = _pixels()
     with pytest.raises(ValueError, match="units"):
         tk.LiveSmoother(TOPO, units="inch")
-    with pytest.raises(ValueError, match="no gates"):
-        tk.LiveSmoother(TOPO, method="kf", gates_from=y)
+    # a method without gates takes the untangling's statistics only
+    kf = tk.LiveSmoother(TOPO, method="kf", gates_from=y)
+    assert kf.params == tk.LiveSmoother(TOPO, method="kf").params
+    with pytest.raises(ValueError, match="J = 5"):
+        tk.LiveSmoother(TOPO, method="kf", gates_from=y[:, :3])  # still checked
     with pytest.raises(ValueError, match="J = 5"):
         tk.LiveSmoother(TOPO, gates_from=y[:, :3])
     with pytest.raises(ValueError, match="in 'px', the stream in 'mm'"):

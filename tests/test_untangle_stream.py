@@ -17,6 +17,7 @@ from tobitkf.smoothing.untangle import (
     MAX_SWAP_S,
     StreamUntangler,
     untangle,
+    untangle_sequences,
     untangle_stats,
     untangle_stream,
 )
@@ -118,6 +119,35 @@ def test_live_untangles_as_batch_does(timestamps):
     )
     true = np.stack([t.positions for t in truth], 1)
     assert _rmse(out, true) < 0.8 * _rmse(plain, true)
+
+
+@pytest.mark.parametrize("method", ["kf", "one_euro"])
+def test_a_method_without_gates_untangles_live_too(method):
+    """A method without gates measures nothing but the untangling on the stream
+    (``gates_from="stream"``): live equals the causal untangling of the recording
+    (``untangle_sequences(stream=True)``) smoothed by the method, and the pose
+    estimator's swaps undone bring it closer to the truth."""
+    truth, noisy = _benchmark_people(seed=1)
+    live = _live(noisy, method=method)
+    untangled, info = untangle_sequences(noisy, stream=True)
+    assert any(i["lr_swapped"].any() for i in info)
+    batch = np.stack([b.positions for b in tk.smooth(untangled, method, untangle=False)], 1)
+    np.testing.assert_allclose(live, batch, rtol=0, atol=1e-9)
+    plain = np.stack([b.positions for b in tk.smooth(noisy, method, untangle=False)], 1)
+    true = np.stack([t.positions for t in truth], 1)
+    assert _rmse(live, true) < 0.8 * _rmse(plain, true)
+
+
+def test_a_method_without_gates_untangles_with_a_sample():
+    """``gates_from=<recording>`` gives a method without gates the untangling's
+    statistics: the wrists' swap is undone, frame for frame."""
+    a, p = _swapped_wrists(80, 95, T=200)
+    live = tk.LiveSmoother(a.topology, "kf", fps=30, gates_from=a)
+    flags = []
+    for t in range(len(p)):
+        live.update(p[t])
+        flags.append(bool(live.swapped["lr_swapped"][0]))
+    assert np.flatnonzero(flags).tolist() == list(range(80, 95))
 
 
 def test_a_keyed_stream_follows_the_people_through_an_identity_switch():

@@ -293,7 +293,9 @@ class LiveSmoother:
         frames, then again each time their count doubles, up to 4096; the first 16 are
         returned as measured), all six of them; what ``smooth(recording,
         "robust_online", gates="stream")`` gives. In a stream keyed by body id, each body
-        has its own (and its own stepper: the bodies are not stepped as one array).
+        has its own (and its own stepper: the bodies are not stepped as one array). For
+        a method without gates (``kf``, ``one_euro``, ...) either form gives the
+        untangling's statistics only.
     untangle : ``"auto"`` (default), True or False
         Undo identity swaps between the bodies of a frame (the rows of a ``(B, J, D)``
         frame, or the ids of a keyed one) and left/right swaps within each, causally,
@@ -360,18 +362,21 @@ class LiveSmoother:
         self.max_missing = float(max_missing)
         self._gates_dims: int | None = None  # the coordinates of the gates' sample
         self._scale = 1.0  # metres per unit of the stream (set at its first frame)
-        self._stream_gates = isinstance(gates_from, str) and gates_from == "stream"
+        # "stream": the untangling's statistics, and a gated method's gates, measured on
+        # the stream's own frames (a method without gates: the untangling only)
+        self._stream_untangle = isinstance(gates_from, str) and gates_from == "stream"
+        self._stream_gates = self._stream_untangle and self._gated
         if self._stream_gates:
-            if not self._gated:
-                raise ValueError(f"gates_from: method {self.method!r} has no gates to measure")
             self.params = check_params(self.method, {**self.params, "gates": "stream"})
+        elif self._stream_untangle:
+            pass
         elif isinstance(gates_from, str):
             raise ValueError(
                 f"gates_from: a recording of the same set-up or 'stream', got {gates_from!r}"
             )
         elif gates_from is not None:
             self._measure_gates(gates_from)
-        if self.untangle is True and not self._stream_gates and self._sample_untangle is None:
+        if self.untangle is True and not self._stream_untangle and self._sample_untangle is None:
             raise ValueError(
                 "untangle=True: the swaps are judged against the noise and the steps "
                 "measured on gates_from (a recording of the same set-up, or 'stream')"
@@ -384,9 +389,8 @@ class LiveSmoother:
         return "gates" in self.spec.defaults
 
     def _measure_gates(self, sample: Any) -> None:
-        """The robust gates measured on ``sample`` (``gates_from``), under the given ones."""
-        if not self._gated:
-            raise ValueError(f"gates_from: method {self.method!r} has no gates to measure")
+        """The untangling's statistics and (a gated method) the robust gates measured on
+        ``sample`` (``gates_from``), under the given ones."""
         if isinstance(sample, SkeletonSequence):
             stream = self._stream_units(sample.n_dims)
             if sample.units is not None and sample.units != stream:
@@ -419,6 +423,8 @@ class LiveSmoother:
         times = (sample.times() if isinstance(sample, SkeletonSequence)
                  else np.arange(len(pos)) / self.fps)  # fmt: skip
         self._sample_untangle = untangle_stats(pos, times)  # in the stream's units
+        if not self._gated:  # a method without gates: the untangling's statistics only
+            return
         scale = length_scale(self._stream_units(dims))
         if scale is not None and scale != 1.0:
             pos = pos * scale
@@ -441,8 +447,8 @@ class LiveSmoother:
             return
         if self.untangle == "auto" and length_scale(self._stream_units(dims)) is not None:
             return  # a track in metres (or cm, mm): as smooth(), left as it is
-        if self._stream_gates or self._sample_untangle is not None:
-            stats = None if self._stream_gates else self._sample_untangle
+        if self._stream_untangle or self._sample_untangle is not None:
+            stats = None if self._stream_untangle else self._sample_untangle
             self._untangling = LiveUntangle(self.topology.symmetry, stats)
 
     @property
