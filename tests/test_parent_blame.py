@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from test_robust import _seq, _skeleton_motion
+from tobitkf.skeleton.sequence import TrackingState
 from tobitkf.skeleton.topology import get_topology
 from tobitkf.smoothing.robust import robust_smooth
 from tobitkf.smoothing.robust_gating import gate_measurements
@@ -30,14 +31,14 @@ A_OFF = 0.25 * np.array([np.cos(TURN), 0.0, np.sin(TURN)])
 
 
 def _gate(ys: np.ndarray, parents=PARENTS, vmax_a: float = 3.0, vmax: float = 3.0,
-          max_reject: float = np.inf, fps: float = FPS) -> np.ndarray:  # fmt: skip
+          max_reject: float = np.inf, fps: float = FPS, inferred=None) -> np.ndarray:  # fmt: skip
     """gate_measurements with every joint's speed bound ``vmax`` m/s, a's ``vmax_a``."""
     vmax = np.full(len(parents), vmax)
     vmax[A] = vmax_a
     return gate_measurements(
         ys, np.arange(len(ys)) / fps, parents, vmax, margin=0.05,
         bone_len=LENGTHS[: len(parents)], bone_tol_abs=0.03, bone_tol_rel=0.15,
-        max_reject=max_reject,
+        max_reject=max_reject, inferred=inferred,
     )  # fmt: skip
 
 
@@ -133,6 +134,20 @@ def test_a_child_that_left_its_parents_last_place_does_not_count():
     assert not acc[10:30, B].any()
 
 
+def test_children_the_sensor_only_guessed_do_not_count():
+    # as the first test, but b and c are INFERRED (a sensor's guesses, which it keeps
+    # still while it does not see them): no witnesses, and the broken bones are theirs
+    ys = _track()
+    ys[10:30, A] = A_OFF
+    inferred = np.zeros(ys.shape[:2], dtype=bool)
+    inferred[:, [B, C]] = True
+    acc = _gate(ys, vmax_a=6.0, inferred=inferred)
+    assert acc[:, A].all()
+    assert not acc[10:30, [B, C]].any()
+    inferred[:, C] = False  # one witness left: not enough either
+    assert _gate(ys, vmax_a=6.0, inferred=inferred)[:, A].all()
+
+
 def test_children_at_the_end_of_a_chain_do_not_count():
     # b and c without children of their own (a hand's tip and thumb): as before the
     # rule, the broken bones are theirs
@@ -186,3 +201,11 @@ def test_a_shifted_shoulder_centre_keeps_the_shoulders(offline):
     assert not rej[:, shoulders].any()
     err = np.linalg.norm(out.positions[a:b, centre] - truth[a:b, centre], axis=-1)
     assert np.sqrt((err**2).mean()) < 0.3 * np.sqrt((shift**2).mean())
+    # the same with the shoulders INFERRED throughout (left where the sensor guessed them:
+    # inferred_bones off): guesses are no witnesses, and the shoulders are blamed again
+    states = np.full(meas.shape[:2], TrackingState.TRACKED, dtype=np.int8)
+    states[:, shoulders] = TrackingState.INFERRED
+    out = robust_smooth(_seq(meas, states), offline=offline, inferred_bones=False)
+    rej = out.metadata["diagnostics"]["rejected"]
+    assert rej[a:b, centre].mean() < 0.1  # its first frame may be its speed gate's
+    assert rej[a:b, shoulders].mean() > 0.9

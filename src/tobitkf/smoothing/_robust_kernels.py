@@ -426,6 +426,7 @@ def bone_lengths_run(pos: np.ndarray, parents: np.ndarray) -> np.ndarray:
 def gate_frame(
     y: np.ndarray,  # (J, 3) this frame, NaN = missing
     yprev: np.ndarray,  # (J, 3) previous frame (ignored when not has_prev)
+    guess: np.ndarray,  # (J,) the frame's INFERRED samples (no witness for the blame)
     has_prev: bool,
     tt: float,
     dt_prev: float,  # tt - time of the previous frame
@@ -463,7 +464,8 @@ def gate_frame(
     # are broken while those children went on as before (accepted last frame, their own
     # step inside their speed gate, their bone to where the joint was last accepted
     # intact) is the one that failed: one failure, not two. It counts where the joint's
-    # step starts the break, and while its rejection lasts
+    # step starts the break, and while its rejection lasts. A child the sensor only
+    # guessed (INFERRED) is no witness
     blame = np.zeros(J, dtype=np.int64)
     if use_bones and has_prev:
         # a child counts only if it has children of its own: the end of a chain (a
@@ -474,7 +476,7 @@ def gate_frame(
                 inner[parents[g]] = True
         for c in range(J):
             p = parents[c]
-            if p < 0 or not sb[c, B_PREV_ACC] or not inner[c]:
+            if p < 0 or not sb[c, B_PREV_ACC] or not inner[c] or guess[c]:
                 continue
             Lc = sf[c, S_L_CUR] if online else L_fixed[c]
             if not math.isfinite(Lc):
@@ -660,6 +662,7 @@ def gate_both(
     pj: np.ndarray,
     pf: np.ndarray,
     L_fixed: np.ndarray,  # (B, J)
+    guess: np.ndarray,  # (T, B, J) the INFERRED samples
     use_bones: bool,
     max_reject: float,
     two_pass: bool,
@@ -671,10 +674,10 @@ def gate_both(
     the time-reversed recording (clock ``times_back``), read in place."""
     T, B, J = ys.shape[0], ys.shape[1], ys.shape[2]
     acc = np.zeros((T, B, J), dtype=np.bool_)
-    gate_pass(ys, times, parents, order, pj, pf, L_fixed, use_bones, False, max_reject, st,
-              False, acc)  # fmt: skip
+    gate_pass(ys, times, parents, order, pj, pf, L_fixed, guess, use_bones, False,
+              max_reject, st, False, acc)  # fmt: skip
     if two_pass:
-        gate_pass(ys, times_back, parents, order, pj, pf, L_fixed, use_bones, False,
+        gate_pass(ys, times_back, parents, order, pj, pf, L_fixed, guess, use_bones, False,
                   max_reject, st_back, True, acc)  # fmt: skip
     return acc
 
@@ -688,6 +691,7 @@ def gate_pass(
     pj: np.ndarray,
     pf: np.ndarray,
     L_fixed: np.ndarray,
+    guess: np.ndarray,  # (T, B, J) the INFERRED samples
     use_bones: bool,
     online: bool,
     max_reject: float,
@@ -709,9 +713,10 @@ def gate_pass(
         if has_prev:
             tp = t + 1 if reverse else t - 1
         for b in range(B):
-            gate_frame(ys[t, b], ys[tp, b], has_prev, times[i], dt_prev, i, parents, order,
-                       pj, pf, L_fixed[b], use_bones, online, False, max_reject, last[b],
-                       sf[b], sb[b], h_val[b], h_mult[b], h_cnt[b], out[b])  # fmt: skip
+            gate_frame(ys[t, b], ys[tp, b], guess[t, b], has_prev, times[i], dt_prev, i,
+                       parents, order, pj, pf, L_fixed[b], use_bones, online, False,
+                       max_reject, last[b], sf[b], sb[b], h_val[b], h_mult[b], h_cnt[b],
+                       out[b])  # fmt: skip
         if reverse:
             for b in range(B):
                 for j in range(J):
@@ -1265,9 +1270,10 @@ def online_frames(
             for j in range(J):
                 lengths[j] = sf[b, j, S_L_CUR]  # learnt so far (NaN before)
             project_frame(y[b], project_n[f, b], parents, order, lengths, yb, scratch[3])
-            gate_frame(yb, yprev[b], has_prev, tt, dt_prev, tidx, parents, order, pj, pf,
-                       no_lengths, use_bones, True, pi[I_NDIMS] == 3, pf[P_MAX_REJECT],
-                       last[b], sf[b], sb[b], h_val[b], h_mult[b], h_cnt[b], gate)  # fmt: skip
+            gate_frame(yb, yprev[b], inferred_n[f, b], has_prev, tt, dt_prev, tidx, parents,
+                       order, pj, pf, no_lengths, use_bones, True, pi[I_NDIMS] == 3,
+                       pf[P_MAX_REJECT], last[b], sf[b], sb[b], h_val[b], h_mult[b],
+                       h_cnt[b], gate)  # fmt: skip
             if min_run > 0:
                 confirm_frame(gate, missing[b], tt, min_run, sf[b], final)
                 if has_prev:

@@ -30,8 +30,8 @@ A valid measurement ``y_j(t)`` is *accepted* when
    limb failing at a stream's start does not teach the gate a wrong length for good).
    A wrong bone is blamed on the distal joint, unless a joint's bones to two or more
    children with children of their own broke while those children went on as before
-   (accepted in the previous frame, a step inside their speed gate, their bone to the
-   joint's last accepted place intact): then the joint is
+   (accepted in the previous frame, not INFERRED, a step inside their speed gate, their
+   bone to the joint's last accepted place intact): then the joint is
    the one rejected, at the frame its own step starts the break and while its
    rejection lasts (up to ``max_reject``);
 3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
@@ -439,9 +439,9 @@ def _offline(
     par, order, pj, pf, _ = setup.args()
     B, J = missing.shape[1:]
     acc = k.gate_both(ys, times, np.ascontiguousarray(-times[::-1]), par, order, pj, pf,
-                      L_fixed, bool(params["bones"]), float(params["max_reject"]),
-                      bool(params["two_pass"]), k.new_state(B, J, 0),
-                      k.new_state(B, J, 0))  # fmt: skip
+                      L_fixed, np.ascontiguousarray(inferred), bool(params["bones"]),
+                      float(params["max_reject"]), bool(params["two_pass"]),
+                      k.new_state(B, J, 0), k.new_state(B, J, 0))  # fmt: skip
     if setup.girdle is not None and setup.pi[k.I_NDIMS] == 3:  # a shoulder dropped too far
         acc = reject_dropped_shoulders(acc, ys, setup.girdle, float(params["shoulder_drop"]))
     if params["min_run"] > 0:

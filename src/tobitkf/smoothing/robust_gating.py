@@ -158,6 +158,7 @@ def gate_measurements(
     bone_tol_rel: float,
     online_bones: bool = False,
     max_reject: float = np.inf,
+    inferred: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Causal accept / reject decision for every measurement (module docstring).
 
@@ -178,6 +179,8 @@ def gate_measurements(
     max_reject : seconds; a joint rejected for longer than this is re-acquired as soon as
         its measurement moves plausibly from the previous frame's (no lock-out when the
         reference itself was wrong).
+    inferred : (T, J) the sensor's guessed (INFERRED) samples, which are no witness of
+        the bone gate's blame; None: none.
 
     Returns
     -------
@@ -190,10 +193,12 @@ def gate_measurements(
     L = np.full((1, J), np.nan) if bone_len is None else np.asarray(bone_len, float)[None]
     k = kernels()
     acc = np.zeros(y.shape[:3], dtype=bool)
+    guess = (np.zeros(y.shape[:3], dtype=bool) if inferred is None
+             else np.ascontiguousarray(np.asarray(inferred, dtype=bool)[:, None]))  # fmt: skip
     k.gate_pass(
         y, np.ascontiguousarray(times, dtype=float), par, order, pj, pf,
-        np.ascontiguousarray(L), bone_len is not None, bool(online_bones), float(max_reject),
-        k.new_state(1, J, 0), False, acc,
+        np.ascontiguousarray(L), guess, bone_len is not None, bool(online_bones),
+        float(max_reject), k.new_state(1, J, 0), False, acc,
     )  # fmt: skip
     return acc[:, 0]
 
