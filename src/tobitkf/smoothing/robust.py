@@ -31,9 +31,9 @@ A valid measurement ``y_j(t)`` is *accepted* when
    A wrong bone is blamed on the distal joint, unless a joint's bones to two or more
    children with children of their own broke while those children went on as before
    (accepted in the previous frame, not INFERRED, a step inside their speed gate, their
-   bone to the joint's last accepted place intact): then the joint is
-   the one rejected, at the frame its own step starts the break and while its
-   rejection lasts (up to ``max_reject``);
+   bone to the joint's last accepted place intact): then the joint is the one
+   rejected, at the frame its own step starts the break and while its rejection lasts
+   (up to ``max_reject``);
 3. **chain** — if the parent was *rejected* in this frame the bone says nothing, and the
    joint is accepted only if it was accepted in the previous frame and did not jump
    (a wrong wrist makes its hand suspect: a hand that jumped together with a rejected
