@@ -60,3 +60,32 @@ def test_bounds_drop_the_classes_made_exact():
         ("every rejected sample exactly right", 6.0),
         ("every glitch and every rejected sample exactly right", 2.0),
     ]
+
+
+def test_compare_split_puts_each_sample_in_the_class_of_what_each_method_did():
+    eb = _tool()
+    e_method = np.array([[1.0, 2.0], [3.0, np.nan], [4.0, 0.5]])
+    e_other = np.array([[2.0, 2.0], [1.0, 5.0], [np.nan, 1.5]])
+    rej_method = np.array([[False, True], [True, False], [False, True]])
+    rej_other = np.array([[False, True], [False, True], [True, False]])
+    split = eb.compare_split(e_method, e_other, rej_method, rej_other)
+    # (0,0) both accepted; (0,1) both rejected; (1,0) only the method; (1,1) and (2,0)
+    # lack an error; (2,1) only the method
+    assert split == {
+        "both accepted": (1, 1.0, 4.0),
+        "both rejected": (1, 4.0, 4.0),
+        "only the other rejected": (0, 0.0, 0.0),
+        "only the method rejected": (2, 9.0 + 0.25, 1.0 + 2.25),
+    }
+
+
+def test_compare_bounds_swap_in_the_methods_error_class_by_class():
+    split = {
+        "both accepted": (10, 1.0, 2.0),
+        "both rejected": (5, 3.0, 7.0),
+        "only the other rejected": (1, 0.5, 4.0),
+        "only the method rejected": (2, 6.0, 5.0),
+    }
+    rows = _tool().compare_bounds(split)
+    assert [v for _, v in rows] == [18.0, 17.0, 13.0, 9.5, 10.5]
+    assert rows[-1][1] == sum(v[1] for v in split.values())  # the method's own

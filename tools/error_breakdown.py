@@ -27,8 +27,14 @@ look like:
   A limb is the subtree under a mirrored joint whose parent is not mirrored (shoulder,
   hip); every other joint is trunk.
 
+``--compare OTHER`` (for instance the causal ``robust_online`` against the offline
+default) splits OTHER's extra squared error over the method's by what the two did with
+the sample (both accepted it, both rejected it, only one of them rejected it), and
+gives OTHER's pooled RMSE had it matched the method in some of these classes: what the
+other method would have to recover to come level.
+
     python tools/error_breakdown.py TRACK... --truth-replace OLD NEW [--method robust]
-                                    [--truth-check]
+                                    [--truth-check] [--compare robust_online]
 """
 
 from __future__ import annotations
@@ -147,10 +153,48 @@ def _ext(values, fn) -> float:
     return float(fn(v)) if v.size else float("nan")
 
 
+#: classes of samples by what the method and the one compared with it did (``--compare``)
+COMPARE_CLASSES = ("both accepted", "both rejected", "only the other rejected",
+                   "only the method rejected")  # fmt: skip
+
+
+def compare_split(e_method: np.ndarray, e_other: np.ndarray, rej_method: np.ndarray,
+                  rej_other: np.ndarray) -> dict[str, tuple[int, float, float]]:  # fmt: skip
+    """Per class of :data:`COMPARE_CLASSES`: (samples, method's squared error, other's
+    squared error), over the samples where both errors are known. ``rej_*``: what each
+    rejected, same shape as the errors."""
+    ok = np.isfinite(e_method) & np.isfinite(e_other)
+    rm, ro = np.asarray(rej_method, bool), np.asarray(rej_other, bool)
+    masks = (~rm & ~ro, rm & ro, ~rm & ro, rm & ~ro)
+    out = {}
+    for name, m in zip(COMPARE_CLASSES, masks, strict=True):
+        m = m & ok
+        out[name] = (int(m.sum()), float((e_method[m] ** 2).sum()), float((e_other[m] ** 2).sum()))
+    return out
+
+
+def compare_bounds(split: dict[str, tuple[int, float, float]]) -> list[tuple[str, float]]:
+    """The other method's pooled squared error as measured, then had it matched the
+    method's error in more and more classes (both accepted; and both rejected; and
+    every class, which is the method's own)."""
+    other = {k: v[2] for k, v in split.items()}
+    method = {k: v[1] for k, v in split.items()}
+    rows = [("as measured", sum(other.values()))]
+    same: set[str] = set()
+    for i, cls in enumerate(COMPARE_CLASSES):
+        label = f"matched where {cls}" if i == 0 else f"... and where {cls}"
+        same.add(cls)
+        rows.append((label, sum(method[k] if k in same else other[k] for k in split)))
+    return rows
+
+
 def breakdown(track: str, truth: str, method: str, threshold: float,
-              truth_check: bool = False, near: float = 0.05) -> dict:  # fmt: skip
+              truth_check: bool = False, near: float = 0.05,
+              compare: str | None = None) -> dict:  # fmt: skip
     outputs: dict = {}
     methods = [method, ONLINE] if truth_check and method != ONLINE else [method]
+    if compare and compare not in methods:
+        methods.append(compare)
     gt, _ = evaluate_paths(track, truth, methods, outputs=outputs)
     seq = tk.load(track)[0]
     est = outputs[method]
@@ -170,6 +214,11 @@ def breakdown(track: str, truth: str, method: str, threshold: float,
             mirror = np.linalg.norm(seq.positions[:, j] - t[:, k], axis=-1)
             swaps += int(np.sum(ok[:, j] & (mirror + threshold < e_raw[:, j])))
     res = {"rows": rows, "swaps": swaps, "n": int(ok.sum())}
+    if compare:
+        other = outputs[compare]
+        e_other = np.linalg.norm(other.positions - t, axis=-1)
+        rej_other = np.asarray(other.metadata["diagnostics"].get("rejected", np.zeros_like(ok)))
+        res["compare"] = compare_split(np.where(ok, e_est, np.nan), e_other, rejected, rej_other)
     if truth_check:
         e_on = np.linalg.norm(outputs[ONLINE].positions - t, axis=-1)
         ok &= np.isfinite(e_on)
@@ -218,6 +267,9 @@ def main(argv: list[str] | None = None) -> int:
         default=0.05,
         help="--truth-check: distance to another limb's joint counted, m",
     )
+    ap.add_argument("--compare", metavar="OTHER",
+                    help="also split OTHER's extra error over the method's by what each "
+                         "rejected (module docstring)")  # fmt: skip
     args, (old, new) = parse_with_truth_replace(ap, argv)
     print(f"| recording | class | samples | raw RMSE cm | {args.method} RMSE cm "
           f"| share of {args.method}'s squared error | swap-like samples |")  # fmt: skip
@@ -227,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {}
     for track in args.tracks:
         res = breakdown(track, track.replace(old, new), args.method, args.threshold,
-                        args.truth_check, args.near)  # fmt: skip
+                        args.truth_check, args.near, args.compare)  # fmt: skip
         results[track.rsplit("/", 1)[-1]] = res
         sse = sum(r[2] for r in res["rows"].values())
         all_sse += sse
@@ -247,7 +299,36 @@ def main(argv: list[str] | None = None) -> int:
     _print_bounds(total, args.method)
     if args.truth_check:
         _print_truth_check(results, args.method, args.threshold, args.near)
+    if args.compare:
+        _print_compare(results, args.method, args.compare)
     return 0
+
+
+def _print_compare(results: dict, method: str, other: str) -> None:
+    split = {k: [0, 0.0, 0.0] for k in COMPARE_CLASSES}
+    for res in results.values():
+        for k, v in res["compare"].items():
+            for i in range(3):
+                split[k][i] += v[i]
+    n = sum(v[0] for v in split.values())
+    excess = sum(v[2] - v[1] for v in split.values())
+    print()
+    print(f"{other} against {method}, pooled over the recordings: the samples by what "
+          f"the two did with them, and each class's share of {other}'s extra squared "
+          "error:")  # fmt: skip
+    print()
+    print(f"| samples | count | {method} RMSE cm | {other} RMSE cm | share of the extra error |")
+    print("|---|---|---|---|---|")
+    for k, (c, sm, so) in split.items():
+        share = f"{(so - sm) / excess:.0%}" if excess > 0 else "–"
+        print(f"| {k} | {c} | {_rms(sm, c)} | {_rms(so, c)} | {share} |")
+    print()
+    print(f"Pooled RMSE of {other}, cm, had it matched {method} in these samples:")
+    print()
+    print(f"| {other} | RMSE |")
+    print("|---|---|")
+    for label, sse in compare_bounds({k: tuple(v) for k, v in split.items()}):
+        print(f"| {label} | {_rms(sse, n, 2)} |")
 
 
 def bounds(total: dict) -> list[tuple[str, float]]:
