@@ -281,3 +281,63 @@ def test_the_delayed_smoother_refuses_at_its_first_run():
         for t in range(seq.n_frames):
             d.update(seq.positions[t] * 1000)
     assert t == round(0.5 * 30)  # the frame of its first run
+
+
+@pytest.mark.parametrize(
+    "radius, unit",
+    [
+        (0.4, "m"),
+        (0.4 * 10**0.49, "m"),  # within half a decade of a person's size in metres
+        (40.0, "cm"),
+        (400.0, "mm"),
+        (0.4 * 10**-0.49, "m"),
+        (0.4 * 10**0.51, None),  # between metres and centimetres: no unit told
+        (0.4 * 10**1.51, "cm"),  # within half a decade of it in centimetres
+        (0.4 * 10**1.49, None),
+        (0.4 * 10**3.51, None),  # beyond millimetres
+        (0.01, None),  # a hand's or a mouse's size in metres: not a person's in any
+        (float("nan"), None),
+        (0.0, None),
+    ],
+)
+def test_the_unit_a_persons_size_tells(radius, unit):
+    from tobitkf.smoothing.body_scale import person_unit
+
+    got = person_unit(radius)
+    assert (got[1] if got else None) == unit
+
+
+def _unit_warnings(positions, **kw) -> list[str]:
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tk.smooth(positions, fps=30.0, topology="kinect_v2", **kw)
+    return [str(w.message) for w in caught if "state no length unit" in str(w.message)]
+
+
+def test_an_array_of_a_persons_size_in_no_unit_is_smoothed_with_a_warning_naming_it():
+    # 25 joints on a star of radius 0.4 (the rest at the centre's star too): a person in m
+    T = 40
+    star = np.vstack([_star(0.4)] * 5)[:25]  # every joint 0.4 from the centre
+    y = np.broadcast_to(star, (T, 25, 3)) + 0.002 * np.random.default_rng(0).normal(size=(T, 25, 3))
+    said = _unit_warnings(y)
+    assert len(said) == 1 and "units='m'" in said[0] and "--units m " in said[0]
+    said = _unit_warnings(y * 100)
+    assert len(said) == 1 and "units='cm'" in said[0]
+    assert _unit_warnings(y, units="m") == []  # declared
+    assert _unit_warnings(y[..., :2]) == []  # 2-D: image keypoints, no person's size in m
+    assert _unit_warnings(y * 5) == []  # a size like no person's in m, cm or mm
+    assert _unit_warnings(y, gates="recording") == []  # asked for the recording's gates
+
+
+def test_the_command_line_warns_on_an_array_of_a_persons_size_without_units(tmp_path):
+    seq = tk.load(data_file(KERAAL))[0]
+    np.save(tmp_path / "track.npy", seq.positions)
+    args = ["smooth", str(tmp_path / "track.npy"), "--fps", "30", "--topology", "kinect_v2"]
+    res = CliRunner().invoke(app, [*args, "-o", str(tmp_path / "a")])
+    assert res.exit_code == 0, res.output
+    assert "state no length unit" in res.output and "--units m " in res.output
+    res = CliRunner().invoke(app, [*args, "--units", "m", "-o", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    assert "state no length unit" not in res.output

@@ -11,7 +11,9 @@ which joint is which, how fast it was sampled nor in which units, so:
   so;
 * ``fps=`` the frame rate (otherwise none: ``tobitkf smooth --fps`` or ``smooth(fps=)``);
 * ``units=`` the length unit (``"m"``, ``"cm"``, ``"mm"``, ``"px"``); otherwise unknown,
-  so the robust gates are measured on the recording itself, as for pixels.
+  so the robust gates are measured on the recording itself, as for pixels (smoothing a
+  3-D body of a person's size in metres, centimetres or millimetres warns and names
+  that unit).
 
 The same three may sit in a JSON file beside the array (``poses.json`` for
 ``poses.npy``: ``{"topology": "h36m17", "fps": 50, "units": "m"}``), which is how

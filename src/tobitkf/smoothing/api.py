@@ -53,6 +53,7 @@ and whatever the method adds (``robust``: ``rejected``, ``rejected_fraction``,
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -66,7 +67,7 @@ from tobitkf.smoothing import baselines as _baselines  # noqa: F401
 from tobitkf.smoothing import kalman_methods as _kalman_methods  # noqa: F401
 from tobitkf.smoothing import robust as _robust
 from tobitkf.smoothing.arrays import sequence_from_array
-from tobitkf.smoothing.body_scale import check_body_scale
+from tobitkf.smoothing.body_scale import check_body_scale, unstated_unit_note
 from tobitkf.smoothing.keypoints import (
     DEFAULT_MIN_CONFIDENCE,
     check_min_confidence,
@@ -187,7 +188,12 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
     # a body a thousand times too large is not in metres (unless the gates are measured
     # on the recording, whatever its unit); 1e-150 is in no unit
     physical = inp.units == "m" and not _robust.gates_measured(params)
-    check_body_scale(inp.ys, metres=physical)
+    radius = check_body_scale(inp.ys, metres=physical)
+    if inp.units is None and inp.n_dims == 3 and not _robust.gates_measured(params):
+        # a 3-D array states no unit: a person's size tells which one it likely is
+        note = unstated_unit_note(radius)
+        if note is not None:
+            warnings.warn(note, UserWarning, stacklevel=4)  # the caller of smooth
     if spec.check_data is not None:
         spec.check_data(params, inp.n_dims, inp.units)
     out = spec.run(inp, **params)

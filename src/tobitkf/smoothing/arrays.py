@@ -37,7 +37,9 @@ def sequence_from_array(
     confidence : (T, J) (or (T,) for a single point) scores in [0, 1], NaN = none
     units : ``"m"``, ``"cm"``, ``"mm"``, ``"px"`` or None (unknown, the default for
         arrays: the robust methods then take their gates from the recording; pass
-        ``units="m"`` for the physical gates of 3-D tracks in metres)
+        ``units="m"`` for the physical gates of 3-D tracks in metres; a 3-D body of a
+        person's size in metres, centimetres or millimetres is smoothed with a warning
+        that names that unit, :func:`~tobitkf.smoothing.body_scale.unstated_unit_note`)
     topology : a :class:`Topology` or built-in name with J joints (bones for the bone
         gate); None: J keypoints without bones (gated by speed and confidence alone)
     timestamps : (T,) seconds, increasing (irregular frames), or datetimes (counted from

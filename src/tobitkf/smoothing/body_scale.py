@@ -45,10 +45,13 @@ __all__ = [
     "MAX_BODY_RADIUS",
     "MAX_BODY_RADIUS_M",
     "MIN_BODY_RADIUS",
+    "PERSON_UNITS",
     "TYPICAL_BODY_RADIUS_M",
     "body_extent",
     "body_radius",
     "check_body_scale",
+    "person_unit",
+    "unstated_unit_note",
 ]
 
 #: no tracked body's joints lie this far (m) from their centre, on average
@@ -98,13 +101,54 @@ def body_extent(ys: NDArray[np.floating]) -> NDArray[np.floating]:
         return np.nanmean(np.linalg.norm(y - centre, axis=-1), axis=(0, 2))
 
 
+#: the length units a person's size is told apart in: name, symbol, units per metre
+PERSON_UNITS = (("metres", "m", 1.0), ("centimetres", "cm", 100.0), ("millimetres", "mm", 1000.0))
+
+
+def person_unit(radius: float) -> tuple[str, str] | None:
+    """The unit (name, symbol) in which a person's body has this radius (the mean
+    distance of its joints from their centre, :func:`body_radius`): the one of
+    :data:`PERSON_UNITS` whose :data:`TYPICAL_BODY_RADIUS_M` it is within half a decade
+    of (nearer it than any other); None for a radius near none of them (or NaN)."""
+    if not radius > 0:
+        return None
+    ratio = radius / TYPICAL_BODY_RADIUS_M
+    for name, symbol, factor in PERSON_UNITS:
+        if abs(np.log10(ratio / factor)) <= 0.5:
+            return name, symbol
+    return None
+
+
 def _looks_like(radius: float) -> str:
     """The unit a body of this radius in "metres" most likely is in."""
-    ratio = radius / TYPICAL_BODY_RADIUS_M
-    for name, factor in (("millimetres", 1000.0), ("centimetres", 100.0)):
-        if abs(np.log10(ratio / factor)) <= 0.5:  # nearer this factor than any other
-            return f"they look like {name}"
+    unit = person_unit(radius)
+    if unit is not None and unit[1] != "m":
+        return f"they look like {unit[0]}"
     return "they are not metres"
+
+
+def unstated_unit_note(radius: NDArray[np.floating]) -> str | None:
+    """What to tell about a 3-D track that states no length unit, whose bodies have
+    ``radius`` (:func:`body_radius`, per body): when their median size is a person's
+    in metres, centimetres or millimetres (:func:`person_unit`), that this unit
+    declared would let the methods' physical constants apply; else None (a size like
+    no person's in any of them says nothing about the unit)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # every body NaN
+        r = float(np.nanmedian(radius)) if np.size(radius) else float("nan")
+    unit = person_unit(r)
+    if unit is None:
+        return None
+    name, symbol = unit
+    return (
+        f"the positions state no length unit, and their joints lie {r:.3g} units from "
+        f"their centre on average, as a person's do in {name} "
+        f"(about {TYPICAL_BODY_RADIUS_M} m): if they are {name}, declare it "
+        f"(units='{symbol}'; --units {symbol} of tobitkf smooth / evaluate / report) so "
+        "that the methods' physical constants apply. Without a unit the robust methods "
+        "measure their gates on the recording itself and the Kalman methods take their "
+        "constants in the data's unit"
+    )
 
 
 def check_body_scale(ys: NDArray[np.floating], metres: bool) -> NDArray[np.floating]:
