@@ -28,14 +28,15 @@ def _recordings() -> list:
     return out
 
 
-def _new_jumps(seq: tk.SkeletonSequence, method: str) -> list[tuple[str, int, float, float]]:
+def _new_jumps(seq: tk.SkeletonSequence, method: str, **kw) -> list[tuple[str, int, float, float]]:
     p = seq.positions
     valid = np.isfinite(p).all(axis=-1)
     if seq.tracking_state is not None:
         valid &= seq.tracking_state != tk.TrackingState.NOT_TRACKED
     step_in = np.linalg.norm(np.diff(np.where(valid[..., None], p, np.nan), axis=0), axis=-1)
     largest = np.nanmax(np.where(np.isfinite(step_in), step_in, -1.0), axis=0)  # (J,)
-    step_out = np.linalg.norm(np.diff(tk.smooth(seq, method=method).positions, axis=0), axis=-1)
+    out = tk.smooth(seq, method=method, **kw).positions
+    step_out = np.linalg.norm(np.diff(out, axis=0), axis=-1)
     both = valid[1:] & valid[:-1]
     bad = both & (step_out > largest[None] + TOLERANCE)
     return [
@@ -133,3 +134,117 @@ def test_the_offline_guard_limits_to_the_whole_recordings_largest_step():
     causal = est.copy()
     g.guard_frames(ys, missing, causal, np.zeros((T, 1, 1)), 0, *g.new_state(1, 1, D))
     np.testing.assert_allclose(causal[:6, 0, 0, 0], [0.0, 0.1, 0.2, 0.3, 0.5, 0.5])
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize(
+    "method, kw",
+    [("kf", {}), ("atkf", {}), ("tkfc", {}), ("kinect", {}), ("kf", {"offline": True})],
+)
+def test_the_step_guard_leaves_no_new_jump_to_the_published_filters(method, kw):
+    # the methods that make new jumps as published (tools/new_jumps.py), guarded
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # tkfc's note on limits that do not fit
+        found = {n: _new_jumps(s, method, step_guard=True, **kw) for n, s in _recordings()}
+    assert {k: v[:3] for k, v in found.items() if v} == {}
+
+
+def _jumpy_method(causal: bool) -> None:
+    """A method that adds a 0.5 m step at frame 10 and keeps it: its own output."""
+
+    def run(inp):
+        out = np.array(inp.ys)
+        out[10:, ..., 0] += 0.5  # along x only
+        return tk.SmoothOutput(out, std=np.full(inp.missing.shape, 0.01))
+
+    tk.register_method("jumpy", run, params={}, causal=causal, replace=True)
+
+
+@pytest.mark.parametrize("causal", [True, False])
+def test_the_step_guard_holds_any_methods_steps_to_the_inputs(causal):
+    topo = tk.get_topology("kinect_v2")
+    T = 30
+    pos = np.zeros((T, topo.n_joints, 3))
+    pos[:, :, 0] = 0.001 * np.arange(T)[:, None]  # 1 mm per frame
+    pos[20:, :, 0] += 0.05  # and one step of 5.1 cm at frame 20, after the method's jump
+    seq = tk.SkeletonSequence(positions=pos, topology=topo, fps=30.0)
+    _jumpy_method(causal)
+    try:
+        free = tk.smooth(seq, method="jumpy")
+        held = tk.smooth(seq, method="jumpy", step_guard=True)
+    finally:
+        tk.unregister_method("jumpy")
+    np.testing.assert_allclose(np.diff(free.positions[:, 0, 0])[9], 0.501)  # as it made it
+    steps = np.linalg.norm(np.diff(held.positions, axis=0), axis=-1)
+    # the limit at frame 10: the largest input step so far (1 mm) for a causal method,
+    # the whole recording's (5.1 cm) for any other
+    limit = 0.001 if causal else 0.051
+    np.testing.assert_allclose(steps[9], limit, rtol=1e-9)
+    assert np.all(steps <= 0.051 + 1e-12)
+    # the output catches up: the shift held back at frame 10 is the jump less the limit,
+    # and it is added to the variance over the three axes
+    shift = 0.501 - limit
+    np.testing.assert_allclose(held.std[10, 0], np.sqrt(0.01**2 + shift**2 / 3), rtol=1e-9)
+    assert held.metadata["provenance"]["params"]["step_guard"] is True
+    assert "step_guard" not in free.metadata["provenance"]["params"]
+
+
+def test_the_step_guard_changes_nothing_the_robust_methods_did_not_guard_already():
+    seq = tk.load(data_file("kimore/JointPositionExercise3.csv"))[0]
+    for method in ("robust", "robust_online"):
+        a, b = tk.smooth(seq, method=method), tk.smooth(seq, method=method, step_guard=True)
+        # a step held to its limit once is at it, up to the rounding of the rescaling
+        np.testing.assert_allclose(b.positions, a.positions, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(b.std, a.std, rtol=0, atol=1e-12)
+
+
+def test_step_guard_must_be_a_bool():
+    seq = tk.SkeletonSequence(positions=np.zeros((5, 25, 3)), topology="kinect_v2", fps=30.0)
+    with pytest.raises((TypeError, ValueError), match="step_guard"):
+        tk.smooth(seq, method="kf", step_guard="maybe")
+
+
+@pytest.mark.parametrize("method", ["kf", "kinect", "one_euro"])
+def test_live_with_the_step_guard_equals_batch(method):
+    # KIMORE Ex1: kf's and the Kinect filter's new jumps (tools/new_jumps.py)
+    seq = tk.load(data_file("kimore/JointPositionExercise1.csv"))[0]
+    batch = tk.smooth(seq, method=method, step_guard=True)
+    live = tk.LiveSmoother(seq.topology, method, fps=seq.fps, step_guard=True)
+    frames, stds = [], []
+    for t in range(seq.n_frames):
+        frames.append(live.update(seq.positions[t], tracking_state=seq.tracking_state[t]))
+        stds.append(live.std)
+    np.testing.assert_allclose(np.stack(frames), batch.positions, rtol=0, atol=1e-9)
+    if batch.std is not None:
+        np.testing.assert_allclose(np.stack(stds), batch.std, rtol=0, atol=1e-9)
+    unguarded = tk.LiveSmoother(seq.topology, method, fps=seq.fps)
+    assert unguarded.step_guard is False
+
+
+def test_the_command_line_guards_with_step_guard(tmp_path):
+    from click.testing import CliRunner
+
+    from tobitkf.app.commands import app
+
+    src = data_file("kimore/JointPositionExercise1.csv")
+    seq = tk.load(src)[0]
+    found = {}
+    for flag in ([], ["--step-guard"]):
+        out = tmp_path / ("guarded" if flag else "free")
+        res = CliRunner().invoke(app, ["smooth", str(src), "-m", "kf", "-o", str(out), *flag])
+        assert res.exit_code == 0, res.output
+        written = tk.load(next(out.glob("*.kf.csv")))[0]
+        ok = np.isfinite(seq.positions).all(-1) & (
+            seq.tracking_state != tk.TrackingState.NOT_TRACKED
+        )
+        both = ok[1:] & ok[:-1]
+        step_in = np.linalg.norm(np.diff(seq.positions, axis=0), axis=-1)
+        largest = np.where(both, step_in, -1.0).max(axis=0)
+        step_out = np.linalg.norm(np.diff(written.positions, axis=0), axis=-1)
+        # the CSV keeps six decimals: a micrometre of rounding per coordinate
+        found[bool(flag)] = int((both & (step_out > largest + 1e-5)).sum())
+        params = written.metadata["provenance"]["params"]
+        assert params.get("step_guard", False) is bool(flag)
+    assert found[False] > 0 and found[True] == 0  # kf as published has some; guarded none

@@ -53,6 +53,7 @@ and whatever the method adds (``robust``: ``rejected``, ``rejected_fraction``,
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -113,7 +114,14 @@ DEFAULT_METHOD = "robust"
 #: most accurate causal one
 DEFAULT_LIVE_METHOD = "robust_online"
 #: keywords of :func:`smooth` accepted next to the method's parameters
-COMMON_KEYWORDS = ("offline", "up_axis", "inferred_noise_factor", "min_confidence", "untangle")
+COMMON_KEYWORDS = (
+    "offline",
+    "up_axis",
+    "inferred_noise_factor",
+    "min_confidence",
+    "untangle",
+    "step_guard",
+)
 
 
 def method_defaults(method: str) -> dict[str, Any]:
@@ -215,6 +223,25 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
     return out
 
 
+def guard_steps(result: SmoothOutput, inp: SmoothInput, causal: bool) -> SmoothOutput:
+    """``result`` with no output step of a joint larger than the largest step its input
+    made between two present samples, where the input is present at both frames (the
+    step guard, :mod:`tobitkf.smoothing._step_guard`; ``causal``: the largest so far,
+    else the whole recording's); the shift is added to the variance of ``std``."""
+    from tobitkf.smoothing import _step_guard as g
+
+    est = np.array(result.positions, dtype=float)  # a copy: the method's array is its own
+    std = None if result.std is None else np.asarray(result.std, dtype=float)
+    var = np.zeros(inp.missing.shape) if std is None else std**2
+    _, B, J, D = inp.ys.shape
+    state = g.new_state(B, J, D)
+    missing = np.ascontiguousarray(inp.missing)
+    if not causal:
+        g.largest_steps(inp.ys, missing, state[1])
+    g.guard_frames(inp.ys, missing, est, var, 0, *state)
+    return dataclasses.replace(result, positions=est, std=None if std is None else np.sqrt(var))
+
+
 def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any]) -> dict:
     source = {k: meta[k] for k in ("source", "format") if meta.get(k) is not None}
     prov: dict[str, Any] = {
@@ -242,6 +269,7 @@ def smooth(
     units: str | None = None,
     topology: Any = None,
     timestamps: Any = None,
+    step_guard: bool = False,
     **params: Any,
 ) -> Any:
     """Smooth every joint of a skeleton sequence (or a list of them, one per body), or
@@ -284,6 +312,13 @@ def smooth(
         sequences in pixels or unknown units (pose-estimator output), not for tracks in
         metres. With ``gates="stream"`` the untangling is causal too, as live
         (:class:`~tobitkf.smoothing.untangle.StreamUntangler`).
+    step_guard : bool
+        Hold every output step of a joint to the largest step its input made between two
+        present samples (:mod:`tobitkf.smoothing._step_guard`: a causal method the
+        largest so far, any other the whole recording's), where the input is present at
+        both frames; the shift is added to the standard deviation. The robust methods
+        always do this; the paper's filters and the other published ones give their own
+        output unless this is True (docs/robust.md, "No new jumps").
     **params
         Method parameters; :func:`method_defaults` lists them.
 
@@ -302,7 +337,8 @@ def smooth(
     untangle = check_untangle(untangle)
     offline = as_bool("offline", offline)
     _check_offline(spec, offline)
-    opts = (offline, up_axis, factor, min_conf, untangle)
+    guard = as_bool("step_guard", step_guard)
+    opts = (offline, up_axis, factor, min_conf, untangle, guard)
     described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology,
                  "timestamps": timestamps}  # fmt: skip
     if isinstance(sequence, np.ndarray):
@@ -380,6 +416,7 @@ def _smooth_group(
     factor: float,
     min_conf: float = DEFAULT_MIN_CONFIDENCE,
     untangle: Any = "auto",
+    step_guard: bool = False,
 ) -> list[SkeletonSequence]:
     """Smooth bodies sharing frames, topology, time base, dimension and units, stacked
     on a body axis."""
@@ -428,6 +465,8 @@ def _smooth_group(
         result = SmoothOutput(positions.copy())
     else:
         result = run_method(spec, inp, params)
+        if step_guard:
+            result = guard_steps(result, inp, causal=spec.is_causal(params) and not offline)
     returned = np.asarray(result.positions, dtype=float)
     est = drop_third_axis(returned, n_dims)
     if scale is not None and scale != 1.0:
@@ -455,6 +494,8 @@ def _smooth_group(
         used["min_confidence"] = min_conf
     if untangled is not None:
         used["untangle"] = True
+    if step_guard:
+        used["step_guard"] = True
     body_shape = (missing.shape[0], missing.shape[2])  # (T, J)
     rejected = np.stack(
         [

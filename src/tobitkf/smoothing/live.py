@@ -64,7 +64,7 @@ from tobitkf.smoothing.keypoints import (
 )
 from tobitkf.smoothing.live_untangle import LiveUntangle
 from tobitkf.smoothing.paper import REFERENCE_DT
-from tobitkf.smoothing.params import check_inferred_factor, check_up_axis
+from tobitkf.smoothing.params import as_bool, check_inferred_factor, check_up_axis
 from tobitkf.smoothing.registry import LiveStepper, MethodSpec, SmoothInput
 from tobitkf.smoothing.robust_scale import (
     GATE_PARAMS,
@@ -95,6 +95,36 @@ Array = NDArray[np.float64]
 def live_methods() -> list[str]:
     """Names of the registered methods that can run live (causal with their defaults)."""
     return method_names(causal=True)
+
+
+class _GuardedStepper:
+    """A stepper whose output steps are held to the largest step its input made so far,
+    where the input is present at both frames (``step_guard=True``): the causal step
+    guard of :mod:`tobitkf.smoothing._step_guard`, frame by frame, as
+    :func:`~tobitkf.smoothing.api.smooth` runs it on a whole recording; the shift is
+    added to the variance of ``std``. Anything else is the wrapped stepper's."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.std: Array | None = None
+        self._state: tuple[Any, ...] | None = None
+
+    def __getattr__(self, name: str) -> Any:  # uses_*, rejected, ...: the stepper's own
+        return getattr(self.inner, name)
+
+    def step(self, ys: Array, missing: Any, states: Any, dt: float, **kw: Any) -> Array:
+        from tobitkf.smoothing import _step_guard as g
+
+        out = np.array(self.inner.step(ys, missing, states, dt, **kw), dtype=float)
+        std = getattr(self.inner, "std", None)
+        B, J, D = out.shape
+        if self._state is None or self._state[1].shape != (B, J):
+            self._state = g.new_state(B, J, D)
+        var = np.zeros((1, B, J)) if std is None else np.asarray(std, dtype=float)[None] ** 2
+        y = np.ascontiguousarray(ys, dtype=float)[None]
+        g.guard_frames(y, np.ascontiguousarray(missing)[None], out[None], var, 0, *self._state)
+        self.std = None if std is None else np.sqrt(var[0])
+        return out
 
 
 class _HistoryStepper:
@@ -305,6 +335,9 @@ class LiveSmoother:
         What was undone in the last frame: :attr:`swapped`.
     **params
         Method parameters; unknown names raise ``ValueError`` listing the valid ones.
+        ``step_guard=True`` holds every output step of a joint to the largest step its
+        input made so far, as ``smooth(..., step_guard=True)`` does (the robust methods
+        always do).
     """
 
     def __init__(
@@ -327,6 +360,9 @@ class LiveSmoother:
         self._sample_untangle: tuple[float, float, int] | None = None
         if "offline" in params:
             raise ValueError("offline smoothing needs the whole recording: it cannot run live")
+        params = dict(params)
+        # smooth(..., step_guard=True) as it runs live: the causal guard, frame by frame
+        self.step_guard = as_bool("step_guard", params.pop("step_guard", False))
         self.params = check_params(method, params)
         if units is not None and (not isinstance(units, str) or units not in KNOWN_UNITS):
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
@@ -578,11 +614,13 @@ class LiveSmoother:
         """Ids of the bodies being tracked (seen within ``max_missing``), in arrival order."""
         return list(self._bodies or ())
 
-    def _new_stepper(self) -> LiveStepper | _HistoryStepper:
+    def _new_stepper(self) -> LiveStepper | _HistoryStepper | _GuardedStepper:
         args = (self.topology, self.up_axis, self.inferred_noise_factor)
         if self.spec.live is not None:
-            return self.spec.live(*args, **self.params)
-        return _HistoryStepper(self.spec, *args, self.params)
+            stepper: Any = self.spec.live(*args, **self.params)
+        else:
+            stepper = _HistoryStepper(self.spec, *args, self.params)
+        return _GuardedStepper(stepper) if self.step_guard else stepper
 
     def _step_seconds(self, timestamp: float | None) -> tuple[float, float | None]:
         nominal = 1.0 / self.fps

@@ -114,6 +114,13 @@ from tobitkf.core.jsonable import dumps
     help="Run the RTS smoother after Kalman-type methods (uses future frames).",
 )
 @click.option(
+    "--step-guard",
+    is_flag=True,
+    help="Hold every output step of a joint to the largest step its input made. The "
+    "robust methods always do; the published filters (kf, atkf, tkfc, kinect, ...) may "
+    "overshoot it otherwise (docs/robust.md, 'No new jumps').",
+)
+@click.option(
     "--glob",
     "pattern",
     default="*",
@@ -154,6 +161,7 @@ def smooth(
     params,
     noise_from,
     offline,
+    step_guard,
     pattern,
     jobs,
     cluster,
@@ -174,6 +182,7 @@ def smooth(
 
     kwargs = _parse_params(params)
     offline = bool(kwargs.pop("offline", False)) or offline  # -p offline=true == --offline
+    step_guard = bool(kwargs.pop("step_guard", False)) or step_guard  # smooth's, not the method's
     try:
         check_params(method, kwargs)
     except (ValueError, TypeError) as exc:
@@ -189,6 +198,8 @@ def smooth(
             check_params(method, {"offline": True})
         except ValueError as exc:
             _fail(f"--offline: {exc}")
+    if step_guard:
+        kwargs["step_guard"] = True  # passed to tobitkf.smooth with the method's parameters
     _check_cluster_options(cluster, workers, jobs)
     if "://" not in outdir:
         _writable_folder(outdir, "the outputs")  # once, before any file is read
