@@ -227,6 +227,22 @@ def test_info_says_the_unit_is_assumed_and_the_size_wrong(tmp_path):
     assert body["units_stated"] and "size_problem" not in body
 
 
+def test_info_names_the_unit_a_3d_array_of_a_persons_size_looks_like(tmp_path):
+    from tobitkf.app.info import describe
+
+    seq = generate_motion("arms", duration=1.0, seed=11)  # a person, in metres
+    for k, unit in ((1.0, "units='m'"), (100.0, "units='cm'")):
+        np.save(tmp_path / "track.npy", seq.positions * k)
+        body = describe(tmp_path / "track.npy")["sequences"][0]
+        assert body["units"] is None and unit in body["size_note"]
+    np.save(tmp_path / "flat.npy", seq.positions[..., :2])  # 2-D: image keypoints
+    assert "size_note" not in describe(tmp_path / "flat.npy")["sequences"][0]
+    res = CliRunner().invoke(app, ["info", str(tmp_path / "track.npy")])
+    assert res.exit_code == 0 and "--units cm" in " ".join(res.output.split())
+    body = describe(_csv_in_mm(tmp_path, seq))["sequences"][0]  # a unit assumed: no note
+    assert "size_note" not in body
+
+
 def test_a_single_point_is_judged_by_its_motion_and_a_still_one_is_left_alone():
     rng = np.random.default_rng(12)
     point = np.cumsum(rng.normal(0, 0.01, (50, 1, 3)), axis=0)  # one marker, moving

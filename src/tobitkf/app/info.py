@@ -32,13 +32,16 @@ def describe(path: str | Path, format: str = "auto") -> dict[str, Any]:
 
 def _size(seq: Any) -> dict[str, Any]:
     """``size_problem``: why the smoothers would refuse the body's size (a track in
-    millimetres read as metres, :mod:`tobitkf.smoothing.body_scale`), else nothing."""
-    from tobitkf.smoothing.body_scale import check_body_scale
+    millimetres read as metres, :mod:`tobitkf.smoothing.body_scale`); ``size_note``: for
+    a 3-D track in unknown units, the unit its size looks like (what smoothing it warns,
+    :func:`~tobitkf.smoothing.body_scale.unstated_unit_note`); else nothing."""
+    from tobitkf.smoothing.body_scale import check_body_scale, unstated_unit_note
 
     scale = seq.metres_per_unit
     pos = seq.positions[:, None] * (1.0 if scale is None else scale)
     try:
-        check_body_scale(pos, metres=scale is not None)
+        radius = check_body_scale(pos, metres=scale is not None)
     except ValueError as exc:
         return {"size_problem": str(exc)}
-    return {}
+    note = unstated_unit_note(radius) if seq.units is None and seq.n_dims == 3 else None
+    return {} if note is None else {"size_note": note}

@@ -46,6 +46,8 @@ def info(path, input_format, as_json):
         console.print(f"  units: {_units(body)}")
         if body.get("size_problem"):
             console.print(f"  [red]size[/red]: {escape(body['size_problem'])}")
+        if body.get("size_note"):
+            console.print(f"  [yellow]size[/yellow]: {escape(body['size_note'])}")
         for note in body["reader_warnings"]:
             console.print(f"  [yellow]reader[/yellow]: {escape(note)}")
         if body.get("tracking_states"):
