@@ -43,5 +43,11 @@ def test_steps_where_the_input_is_absent_or_not_tracked_do_not_count():
 
 
 @pytest.mark.parametrize("spec, method, offline", [("kf+rts", "kf", True), ("kf", "kf", False)])
-def test_method_specs(spec, method, offline):
-    assert tool_module("new_jumps")._split(spec) == (method, offline)
+@pytest.mark.parametrize("guard", [False, True])
+def test_method_specs(spec, method, offline, guard):
+    seq = _seq()
+    seq = seq.replace(positions=seq.positions + 0.01 * np.sin(np.arange(8))[:, None, None])
+    got = tool_module("new_jumps").runner(spec, guard)(seq)
+    want = tk.smooth(seq, method=method, offline=offline, step_guard=guard)
+    np.testing.assert_array_equal(got.positions, want.positions)
+    assert got.metadata["provenance"]["params"].get("step_guard", False) is guard

@@ -27,6 +27,7 @@ import itertools
 import numpy as np
 from error_breakdown import parse_with_truth_replace  # tools/ is on the script's path
 
+import tobitkf as tk
 from tobitkf.evaluation.evaluate import evaluate_paths
 
 #: band edges, Hz (the last band runs to the Nyquist frequency)
@@ -93,8 +94,6 @@ def recording(track_path: str, truth_path: str, methods: list[str]) -> dict:
     outputs: dict = {}
     gt, _ = evaluate_paths(track_path, truth_path, [m for m in methods if m != "raw"],
                            outputs=outputs)  # fmt: skip
-    import tobitkf as tk
-
     seq = tk.load(track_path)[0]
     outputs["raw"] = seq
     truth = gt.positions

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import tobitkf as tk
+from tobitkf.evaluation.scores import resolve_method
 
 TOLERANCE = 1e-3  # m
 METHODS = ("kf", "kf+rts", "atkf", "atkf2016", "tkfc", "sgf", "one_euro", "kinect",
@@ -58,8 +59,10 @@ def new_jumps(seq: tk.SkeletonSequence, out: np.ndarray) -> np.ndarray:
     return excess[excess > TOLERANCE]
 
 
-def _split(spec: str) -> tuple[str, bool]:
-    return (spec[: -len("+rts")], True) if spec.endswith("+rts") else (spec, False)
+def runner(spec: str, guard: bool):
+    """``spec`` (``tobitkf evaluate``'s method names: ``kf+rts`` is ``kf`` offline) as a
+    callable, with ``step_guard=guard`` (:func:`tobitkf.evaluation.scores.resolve_method`)."""
+    return resolve_method((spec, spec, {"step_guard": guard}))[1]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,15 +79,15 @@ def main(argv: list[str] | None = None) -> int:
           "| with step_guard=True: recordings | new jumps |")  # fmt: skip
     print("|---|---|---|---|---|---|")
     for spec in (m.strip() for m in args.methods.split(",") if m.strip()):
-        method, offline = _split(spec)
         cells = []
         for guard in (False, True):
+            smooth = runner(spec, guard)
             n_rec = n_jumps = 0
             worst = 0.0
             for _, seq in recs:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")  # the methods' notes on odd data
-                    out = tk.smooth(seq, method=method, offline=offline, step_guard=guard)
+                    out = smooth(seq)
                 ex = new_jumps(seq, out.positions)
                 if ex.size:
                     n_rec += 1

@@ -43,5 +43,5 @@ def _size(seq: Any) -> dict[str, Any]:
         radius = check_body_scale(pos, metres=scale is not None)
     except ValueError as exc:
         return {"size_problem": str(exc)}
-    note = unstated_unit_note(radius) if seq.units is None and seq.n_dims == 3 else None
+    note = unstated_unit_note(radius, seq.units, seq.n_dims)
     return {} if note is None else {"size_note": note}

@@ -109,3 +109,16 @@ def guard_frames(
                         var[t, bo, j] += shift / D
                 for k in range(D):
                     prev_out[b, j, k] = est[t, bo, j, k]
+
+
+def guard_output(
+    ys: np.ndarray, missing: np.ndarray, est: np.ndarray, std: np.ndarray | None, state: tuple
+) -> np.ndarray | None:
+    """:func:`guard_frames` on a method's output ``est (T, B, J, D)`` (changed in place)
+    with its standard deviation ``std (T, B, J)`` or None, the state carried in
+    ``state`` (:func:`new_state`); returns the standard deviation with the shifts
+    added (None without one). For methods that do not guard themselves
+    (``smooth(..., step_guard=True)``, batch and live alike)."""
+    var = np.zeros(missing.shape) if std is None else np.asarray(std, dtype=float) ** 2
+    guard_frames(ys, np.ascontiguousarray(missing), est, var, 0, *state)
+    return None if std is None else np.sqrt(var)

@@ -195,13 +195,13 @@ def run_method(spec: MethodSpec, inp: SmoothInput, params: Mapping[str, Any]) ->
     """Call a method's runner and check what it returns (a user's method may be wrong)."""
     # a body a thousand times too large is not in metres (unless the gates are measured
     # on the recording, whatever its unit); 1e-150 is in no unit
-    physical = inp.units == "m" and not _robust.gates_measured(params)
+    measured = _robust.gates_measured(params)
+    physical = inp.units == "m" and not measured
     radius = check_body_scale(inp.ys, metres=physical)
-    if inp.units is None and inp.n_dims == 3 and not _robust.gates_measured(params):
-        # a 3-D array states no unit: a person's size tells which one it likely is
-        note = unstated_unit_note(radius)
-        if note is not None:
-            warnings.warn(note, UserWarning, stacklevel=4)  # the caller of smooth
+    # a 3-D array states no unit: a person's size tells which one it likely is
+    note = None if measured else unstated_unit_note(radius, inp.units, inp.n_dims)
+    if note is not None:
+        warnings.warn(note, UserWarning, stacklevel=4)  # the caller of smooth
     if spec.check_data is not None:
         spec.check_data(params, inp.n_dims, inp.units)
     out = spec.run(inp, **params)
@@ -231,15 +231,12 @@ def guard_steps(result: SmoothOutput, inp: SmoothInput, causal: bool) -> SmoothO
     from tobitkf.smoothing import _step_guard as g
 
     est = np.array(result.positions, dtype=float)  # a copy: the method's array is its own
-    std = None if result.std is None else np.asarray(result.std, dtype=float)
-    var = np.zeros(inp.missing.shape) if std is None else std**2
     _, B, J, D = inp.ys.shape
     state = g.new_state(B, J, D)
-    missing = np.ascontiguousarray(inp.missing)
     if not causal:
-        g.largest_steps(inp.ys, missing, state[1])
-    g.guard_frames(inp.ys, missing, est, var, 0, *state)
-    return dataclasses.replace(result, positions=est, std=None if std is None else np.sqrt(var))
+        g.largest_steps(inp.ys, np.ascontiguousarray(inp.missing), state[1])
+    std = g.guard_output(inp.ys, inp.missing, est, result.std, state)
+    return dataclasses.replace(result, positions=est, std=std)
 
 
 def _provenance(spec: MethodSpec, params: dict[str, Any], meta: Mapping[str, Any]) -> dict:

@@ -127,12 +127,15 @@ def _looks_like(radius: float) -> str:
     return "they are not metres"
 
 
-def unstated_unit_note(radius: NDArray[np.floating]) -> str | None:
-    """What to tell about a 3-D track that states no length unit, whose bodies have
-    ``radius`` (:func:`body_radius`, per body): when their median size is a person's
-    in metres, centimetres or millimetres (:func:`person_unit`), that this unit
-    declared would let the methods' physical constants apply; else None (a size like
-    no person's in any of them says nothing about the unit)."""
+def unstated_unit_note(radius: NDArray[np.floating], units: str | None, n_dims: int) -> str | None:
+    """What to tell about a track whose bodies have ``radius`` (:func:`body_radius`,
+    per body): when it is 3-D, states no length unit (``units`` None) and its median
+    size is a person's in metres, centimetres or millimetres (:func:`person_unit`),
+    that this unit declared would let the methods' physical constants apply; else None
+    (2-D keypoints are image positions, and a size like no person's in any of them says
+    nothing about the unit)."""
+    if units is not None or n_dims != 3:
+        return None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # every body NaN
         r = float(np.nanmedian(radius)) if np.size(radius) else float("nan")

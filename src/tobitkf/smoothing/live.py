@@ -120,10 +120,10 @@ class _GuardedStepper:
         B, J, D = out.shape
         if self._state is None or self._state[1].shape != (B, J):
             self._state = g.new_state(B, J, D)
-        var = np.zeros((1, B, J)) if std is None else np.asarray(std, dtype=float)[None] ** 2
         y = np.ascontiguousarray(ys, dtype=float)[None]
-        g.guard_frames(y, np.ascontiguousarray(missing)[None], out[None], var, 0, *self._state)
-        self.std = None if std is None else np.sqrt(var[0])
+        std1 = None if std is None else np.asarray(std, dtype=float)[None]
+        guarded = g.guard_output(y, np.asarray(missing)[None], out[None], std1, self._state)
+        self.std = None if guarded is None else guarded[0]
         return out
 
 
