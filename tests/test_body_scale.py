@@ -95,8 +95,9 @@ def test_the_same_track_in_millimetres_gives_the_same_output(method):
     seq = generate_motion("mixed", duration=4.0, seed=2)
     metres = tk.smooth(seq, method=method)
     mm = tk.smooth(seq.replace(positions=seq.positions * 1000, units="mm"), method=method)
-    # to a micrometre: the noise fit's optimiser sees the rounding of the conversion
-    np.testing.assert_allclose(mm.positions / 1000, metres.positions, rtol=0, atol=1e-6)
+    # to 10 micrometres: the noise fit's optimiser sees the rounding of the conversion,
+    # and the reweighting passes (weights from the pass before) pass it on
+    np.testing.assert_allclose(mm.positions / 1000, metres.positions, rtol=0, atol=1e-5)
 
 
 def test_live_refuses_millimetres_taken_as_metres_at_the_first_frame():

@@ -417,7 +417,7 @@ def test_carried_joint_follows_its_parent_offline_exactly():
     pos += (0.2 * np.sin(np.pi * t))[:, None, None] * np.array([1.0, 0.3, -0.5])
     meas = pos.copy()
     meas[30:50, 1] += OFF
-    est, rej = _run(meas, "robust", v_max=5.0, noise="fixed")
+    est, rej = _run(meas, "robust", v_max=5.0, noise="fixed", reweight=0)
     assert _frames(rej[:, 1]) == _span(30, 49)
     q = 2 * 0.6**2 / 0.15  # arms: speed_sd 0.6 m/s, noise_sd 10 mm; tau 0.15 s
     offset = pos[29, 1] - pos[29, 0]
@@ -581,7 +581,7 @@ def test_offline_smoother_is_the_documented_ou_kalman_rts_smoother():
     seq = _seq(pos, states, timestamps=ts)
     sd, spd, tau, factor = 0.008, 0.4, 0.2, 3.0
     out = tk.smooth(seq, "robust", noise_sd=sd, speed_sd=spd, tau=tau, inferred_noise_factor=factor,
-                    noise="fixed")  # fmt: skip
+                    noise="fixed", reweight=0)  # fmt: skip
     assert not out.metadata["diagnostics"]["rejected"].any()
     y = pos[:, 0].copy()
     y[states[:, 0] == NOT_TRACKED] = np.nan

@@ -624,9 +624,10 @@ def test_ou_smoother_equals_the_generic_kalman_core_when_nothing_is_rejected(off
     states = np.full(ys.shape[:2], int(TrackingState.TRACKED), dtype=np.int8)
     states[rng.random(states.shape) < 0.1] = TrackingState.INFERRED
     tau, spd, sd = 0.15, 0.5, 0.01
-    # the guesses as independent measurements, as the core treats them (test_robust_shared)
+    # the guesses as independent measurements, as the core treats them (test_robust_shared);
+    # one pass of the smoother (no reweighting: test_reweight)
     params = dict(v_max=1e6, bones=False, speed_sd=spd, noise_sd=sd, tau=tau, lookback=0,
-                  noise="fixed", shared_errors=False)  # fmt: skip
+                  noise="fixed", shared_errors=False, reweight=0)  # fmt: skip
     out = robust_smooth(_seq(ys, states), offline=offline, **params)
     assert not out.metadata["diagnostics"]["rejected"].any()
     ref, ref_sd = _ou_reference(

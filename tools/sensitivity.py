@@ -36,12 +36,12 @@ from tobitkf.smoothing.robust import ROBUST_DEFAULTS
 ROOT = Path(__file__).resolve().parents[1]
 METHODS = ("robust", "robust_online")
 #: parameters one method does not read
-OFFLINE_ONLY = {"two_pass", "noise", "fit_seconds", "shoulder_drop"}
+OFFLINE_ONLY = {"two_pass", "noise", "fit_seconds", "shoulder_drop", "reweight"}
 ONLINE_ONLY = {"lookback"}
 #: the numeric parameters, halved and doubled
 SCALED = (
     "v_max", "margin", "bone_tol_abs", "bone_tol_rel", "speed_sd", "noise_sd", "tau",
-    "max_reject", "min_run", "lookback", "fit_seconds", "shoulder_drop",
+    "max_reject", "min_run", "lookback", "fit_seconds", "shoulder_drop", "reweight",
 )  # fmt: skip
 #: the switches, turned off
 SWITCHES = ("bones", "two_pass", "carry", "inferred_bones")

@@ -100,7 +100,9 @@ standard deviation is ``speed_sd``, per body region) and measurement noise ``noi
 fitted to the recording per body region by maximum likelihood, with a coloured
 measurement error beside the white one, and the filter is the three-state one of that
 model (:mod:`tobitkf.smoothing.robust_fit`); while a joint is not measured its process
-noise is at least the constant's.  Offline the RTS smoother runs after the filter;
+noise is at least the constant's.  Offline the RTS smoother runs after the filter, and
+then ``reweight`` (2) times more with Huber's weights on the accepted samples that the
+pass before does not explain (:mod:`tobitkf.smoothing.robust_reweight`);
 online (constants) the filter output is returned: across a rejected stretch the OU
 velocity decays with ``tau`` (0.15 s), so a lost joint is extrapolated by at most about
 ``v * tau`` and then held. Online, a joint not accepted yet is returned as measured
@@ -161,6 +163,7 @@ from tobitkf.smoothing.robust_gating import (
     region_values,
     reject_dropped_shoulders,
 )
+from tobitkf.smoothing.robust_reweight import HuberWeights
 from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates, stream_gate_frames
 from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS
 from tobitkf.smoothing.timebase import (
@@ -221,6 +224,9 @@ ROBUST_DEFAULTS: dict[str, Any] = {
     "noise": "fit",
     # offline, noise="fit": at most this many seconds of each recording are fitted on, s
     "fit_seconds": 5.0,
+    # offline: passes of the smoother that down-weight the accepted samples it does not
+    # explain (Huber's weights on the residuals of the pass before; robust_reweight.py)
+    "reweight": 2,
     # the errors that the INFERRED guesses of one occlusion and the carried
     # samples of one stretch share, taken from the recording (online: the frames so far),
     # are added to the sd of the samples resting on them (robust_shared.py); the
@@ -254,6 +260,9 @@ def _noise_choice(name: str, value: Any) -> Any:
     return check_given_noise(name, value)
 
 
+#: most reweighting passes (each is one more run of the smoother)
+MAX_REWEIGHT = 10
+
 #: parameter validators (name -> check(name, value) -> value)
 ROBUST_VALIDATORS: dict[str, Any] = {
     "v_max": region_value,
@@ -277,19 +286,31 @@ ROBUST_VALIDATORS: dict[str, Any] = {
     "noise": _noise_choice,
     "fit_seconds": positive_or_inf,
     "shared_errors": as_bool,
+    "reweight": int_between(0, MAX_REWEIGHT),
 }
 
 #: a sample's measurement variance is multiplied by 1 / max(confidence, this)^2
 MIN_CONFIDENCE_WEIGHT = 0.01
 
 
+def _online_reweight(name: str, value: Any) -> int:
+    """``robust_online``'s ``reweight``: 0 (it updates with each sample as it comes)."""
+    if int_between(0, MAX_REWEIGHT)(name, value) != 0:
+        raise ValueError(
+            f"{name} is robust's (offline: passes over the whole recording); robust_online "
+            "weighs each sample once, as it comes: give 0 or leave it out"
+        )
+    return 0
+
+
 #: robust_online keeps the given noise (a causal fit would gain little: docs/robust.md,
 #: "Which choices"); its shared errors come from the frames so far
-ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed"}
+ONLINE_DEFAULTS: dict[str, Any] = {**ROBUST_DEFAULTS, "noise": "fixed", "reweight": 0}
 ONLINE_VALIDATORS: dict[str, Any] = {
     **ROBUST_VALIDATORS,
     "noise": one_of("fixed"),
     "gates": one_of("auto", "physical", "recording", "stream"),
+    "reweight": _online_reweight,
 }
 
 
@@ -494,6 +515,11 @@ def _offline(
         guess, shared = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred, yk,
                                        steps, par, order, float(params["max_reject"]))  # fmt: skip
     fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0, shared)
+    if params["reweight"]:  # the samples the track does not explain, down-weighted
+        weights = HuberWeights(ys, acc, rinf)
+        for _ in range(int(params["reweight"])):
+            fit_kernels().smooth_run(yk, rvar * weights(est[:, bs]), steps, q, sc2, tau, tau_c,
+                                     est, var, b0, shared)  # fmt: skip
     if fits is not None:  # the sd is at least what the samples' own noise says
         from tobitkf.smoothing.robust_fit import sd_floor
 
@@ -964,6 +990,9 @@ def robust_smooth(
         samples resting on them (:mod:`tobitkf.smoothing.robust_shared`; the estimate is
         unchanged; offline ``diagnostics["guess_error_sd"]``); False keeps each sample's
         own error as if independent.
+    reweight : offline, passes of the smoother after the first with Huber's weights on
+        the accepted samples the pass before does not explain (default 2; 0: none;
+        :mod:`tobitkf.smoothing.robust_reweight`). ``robust_online`` takes only 0.
     gates : ``"auto"`` (default: the metric parameters as given for lengths, from the
         recording for pixels and unknown units), ``"physical"`` (as given, in the data's
         units after conversion of lengths to metres) or ``"recording"``
