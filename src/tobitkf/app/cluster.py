@@ -20,6 +20,7 @@ file that kills two workers is failed after exactly those two deaths.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import uuid
@@ -142,8 +143,12 @@ def run_on_cluster(
     deaths: dict[int, int] = {}
     members: dict[Any, list[int]] = {}
 
+    submitted = itertools.count()
+
     def submit(idx: list[int]) -> Any:
-        key = f"tobitkf-smooth-{token}-{idx[0]}-{len(members)}"
+        # a key never used before: a retry under the key of its killed task would get
+        # that task's error back from the scheduler, a death the file never had
+        key = f"tobitkf-smooth-{token}-{idx[0]}-{next(submitted)}"
         fut = client.submit(run_group, [args[i] for i in idx], key=key, pure=False)
         members[fut] = idx
         return fut
