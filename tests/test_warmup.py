@@ -72,14 +72,16 @@ print(json.dumps(seen))
 """
 
 
-@pytest.mark.slow
-@pytest.mark.realdata
-@pytest.mark.parametrize(
-    "method", ["robust", "robust_online", "atkf", "tkfc", "kinect", "one_euro"]
-)
-def test_warming_on_the_tiny_recording_covers_real_files(method, tmp_path):
-    # in an empty cache: after warm(), real recordings (other lengths, tracking states
-    # or none, other formats, live frames) need no further compilation
+COVERED = ["robust", "robust_online", "atkf", "tkfc", "kinect", "one_euro"]
+
+
+@pytest.fixture(scope="module")
+def covered(tmp_path_factory):
+    """Per method of :data:`COVERED`, what the :data:`COVER` run printed, each in its own
+    empty cache. The runs are independent processes that only compile, so they go two
+    at a time (the 2 cores of CI): the slowest part of the suite, halved."""
+    from concurrent.futures import ThreadPoolExecutor
+
     files = [
         data_file(rel)
         for rel in (
@@ -89,9 +91,24 @@ def test_warming_on_the_tiny_recording_covers_real_files(method, tmp_path):
             "cmu-mocap/scaled_131_01.bvh",
         )
     ]
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONWARNINGS="ignore")
-    res = subprocess.run([sys.executable, "-c", COVER, method, *map(str, files)], env=env,
-                         capture_output=True, text=True, timeout=600)  # fmt: skip
+
+    def run(method: str) -> subprocess.CompletedProcess:
+        cache = tmp_path_factory.mktemp(f"cache-{method}")
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONWARNINGS="ignore")
+        return subprocess.run([sys.executable, "-c", COVER, method, *map(str, files)],
+                              env=env, capture_output=True, text=True, timeout=900)  # fmt: skip
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        return dict(zip(COVERED, pool.map(run, COVERED), strict=True))
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+@pytest.mark.parametrize("method", COVERED)
+def test_warming_on_the_tiny_recording_covers_real_files(method, covered):
+    # in an empty cache: after warm(), real recordings (other lengths, tracking states
+    # or none, other formats, live frames) need no further compilation
+    res = covered[method]
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout.splitlines()[-1]) == []
 
@@ -112,20 +129,30 @@ def _cli(args: list[str], cache: Path, cwd: Path) -> subprocess.CompletedProcess
 
 @pytest.mark.slow
 def test_empty_cache_compiles_once_says_so_then_loads(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
     cache = tmp_path / "numba-cache"
     seq = tiny_recording()
     tk.save([seq], tmp_path / "rec.csv", format="csv")
-    first = _cli(["smooth", "rec.csv", "-o", "out", "-m", "kf"], cache, tmp_path)
+    cache2 = tmp_path / "other-cache"
+
+    def smooth_twice() -> tuple[subprocess.CompletedProcess, ...]:
+        first = _cli(["smooth", "rec.csv", "-o", "out", "-m", "kf"], cache, tmp_path)
+        args = ["smooth", "rec.csv", "-o", "out", "-m", "kf", "--overwrite"]
+        return first, _cli(args, cache, tmp_path)
+
+    def warm_twice() -> tuple[subprocess.CompletedProcess, ...]:
+        return tuple(_cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path) for _ in "12")
+
+    with ThreadPoolExecutor(max_workers=2) as pool:  # two caches, independent: 2 cores
+        smoothed, warmed = pool.submit(smooth_twice), pool.submit(warm_twice)
+        (first, again), (w1, w2) = smoothed.result(), warmed.result()
     assert first.returncode == 0, first.stderr
     assert "compiling the kernels of kf" in first.stderr
     assert any(cache.rglob("*.nbi"))  # numba wrote its cache
-    again = _cli(["smooth", "rec.csv", "-o", "out", "-m", "kf", "--overwrite"], cache, tmp_path)
     assert again.returncode == 0, again.stderr
     assert "compiling" not in again.stderr
     # the warmup command in a new cache: kf compiles (seconds > 0), then nothing does
-    cache2 = tmp_path / "other-cache"
-    w1 = _cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path)
-    w2 = _cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path)
     assert w1.returncode == 0 and w2.returncode == 0, w1.stderr + w2.stderr
     row1 = next(ln for ln in w1.stdout.splitlines() if " kf " in ln)
     row2 = next(ln for ln in w2.stdout.splitlines() if " kf " in ln)
