@@ -76,11 +76,16 @@ COVERED = ["robust", "robust_online", "atkf", "tkfc", "kinect", "one_euro"]
 
 
 @pytest.fixture(scope="module")
-def covered(tmp_path_factory):
-    """Per method of :data:`COVERED`, what the :data:`COVER` run printed, each in its own
-    empty cache. The runs are independent processes that only compile, so they go two
-    at a time (the 2 cores of CI): the slowest part of the suite, halved."""
+def covered(request, tmp_path_factory):
+    """Per method of :data:`COVERED` whose test was selected, what the :data:`COVER` run
+    printed, each in its own empty cache. The runs are independent processes that only
+    compile, so they go two at a time (the 2 cores of CI): the slowest part of the suite,
+    halved."""
     from concurrent.futures import ThreadPoolExecutor
+
+    test = test_warming_on_the_tiny_recording_covers_real_files.__name__
+    names = {item.name for item in request.session.items}
+    methods = [m for m in COVERED if f"{test}[{m}]" in names]
 
     files = [
         data_file(rel)
@@ -99,7 +104,7 @@ def covered(tmp_path_factory):
                               env=env, capture_output=True, text=True, timeout=900)  # fmt: skip
 
     with ThreadPoolExecutor(max_workers=2) as pool:
-        return dict(zip(COVERED, pool.map(run, COVERED), strict=True))
+        return dict(zip(methods, pool.map(run, methods), strict=True))
 
 
 @pytest.mark.slow
