@@ -79,8 +79,8 @@ COVERED = ["robust", "robust_online", "atkf", "tkfc", "kinect", "one_euro"]
 def covered(request, tmp_path_factory):
     """Per method of :data:`COVERED` whose test was selected, what the :data:`COVER` run
     printed, each in its own empty cache. The runs are independent processes that only
-    compile, so they go two at a time (the 2 cores of CI): the slowest part of the suite,
-    halved."""
+    compile, so they go two at a time (the 2 cores of CI): after the staleness check of
+    the docs, they were the suite's slowest tests."""
     from concurrent.futures import ThreadPoolExecutor
 
     test = test_warming_on_the_tiny_recording_covers_real_files.__name__
@@ -101,7 +101,7 @@ def covered(request, tmp_path_factory):
         cache = tmp_path_factory.mktemp(f"cache-{method}")
         env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONWARNINGS="ignore")
         return subprocess.run([sys.executable, "-c", COVER, method, *map(str, files)],
-                              env=env, capture_output=True, text=True, timeout=900)  # fmt: skip
+                              env=env, capture_output=True, text=True, timeout=600)  # fmt: skip
 
     with ThreadPoolExecutor(max_workers=2) as pool:
         return dict(zip(methods, pool.map(run, methods), strict=True))
@@ -147,7 +147,7 @@ def test_empty_cache_compiles_once_says_so_then_loads(tmp_path):
         return first, _cli(args, cache, tmp_path)
 
     def warm_twice() -> tuple[subprocess.CompletedProcess, ...]:
-        return tuple(_cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path) for _ in "12")
+        return tuple(_cli(["warmup", "-m", "kf", "-j", "1"], cache2, tmp_path) for _ in range(2))
 
     with ThreadPoolExecutor(max_workers=2) as pool:  # two caches, independent: 2 cores
         smoothed, warmed = pool.submit(smooth_twice), pool.submit(warm_twice)
