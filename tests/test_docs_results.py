@@ -67,6 +67,14 @@ def test_the_checker_finds_a_changed_number(tmp_path, monkeypatch):
     assert [b.body for b in tool.blocks(doc)] == [tool.render(cmd, "| a | 1.25 |")]
 
 
+def test_the_longest_commands_start_first():
+    # two at a time: a long command started last would run alone at the end
+    tool = _tool()
+    cmds = ["tobitkf benchmark --seeds 5", "tobitkf fit a.txt", "python tools/delayed.py a.txt",
+            "tobitkf reproduce likelihood --datasets 5"]  # fmt: skip
+    assert tool.slow_first(cmds) == [cmds[2], cmds[3], cmds[0], cmds[1]]
+
+
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_every_results_block_matches_what_its_command_prints():

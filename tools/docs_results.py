@@ -77,6 +77,21 @@ def render(command: str, output: str) -> str:
 
 _CACHE: dict[str, str] = {}  # a command shown in several files runs once
 
+#: parts of the commands that take longest (tens of seconds: a method run once per frame,
+#: maximum-likelihood fits, many recordings or settings), started first so that the
+#: commands run at a time end together instead of one long command running alone at the end
+SLOW = ("tools/delayed.py", "reproduce likelihood", "tools/sensitivity.py", "ui-prmd",
+        "reproduce oscillator")  # fmt: skip
+
+
+def slow_first(cmds: list[str]) -> list[str]:
+    """``cmds`` with those of :data:`SLOW` first (in its order), the rest as given."""
+
+    def rank(cmd: str) -> int:
+        return next((i for i, part in enumerate(SLOW) if part in cmd.lower()), len(SLOW))
+
+    return sorted(cmds, key=rank)  # stable: ties keep their order
+
 
 def prefetch(paths: list[Path], *, only: str | None, jobs: int | None = None) -> None:
     """Run the result blocks' commands of ``paths`` (not the timings: they run alone)
@@ -87,7 +102,7 @@ def prefetch(paths: list[Path], *, only: str | None, jobs: int | None = None) ->
         for b in blocks(path):
             if not b.bench and (not only or only in b.command) and b.command not in _CACHE:
                 cmds.append(b.command)
-    cmds = list(dict.fromkeys(cmds))
+    cmds = slow_first(list(dict.fromkeys(cmds)))
     with ThreadPoolExecutor(max_workers=jobs or os.cpu_count() or 1) as pool:
         for cmd, out in zip(cmds, pool.map(run, cmds), strict=True):
             _CACHE[cmd] = out

@@ -5,9 +5,9 @@ are numba kernels, and so are the output states :func:`~tobitkf.smoothing.api.sm
 works out for every method (:mod:`tobitkf.smoothing.output_states`); all are cached on
 disk (numba's cache: ``__pycache__`` beside the package, or ``NUMBA_CACHE_DIR``). The
 first call on a new machine, or after an upgrade, compiles them: seconds for the Kalman
-methods, about twenty for ``robust``, whose noise fit has kernels of its own (its
-likelihood and optimiser); every later process loads them from the cache in well under a
-second.
+methods, a minute or more for ``robust``, whose gates, untangling and noise fit (its
+likelihood and optimiser) have kernels of their own (``tobitkf warmup`` prints the
+seconds); every later process loads them from the cache in well under a second.
 
 :func:`warm` runs a method on a small built-in recording (and, for causal methods with a
 live stepper, a few live frames), so its kernels are compiled and cached before the real
@@ -112,9 +112,12 @@ def _run_tiny(method: str) -> None:
     seq = tiny_recording()
     smooth(seq, method=method)
     # several people in pixels are untangled before any method runs: its compiled loops
+    # (two: one compiled loop; three or more: a compiled step per frame, called from here)
     px = seq.positions[..., :2] * 500
     people = [seq.replace(positions=px + 100 * b, units="px", tracking_state=None)
-              for b in range(2)]  # fmt: skip
+              for b in range(3)]  # fmt: skip
+    untangle_sequences(people)
+    people3, people = people, people[:2]
     untangle_sequences(people)
     try:  # the method on them: 2-D, its gates from the recording (robust's)
         smooth(people, method=method)
@@ -127,6 +130,17 @@ def _run_tiny(method: str) -> None:
         live = LiveSmoother(seq.topology, method=method, fps=30.0)
         for t in range(5):
             live.update(seq.positions[t], tracking_state=seq.tracking_state[t])
+        # several people in one stream, untangled frame by frame: in metres, and in the
+        # pixels of a pose estimator, measured on the stream itself
+        live = LiveSmoother(seq.topology, method=method, fps=30.0)
+        for t in range(5):
+            live.update(np.stack([seq.positions[t] + b for b in range(3)]))
+        live = LiveSmoother(seq.topology, method=method, fps=30.0, gates_from="stream")
+        try:
+            for t in range(40):
+                live.update(np.stack([p.positions[t] for p in people3]))
+        except ValueError:  # as above: defaults in metres
+            pass
 
 
 def warm(method: str, on_compile: Callable[[], Any] | None = None) -> float:
