@@ -37,6 +37,8 @@ cost; the floor is a guard against recordings without noise. numpy and scipy, no
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
@@ -65,6 +67,20 @@ def huber_cut(n_dims: int) -> float:
     return float(np.sqrt(chi2.ppf(HUBER_LEVEL, n_dims)))
 
 
+@cache
+def _chi_point(dof: int) -> tuple[float, float]:
+    return float(chi2.median(dof)), huber_cut(dof)
+
+
+def _chi_points(dof: NDArray[np.int_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The chi-square median and Huber's cut for each degrees of freedom in ``dof``
+    (small integers: a few distinct values; scipy's quantiles cost more than the pass of a
+    short window that :class:`~tobitkf.DelayedSmoother` runs per frame)."""
+    values, index = np.unique(dof, return_inverse=True)
+    points = np.array([_chi_point(int(v)) for v in values]).reshape(-1, 2)
+    return points[index.reshape(dof.shape), 0], points[index.reshape(dof.shape), 1]
+
+
 #: the normal's standard deviation over its median absolute deviation
 _MAD = 1.4826
 
@@ -90,8 +106,7 @@ class HuberWeights:
         dof = live.sum(axis=-1)
         self.own = self.ok & ~held(ys)  # the samples that show their noise
         self.enough = (self.own.sum(axis=0) >= MIN_SAMPLES) & (dof > 0)
-        self.chi_median = chi2.median(np.maximum(dof, 1))
-        self.cut = np.sqrt(chi2.ppf(HUBER_LEVEL, np.maximum(dof, 1)))
+        self.chi_median, self.cut = _chi_points(np.maximum(dof, 1))
         self.floor = white_noise(ys, self.own, live) ** 2
 
     def __call__(self, est: NDArray[np.float64]) -> NDArray[np.float64]:
