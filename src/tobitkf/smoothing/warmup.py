@@ -5,9 +5,10 @@ are numba kernels, and so are the output states :func:`~tobitkf.smoothing.api.sm
 works out for every method (:mod:`tobitkf.smoothing.output_states`); all are cached on
 disk (numba's cache: ``__pycache__`` beside the package, or ``NUMBA_CACHE_DIR``). The
 first call on a new machine, or after an upgrade, compiles them: seconds for the Kalman
-methods, a minute or more for ``robust``, whose gates, untangling and noise fit (its
-likelihood and optimiser) have kernels of their own (``tobitkf warmup`` prints the
-seconds); every later process loads them from the cache in well under a second.
+methods, from twenty seconds to a minute or two (by machine) for ``robust``, whose gates,
+untangling and noise fit (its likelihood and optimiser) have kernels of their own
+(``tobitkf warmup`` prints the seconds); every later process loads them from the cache in
+well under a second.
 
 :func:`warm` runs a method on a small built-in recording (and, for causal methods with a
 live stepper, a few live frames), so its kernels are compiled and cached before the real
