@@ -26,7 +26,8 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks tools
 	$(PY) -m ruff format --check src tests benchmarks tools
-	$(PY) -m pytest -q -p no:cacheprovider
+	# the slowest tests listed at the end: CI has 20 minutes on 2 cores
+	$(PY) -m pytest -q -p no:cacheprovider --durations=15
 
 lint: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks tools
