@@ -8,11 +8,12 @@ first call on a new machine, or after an upgrade, compiles them: seconds for the
 methods, from twenty seconds to a minute or two (by machine) for ``robust``, whose gates,
 untangling and noise fit (its likelihood and optimiser) have kernels of their own
 (``tobitkf warmup`` prints the seconds); every later process loads them from the cache in
-well under a second.
+a second or so.
 
-:func:`warm` runs a method on a small built-in recording (and, for causal methods with a
-live stepper, a few live frames), so its kernels are compiled and cached before the real
-work starts, and says when something had to be compiled (``on_compile``).
+:func:`warm` runs a method on a small built-in recording, on several people in pixels
+(and, for causal methods with a live stepper, a few live frames of one person and of
+several), so that its kernels are compiled and cached before the real work starts, and
+says when something had to be compiled (``on_compile``).
 ``tobitkf smooth`` calls it before it reads the first file, so that parallel workers
 (``--jobs``) load the kernels instead of each compiling them, and the person waiting
 sees why the first run is slow. :func:`warmup` does it for many methods, in parallel
@@ -113,7 +114,8 @@ def _run_tiny(method: str) -> None:
     seq = tiny_recording()
     smooth(seq, method=method)
     # several people in pixels are untangled before any method runs: its compiled loops
-    # (two: one compiled loop; three or more: a compiled step per frame, called from here)
+    # (two people: one compiled loop; three or more: compiled steps called from Python
+    # frame by frame, which the cache must hold on their own)
     px = seq.positions[..., :2] * 500
     people = [seq.replace(positions=px + 100 * b, units="px", tracking_state=None)
               for b in range(3)]  # fmt: skip
