@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tobitkf.smoothing.timebase import typical_step
+from tobitkf.smoothing.timebase import readonly, typical_step
 
 __all__ = [
     "MAX_LAG_FRAMES",
@@ -132,8 +132,8 @@ def carried_error_sd(
     ``carried (T, B, J)`` the carried ones; ``order`` the joints from the root outwards;
     ``max_lag`` frames (at least 1) the longest lag of the structure function read from
     the data."""
-    return _kernels().carried_sd(
-        np.ascontiguousarray(ys, dtype=float), np.ascontiguousarray(acc, dtype=bool),
+    return _kernels().carried_sd(  # ys read-only always: one compiled version (readonly)
+        readonly(np.ascontiguousarray(ys, dtype=float)), np.ascontiguousarray(acc, dtype=bool),
         np.ascontiguousarray(carried, dtype=bool), np.ascontiguousarray(parents, dtype=np.int64),
         np.ascontiguousarray(order, dtype=np.int64), int(max_lag), MIN_PAIRS, MAX_STARTS,
     )  # fmt: skip
