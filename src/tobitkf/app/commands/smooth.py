@@ -392,9 +392,10 @@ def warmup(names, jobs):
     """Compile the methods' kernels into numba's cache, ahead of the work.
 
     The first run of a compiled method on a machine (or after an upgrade) compiles its
-    kernels: seconds, most for the default method. Later processes load them from
-    the cache. Run this once after installing, or on each node of a cluster whose cache
-    is not shared (NUMBA_CACHE_DIR sets where the cache is).
+    kernels: seconds for most methods, a minute or two for the default one on a slow
+    machine. Later processes load them from the cache. Run this once after installing,
+    or on each node of a cluster whose cache is not shared (NUMBA_CACHE_DIR sets where
+    the cache is).
     """
     from tobitkf.smoothing.warmup import warmup as run_warmup
 
