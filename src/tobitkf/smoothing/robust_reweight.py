@@ -78,7 +78,8 @@ def _chi_points(dof: NDArray[np.int_]) -> tuple[NDArray[np.float64], NDArray[np.
     short window that :class:`~tobitkf.DelayedSmoother` runs per frame)."""
     values, index = np.unique(dof, return_inverse=True)
     points = np.array([_chi_point(int(v)) for v in values]).reshape(-1, 2)
-    return points[index.reshape(dof.shape), 0], points[index.reshape(dof.shape), 1]
+    at = points[index.reshape(dof.shape)]  # (..., 2)
+    return at[..., 0], at[..., 1]
 
 
 #: the normal's standard deviation over its median absolute deviation

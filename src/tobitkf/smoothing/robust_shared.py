@@ -132,7 +132,7 @@ def carried_error_sd(
     ``carried (T, B, J)`` the carried ones; ``order`` the joints from the root outwards;
     ``max_lag`` frames (at least 1) the longest lag of the structure function read from
     the data."""
-    return _kernels().carried_sd(  # ys read-only always: one compiled version (readonly)
+    return _kernels().carried_sd(  # ys read-only whatever the caller's: one compiled version
         readonly(np.ascontiguousarray(ys, dtype=float)), np.ascontiguousarray(acc, dtype=bool),
         np.ascontiguousarray(carried, dtype=bool), np.ascontiguousarray(parents, dtype=np.int64),
         np.ascontiguousarray(order, dtype=np.int64), int(max_lag), MIN_PAIRS, MAX_STARTS,

@@ -117,10 +117,10 @@ def _run_tiny(method: str) -> None:
     # (two people: one compiled loop; three or more: compiled steps called from Python
     # frame by frame, which the cache must hold on their own)
     px = seq.positions[..., :2] * 500
-    people = [seq.replace(positions=px + 100 * b, units="px", tracking_state=None)
-              for b in range(3)]  # fmt: skip
-    untangle_sequences(people)
-    people3, people = people, people[:2]
+    people3 = [seq.replace(positions=px + 100 * b, units="px", tracking_state=None)
+               for b in range(3)]  # fmt: skip
+    untangle_sequences(people3)
+    people = people3[:2]
     untangle_sequences(people)
     try:  # the method on them: 2-D, its gates from the recording (robust's)
         smooth(people, method=method)
