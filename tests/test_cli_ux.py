@@ -688,3 +688,17 @@ def test_evaluate_on_pixels_leaves_out_the_methods_in_metres(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "Left out: atkf, atkf2016" in " ".join(run.stderr.split())
     assert "robust_online" in run.stdout and " atkf " not in run.stdout
+
+
+def test_columns_is_read_at_each_invocation_not_at_import():
+    """rich reads COLUMNS when a console is made; the CLI's table console is made at
+    import, so a second in-process ``main()`` (a notebook, a test) kept the first width."""
+    from click.testing import CliRunner
+
+    from tobitkf.app.commands import app
+
+    for columns, widest in (("50", lambda n: n <= 50), ("300", lambda n: n > 100)):
+        out = CliRunner(env={"COLUMNS": columns}).invoke(app, ["methods"]).output
+        assert widest(max(len(line) for line in out.splitlines())), (columns, out)
+    out = CliRunner(env={"COLUMNS": None}).invoke(app, ["methods"]).output  # a pipe: 160
+    assert 100 < max(len(line) for line in out.splitlines()) <= 160

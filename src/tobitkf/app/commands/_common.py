@@ -16,8 +16,24 @@ from rich.table import Table
 from rich.text import Text
 
 console = Console()
-if not console.is_terminal and not os.environ.get("COLUMNS"):
-    console = Console(width=160)  # files and pipes get whole tables, not 80-column cuts
+
+
+def _fit_console() -> None:
+    """Set the table console's width from the environment of this invocation, not of the
+    import: ``COLUMNS`` when set; else the terminal's own; else (files and pipes) 160, so
+    a log gets whole tables, not 80-column cuts. rich reads ``COLUMNS`` once, when the
+    console is made; a second ``main()`` in one process (tests, notebooks) would keep
+    the first one's width."""
+    columns = os.environ.get("COLUMNS", "")
+    if columns.isdigit() and int(columns) > 0:
+        console.width = int(columns)
+    else:
+        console.width = None  # rich asks the terminal at each print
+        if not console.is_terminal:
+            console.width = 160
+
+
+_fit_console()
 # messages name files: never cut a line (a path split in two is neither found by grep in a
 # log nor copied whole from a terminal, which wraps long lines itself)
 err_console = Console(stderr=True, soft_wrap=True)
@@ -330,6 +346,7 @@ class _InputPath(click.Path):
 @click.version_option(package_name="tobitkf")
 def app() -> None:
     """Tobit Kalman filtering of censored measurements, and skeleton-track smoothing."""
+    _fit_console()
 
 
 def _load_one(
