@@ -22,6 +22,7 @@ from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.smoothing import _minimize
 from tobitkf.smoothing import _noise_kernels as nk
 from tobitkf.smoothing import _robust_kernels as rk
+from tobitkf.smoothing.robust import _smooth_run as smooth_run
 from tobitkf.smoothing.robust_fit import FIT_FTOL, fit_blocks, fit_group, fit_noise_bodies
 
 TAU = 0.15
@@ -195,7 +196,7 @@ def test_smoother_without_coloured_error_is_the_generic_kalman_core():
     q = np.ascontiguousarray(np.broadcast_to(qj, (T, B, J)))
     # written as a chunk (bodies 1..B) of larger outputs: the other bodies stay untouched
     v3, three = np.full((T, B + 2, J), -7.0), np.full((T, B + 2, J, 3), -7.0)
-    nk.smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1,
+    smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1,
                   None)  # fmt: skip
     assert (three[:, [0, B + 1]] == -7.0).all() and (v3[:, [0, B + 1]] == -7.0).all()
     A, Q = _ou_matrices(steps, TAU)
@@ -231,7 +232,7 @@ def test_smoother_equals_a_brute_force_rts_smoother():
     q = np.where(rng.random((T, 1, 1)) < 0.3, 13.0, 2.0)  # the floor in gaps: per step
     sc2, tau_c = 2e-4, 0.07
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
-    nk.smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c), est,
+    smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c), est,
                   var, 0, None)  # fmt: skip
     for i in range(3):
         want, wvar = _brute_smooth(y[:, 0, 0, i], rvar[:, 0, 0], steps, q[:, 0, 0], sc2, TAU,
@@ -254,7 +255,7 @@ def test_smoother_in_several_blocks_equals_the_brute_force_smoother_per_joint():
     sc2 = rng.choice([0.0, 2e-4], size=(B, J))
     tau_c = rng.choice([0.05, 0.3], size=(B, J))
     var, est = np.empty((T, B, J)), np.empty((T, B, J, 3))
-    nk.smooth_run(y, rvar, steps, q, sc2, TAU, tau_c, est, var, 0, None)
+    smooth_run(y, rvar, steps, q, sc2, TAU, tau_c, est, var, 0, None)
     assert np.isnan(est[:, 1, 2]).all() and np.isnan(var[:, 1, 2]).all()
     for b in range(B):
         for j in range(J):
@@ -278,7 +279,7 @@ def test_smoother_of_a_constant_position_is_the_weighted_mean():
     y = rng.normal(scale=0.02, size=(T, 1, 1, 3)) + 1.0
     y[[0, 1, 7, 8, 20]] = np.nan
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
-    nk.smooth_run(y, np.full((T, 1, 1), r), np.full(T, 1 / 30), np.zeros((T, 1, 1)),
+    smooth_run(y, np.full((T, 1, 1), r), np.full(T, 1 / 30), np.zeros((T, 1, 1)),
                   np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0,
                   None)  # fmt: skip
     seen = y[np.isfinite(y[:, 0, 0, 0]), 0, 0]

@@ -23,6 +23,7 @@ from tobitkf.evaluation.metrics import in_sd_ball
 from tobitkf.skeleton.sequence import SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 from tobitkf.smoothing import _noise_kernels as nk
+from tobitkf.smoothing.robust import _smooth_run as smooth_run
 from tobitkf.smoothing.robust_shared import (
     MAX_LAG_FRAMES,
     MIN_CHANGES,
@@ -121,7 +122,7 @@ def test_added_variance_is_the_square_of_the_weighted_shared_sd():
 
     def smooth(y, shared=None):
         est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
-        nk.smooth_run(np.ascontiguousarray(y), rvar, steps, q, sc2, 0.15, tau_c, est, var, 0,
+        smooth_run(np.ascontiguousarray(y), rvar, steps, q, sc2, 0.15, tau_c, est, var, 0,
                       shared)  # fmt: skip
         return est, var
 

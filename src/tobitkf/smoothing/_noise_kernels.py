@@ -175,16 +175,17 @@ def loglik(
 
 @_jit
 def smooth_run(
-    yk: np.ndarray,  # (T, B, J, 3) samples, NaN = none
-    rvar: np.ndarray,  # (T, B, J) measurement variance of each sample
+    y2: np.ndarray,  # (T, B J 3) samples, NaN = none: (T, B, J, 3) as rows of frames
+    r2: np.ndarray,  # (T, B J) measurement variance of each sample
     steps: np.ndarray,  # (T,)
-    q: np.ndarray,  # (T, B, J) OU velocity noise density of the step before each frame
+    q2: np.ndarray,  # (T, B J) OU velocity noise density of the step before each frame
     sc2: np.ndarray,  # (B, J) coloured-error variance
     tau: float,
     tau_c: np.ndarray,  # (B, J) coloured-error correlation time
-    est: np.ndarray,  # out (T, B0, J, 3): the estimate of x
-    var: np.ndarray,  # out (T, B0, J): its smoothed variance
+    e2: np.ndarray,  # out (T, B0 J 3): the estimate of x
+    v2: np.ndarray,  # out (T, B0 J): its smoothed variance
     b0: int,  # body b is written at b0 + b (a chunk of the bodies of est and var)
+    J: int,  # joints per body
     shared: np.ndarray | None,  # (T, B, J) the samples' shared errors (below), or None
 ) -> None:
     """Kalman filter + RTS smoother of the three-state model per joint: the estimate of
@@ -210,11 +211,9 @@ def smooth_run(
     axes of the filter, updated with the same gains on ``s`` (0 at the other kind's
     samples), give ``Σ w_i s_i`` of each kind, the weights ``w_i`` being those the
     estimate puts on the samples; the squares of the two are added to ``var``."""
-    T, B, J = yk.shape[0], yk.shape[1], yk.shape[2]
-    N = B * J
-    # columns n = b J + j (the arrays are C-contiguous)
-    y2, r2, q2 = yk.reshape((T, N * 3)), rvar.reshape((T, N)), q.reshape((T, N))
-    e2, v2 = est.reshape((T, est.shape[1] * J * 3)), var.reshape((T, var.shape[1] * J))
+    T, N = r2.shape[0], r2.shape[1]
+    # columns n = b J + j; the caller flattens the arrays (a reshape here would compile
+    # numba's error path for a wrong shape: seconds of the first run)
     # The block's columns are the SIMD lanes, each quantity a row of L lanes. Rows of a
     # state: (x, v, c) of axis i at 3i..3i+2, then the covariance p00, p01, p02, p11,
     # p12, p22 (_P..). Rows of an input: the samples of the three axes, their variance

@@ -39,10 +39,14 @@ def identity_costs(y: np.ndarray, last: np.ndarray, cost: np.ndarray, scratch: n
             n = 0
             for j in range(J):
                 d = _distance(y[b, j], last[a, j])
-                if not math.isnan(d):
-                    scratch[n] = d
+                if not math.isnan(d):  # insertion into the sorted scratch (np.sort would
+                    i = n  # compile numba's quicksort: seconds of a first run)
+                    while i > 0 and scratch[i - 1] > d:
+                        scratch[i] = scratch[i - 1]
+                        i -= 1
+                    scratch[i] = d
                     n += 1
-            cost[a, b] = middle(np.sort(scratch[:n]), n)
+            cost[a, b] = middle(scratch, n)
 
 
 @njit(cache=True, nogil=True)
@@ -143,7 +147,9 @@ def pair_step(
         if run[p] > max_frames:  # taken as detected: the loop goes on from these samples
             state[p] = False
             run[p] = -1
-    yc[:] = yo
+    for j in range(yo.shape[0]):  # (loops, not slice assignments: those compile numba's
+        for k in range(D):  # error message for a shape mismatch, seconds of a first run)
+            yc[j, k] = yo[j, k]
     for p in range(left.shape[0]):
         if state[p]:
             for k in range(yo.shape[1]):
@@ -210,7 +216,8 @@ def pair_exchanges(
         for b in range(B):
             pair_step(yo[t, b], last[b], age[b], vel[b], state[b], run[b], left, right,
                       margin, near, near_factor, ratio, never, yc, pred)  # fmt: skip
-            exchanged[t, b] = state[b]
+            for p in range(P):
+                exchanged[t, b, p] = state[b, p]
 
 
 @njit(cache=True, nogil=True)
@@ -246,5 +253,7 @@ def two_identities(ys: np.ndarray, margin: float, ratio: float, order: np.ndarra
         identity_costs(ys[t], last, cost, scratch)
         c0, c1 = two_choice(cost, c0, c1, margin, ratio)
         order[t, 0], order[t, 1] = c0, c1
-        y[0], y[1] = ys[t, c0], ys[t, c1]
+        for j in range(J):  # (loops: a slice assignment compiles an error message)
+            for k in range(D):
+                y[0, j, k], y[1, j, k] = ys[t, c0, j, k], ys[t, c1, j, k]
         keep_last(y, last)

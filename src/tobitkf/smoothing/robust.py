@@ -514,12 +514,12 @@ def _offline(
         # the coordinates there are (a 2-D sequence has a third axis of zeros)
         guess, shared = _shared_errors(ys[..., : setup.pi[k.I_NDIMS]], acc, inferred, yk,
                                        steps, par, order, float(params["max_reject"]))  # fmt: skip
-    fit_kernels().smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0, shared)
+    _smooth_run(yk, rvar, steps, q, sc2, tau, tau_c, est, var, b0, shared)
     if params["reweight"]:  # the samples the track does not explain, down-weighted
         weights = HuberWeights(ys, acc, rinf)
         for _ in range(int(params["reweight"])):
-            fit_kernels().smooth_run(yk, rvar * weights(est[:, bs]), steps, q, sc2, tau, tau_c,
-                                     est, var, b0, shared)  # fmt: skip
+            _smooth_run(yk, rvar * weights(est[:, bs]), steps, q, sc2, tau, tau_c, est, var, b0,
+                        shared)  # fmt: skip
     if fits is not None:  # the sd is at least what the samples' own noise says
         from tobitkf.smoothing.robust_fit import sd_floor
 
@@ -557,6 +557,21 @@ def _shared_errors(
         max_lag = rs.max_lag_frames(max_reject, steps)
         carried_sd = rs.carried_error_sd(ys, acc, carried, par, order, max_lag)
     return guess, rs.shared_signal(guess_sd, carried_sd, acc.shape)
+
+
+def _smooth_run(
+    yk: Array, rvar: Array, steps: Array, q: Array, sc2: Array, tau: float, tau_c: Array,
+    est: Array, var: Array, b0: int, shared: Array | None,
+) -> None:  # fmt: skip
+    """The fitted-noise kernels' ``smooth_run`` of ``yk`` (T, B, J, 3) into ``est`` and
+    ``var`` (T, B0, J, ...), each array handed over as rows of frames (views)."""
+    fit_kernels().smooth_run(_rows(yk), _rows(rvar), steps, _rows(q), sc2, tau, tau_c,
+                             _rows(est), _rows(var), b0, yk.shape[2], shared)  # fmt: skip
+
+
+def _rows(a: Array) -> Array:
+    """``a`` as (frames, the rest): a view of it, never a copy (the outputs are written)."""
+    return np.reshape(a, (a.shape[0], -1), copy=False)
 
 
 def fit_kernels() -> Any:
