@@ -158,3 +158,114 @@ def test_times_uniform_property(pos, fps):
     np.testing.assert_allclose(np.diff(t), 1 / fps, rtol=1e-12)
     assert s.dt().shape == (pos.shape[0] - 1,)
     assert s.missing().shape == pos.shape[:2]
+
+
+def _full(T=9, **kw):
+    """A sequence with every per-frame field set, from independent random draws."""
+    rng = np.random.default_rng(5)
+    return SkeletonSequence(
+        positions=rng.normal(size=(T, 25, 3)),
+        topology=V2,
+        tracking_state=rng.integers(0, 3, size=(T, 25)),
+        std=rng.random((T, 25)),
+        sample_state=rng.integers(0, 5, size=(T, 25)),
+        confidence=rng.random((T, 25)),
+        metadata={
+            "orientations": rng.normal(size=(T, 25, 4)),
+            "frame_numbers": np.arange(T) + 7,
+            "offsets": rng.normal(size=(25, 3)),
+            "source": "x.txt",
+        },
+        **kw,
+    )
+
+
+@pytest.mark.parametrize(
+    "frames, idx",
+    [
+        (slice(2, 7), [2, 3, 4, 5, 6]),
+        (slice(None, None, 3), [0, 3, 6]),
+        ([1, 4, -1], [1, 4, 8]),
+        (np.arange(9) % 4 == 1, [1, 5]),
+        ([], []),
+    ],
+)
+def test_select_frames_cuts_every_per_frame_field_alike(frames, idx):
+    s = _full(fps=30.0)
+    sub = s.select_frames(frames)
+    for name in ("positions", "tracking_state", "std", "sample_state", "confidence"):
+        np.testing.assert_array_equal(getattr(sub, name), getattr(s, name)[idx])
+    for key in ("orientations", "frame_numbers"):
+        np.testing.assert_array_equal(sub.metadata[key], s.metadata[key][idx])
+    assert sub.metadata["offsets"] is s.metadata["offsets"]  # not per frame: as it was
+    assert sub.metadata["source"] == "x.txt"
+    assert sub.metadata["source_frames"].dtype == np.int64
+    np.testing.assert_array_equal(sub.metadata["source_frames"], idx)
+    assert "source_frames" not in s.metadata  # the original is left alone
+
+
+def test_select_frames_keeps_each_frames_time():
+    s = _full(fps=30.0)
+    run = s.select_frames(slice(2, 7))  # evenly spaced: fps kept, times from 0 again
+    assert run.timestamps is None and run.fps == 30.0
+    np.testing.assert_allclose(run.times(), np.arange(5) / 30)
+    gaps = s.select_frames([0, 1, 5])  # no longer evenly spaced: timestamps
+    np.testing.assert_allclose(gaps.times(), np.array([0, 1, 5]) / 30)
+    stamped = s.replace(timestamps=np.arange(9) ** 2 / 10.0).select_frames(slice(3, None, 2))
+    np.testing.assert_allclose(stamped.timestamps, np.array([9, 25, 49]) / 10.0)
+    untimed = _full().select_frames([0, 4, 5])  # no timing to keep: the indices tell
+    assert untimed.timestamps is None and untimed.fps is None
+    np.testing.assert_array_equal(untimed.metadata["source_frames"], [0, 4, 5])
+
+
+def test_select_frames_of_a_selection_keeps_the_first_indices():
+    sub = _full(fps=30.0).select_frames(slice(3, 9)).select_frames([1, 4])
+    np.testing.assert_array_equal(sub.metadata["source_frames"], [4, 7])
+    np.testing.assert_array_equal(sub.metadata["frame_numbers"], [11, 14])
+
+
+@pytest.mark.parametrize(
+    "frames, error, words",
+    [
+        ([3, 2], ValueError, "increasing"),
+        ([2, 2], ValueError, "increasing"),
+        (slice(None, None, -1), ValueError, "increasing"),
+        ([9], IndexError, "out of range"),
+        ([-10], IndexError, "out of range"),
+        (np.ones(8, dtype=bool), ValueError, "mask"),
+        ([0.5, 1.0], TypeError, "indices"),
+        (np.zeros((2, 2), dtype=int), TypeError, "indices"),
+    ],
+)
+def test_select_frames_refuses_what_is_not_a_selection(frames, error, words):
+    with pytest.raises(error, match=words):
+        _full(fps=30.0).select_frames(frames)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.booleans(), min_size=1, max_size=12), st.booleans())
+def test_select_frames_matches_numpy_and_times(mask, stamped):
+    """Any mask: the positions and times of the selection are the original's at the
+    selected frames (timestamps, or fps-spaced times shifted to start at 0 for a run)."""
+    T = len(mask)
+    s = _full(T=T, fps=25.0)
+    if stamped:
+        s = s.replace(timestamps=np.cumsum(np.arange(1, T + 1)) / 100.0)
+    sub = s.select_frames(np.array(mask))
+    idx = np.flatnonzero(mask)
+    np.testing.assert_array_equal(sub.positions, s.positions[idx])
+    if idx.size:
+        shift = 0.0 if (stamped or sub.timestamps is not None) else s.times()[idx[0]]
+        np.testing.assert_allclose(sub.times() + shift, s.times()[idx])
+
+
+def test_a_selection_round_trips_through_npz(tmp_path):
+    """NPZ keeps the metadata arrays: the selection's source frames and times come back."""
+    import tobitkf as tk
+
+    sub = _full(T=20, fps=30.0).select_frames(slice(4, 20, 5))
+    tk.save([sub], tmp_path / "sub.npz")
+    back = tk.load(tmp_path / "sub.npz")[0]
+    np.testing.assert_array_equal(back.metadata["source_frames"], [4, 9, 14, 19])
+    np.testing.assert_allclose(back.times(), np.array([4, 9, 14, 19]) / 30)
+    np.testing.assert_array_equal(back.positions, sub.positions)

@@ -73,6 +73,11 @@ class SampleState(IntEnum):
         return (s >= cls.REJECTED) & (s <= cls.EXTRAPOLATED)
 
 
+#: ``metadata`` key of :meth:`SkeletonSequence.select_frames`: each frame's index in the
+#: recording the frames were first selected from, int64 (T,)
+SOURCE_FRAMES = "source_frames"
+
+
 @dataclass(frozen=True, eq=False)
 class SkeletonSequence:
     """One body's joint tracks.
@@ -327,6 +332,74 @@ class SkeletonSequence:
             std=None if self.std is None else self.std[:, idx],
             sample_state=None if self.sample_state is None else self.sample_state[:, idx],
             confidence=None if self.confidence is None else self.confidence[:, idx],
+        )
+
+    def select_frames(self, frames: slice | Sequence[int] | np.ndarray) -> SkeletonSequence:
+        """Sequence restricted to some frames, in increasing order: a slice
+        (``seq.select_frames(slice(300, 900))``), frame indices (negative ones count from
+        the end) or a boolean mask of length T.
+
+        Every per-frame field is cut alike: positions, tracking states, timestamps,
+        standard deviations, sample states, confidences, and the metadata arrays whose
+        first axis has length T (orientations, frame numbers, ...).
+        ``metadata["source_frames"]`` holds each frame's index in the recording first
+        selected from (a selection of a selection keeps the first one's indices). Each
+        frame keeps its time: with ``timestamps``, its own; a sequence timed by ``fps``
+        alone keeps ``fps`` for a run of frames (step 1; its times then start at 0 again)
+        and gets ``timestamps`` from :meth:`times` otherwise, since its frames are no
+        longer evenly spaced; without either, ``source_frames`` tells the gaps.
+        """
+        T = self.n_frames
+        if isinstance(frames, slice):
+            idx = np.arange(T)[frames]
+        else:
+            a = np.asarray(frames)
+            if a.dtype == np.bool_:
+                if a.shape != (T,):
+                    raise ValueError(f"a frame mask must have shape (T,) = {(T,)}, found {a.shape}")
+                idx = np.flatnonzero(a)
+            elif a.ndim == 1 and (a.size == 0 or np.issubdtype(a.dtype, np.integer)):
+                idx = a.astype(np.intp)
+                bad = idx[(idx < -T) | (idx >= T)]
+                if bad.size:
+                    raise IndexError(f"frame {int(bad[0])} is out of range for {T} frames")
+                idx = np.where(idx < 0, idx + T, idx)
+            else:
+                raise TypeError(
+                    "frames must be a slice, integer frame indices or a boolean mask, "
+                    f"found {a.dtype} of shape {a.shape}"
+                )
+        steps = np.diff(idx)
+        if (steps <= 0).any():
+            k = int(np.argmax(steps <= 0))
+            raise ValueError(
+                f"frames must be increasing, each at most once; frame {int(idx[k + 1])} "
+                f"comes after frame {int(idx[k])}"
+            )
+        run = bool((steps == 1).all())
+        meta = {
+            k: v[idx] if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == T else v
+            for k, v in self.metadata.items()
+        }
+        if not isinstance(self.metadata.get(SOURCE_FRAMES), np.ndarray):
+            meta[SOURCE_FRAMES] = idx.astype(np.int64)  # (a selection's are sliced above)
+        timestamps = self.timestamps
+        if timestamps is not None:
+            timestamps = timestamps[idx]
+        elif self.fps is not None and not run:  # gaps: the frames are no longer evenly spaced
+            timestamps = self.times()[idx]
+
+        def cut(x: np.ndarray | None) -> np.ndarray | None:
+            return None if x is None else x[idx]
+
+        return self.replace(
+            positions=self.positions[idx],
+            tracking_state=cut(self.tracking_state),
+            timestamps=timestamps,
+            metadata=meta,
+            std=cut(self.std),
+            sample_state=cut(self.sample_state),
+            confidence=cut(self.confidence),
         )
 
     def to_dataframe(self, layout: str = "long") -> Any:
