@@ -372,8 +372,8 @@ def _shown_names(sources: list[str]) -> list[str]:
 def _compiling_notice(method: str):
     def notice():
         err_console.print(
-            f"compiling the kernels of {method} for this machine (first run only: they are "
-            "cached for later runs; `tobitkf warmup` does it ahead)"
+            f"compiling the kernels of {method} for this machine: seconds to a minute or two, "
+            "first run only (they are cached for later runs; `tobitkf warmup` does it ahead)"
         )
 
     return notice
