@@ -570,8 +570,11 @@ def _smooth_run(
 
 
 def _rows(a: Array) -> Array:
-    """``a`` as (frames, the rest): a view of it, never a copy (the outputs are written)."""
-    return np.reshape(a, (a.shape[0], -1), copy=False)
+    """``a`` as (frames, the rest): a view of it, never a copy (the outputs are written),
+    which a C-contiguous array's reshape is."""
+    if not a.flags.c_contiguous:
+        raise ValueError(f"smooth_run takes C-contiguous arrays, found strides {a.strides}")
+    return a.reshape(a.shape[0], -1)
 
 
 def fit_kernels() -> Any:

@@ -16,6 +16,7 @@ from rich.table import Table
 from rich.text import Text
 
 console = Console()
+_OWN_CONSOLE = console  # (a console put in its place, by a test or an embedding, is kept)
 
 
 def _fit_console() -> None:
@@ -24,13 +25,14 @@ def _fit_console() -> None:
     a log gets whole tables, not 80-column cuts. rich reads ``COLUMNS`` once, when the
     console is made; a second ``main()`` in one process (tests, notebooks) would keep
     the first one's width."""
+    own = _OWN_CONSOLE
     columns = os.environ.get("COLUMNS", "")
     if columns.isdigit() and int(columns) > 0:
-        console.width = int(columns)
+        own.width = int(columns)
     else:
-        console.width = None  # rich asks the terminal at each print
-        if not console.is_terminal:
-            console.width = 160
+        own.width = None  # rich asks the terminal at each print
+        if not own.is_terminal:
+            own.width = 160
 
 
 _fit_console()
