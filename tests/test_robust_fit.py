@@ -197,7 +197,7 @@ def test_smoother_without_coloured_error_is_the_generic_kalman_core():
     # written as a chunk (bodies 1..B) of larger outputs: the other bodies stay untouched
     v3, three = np.full((T, B + 2, J), -7.0), np.full((T, B + 2, J, 3), -7.0)
     smooth_run(yk, rvar, steps, q, np.zeros((B, J)), TAU, np.full((B, J), 0.1), three, v3, 1,
-                  None)  # fmt: skip
+               None)  # fmt: skip
     assert (three[:, [0, B + 1]] == -7.0).all() and (v3[:, [0, B + 1]] == -7.0).all()
     A, Q = _ou_matrices(steps, TAU)
     for b in range(B):
@@ -233,7 +233,7 @@ def test_smoother_equals_a_brute_force_rts_smoother():
     sc2, tau_c = 2e-4, 0.07
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
     smooth_run(y, rvar, steps, q, np.full((1, 1), sc2), TAU, np.full((1, 1), tau_c), est,
-                  var, 0, None)  # fmt: skip
+               var, 0, None)  # fmt: skip
     for i in range(3):
         want, wvar = _brute_smooth(y[:, 0, 0, i], rvar[:, 0, 0], steps, q[:, 0, 0], sc2, TAU,
                                    tau_c)  # fmt: skip
@@ -280,8 +280,7 @@ def test_smoother_of_a_constant_position_is_the_weighted_mean():
     y[[0, 1, 7, 8, 20]] = np.nan
     var, est = np.empty((T, 1, 1)), np.empty((T, 1, 1, 3))
     smooth_run(y, np.full((T, 1, 1), r), np.full(T, 1 / 30), np.zeros((T, 1, 1)),
-                  np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0,
-                  None)  # fmt: skip
+               np.zeros((1, 1)), TAU, np.full((1, 1), 0.1), est, var, 0, None)  # fmt: skip
     seen = y[np.isfinite(y[:, 0, 0, 0]), 0, 0]
     n = len(seen)
     want = (seen.sum(axis=0) + seen[0]) / (n + 1)

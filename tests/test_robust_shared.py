@@ -123,7 +123,7 @@ def test_added_variance_is_the_square_of_the_weighted_shared_sd():
     def smooth(y, shared=None):
         est, var = np.empty((T, B, J, 3)), np.empty((T, B, J))
         smooth_run(np.ascontiguousarray(y), rvar, steps, q, sc2, 0.15, tau_c, est, var, 0,
-                      shared)  # fmt: skip
+                   shared)  # fmt: skip
         return est, var
 
     delta = 0.5
