@@ -21,6 +21,17 @@ def middle(w: np.ndarray, n: int) -> float:
 
 
 @njit(cache=True, nogil=True)
+def insert_sorted(buf: np.ndarray, n: int, v: float) -> None:
+    """Insert ``v`` into the sorted ``buf[:n]``, so that ``buf[:n + 1]`` is sorted (for
+    the few values of a window: cheaper than a sort, and no sort to compile)."""
+    i = n
+    while i > 0 and buf[i - 1] > v:
+        buf[i] = buf[i - 1]
+        i -= 1
+    buf[i] = v
+
+
+@njit(cache=True, nogil=True)
 def running_median(y: np.ndarray, window: int, out: np.ndarray) -> None:
     """``out[t, k]``: the median of the non-NaN ``y[t - h .. t + h, k]`` (``h = window //
     2``, an odd ``window`` centred on ``t``, cut at both ends), for ``y (T, N)``."""
@@ -32,11 +43,7 @@ def running_median(y: np.ndarray, window: int, out: np.ndarray) -> None:
             n = 0
             for s in range(max(0, t - h), min(T, t + h + 1)):
                 v = y[s, k]
-                if not np.isnan(v):  # insertion into the sorted buffer
-                    i = n
-                    while i > 0 and buf[i - 1] > v:
-                        buf[i] = buf[i - 1]
-                        i -= 1
-                    buf[i] = v
+                if not np.isnan(v):
+                    insert_sorted(buf, n, v)
                     n += 1
             out[t, k] = middle(buf, n)

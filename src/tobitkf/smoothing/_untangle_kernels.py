@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from tobitkf.smoothing._scale_kernels import middle
+from tobitkf.smoothing._scale_kernels import insert_sorted, middle
 
 
 @njit(cache=True, nogil=True)
@@ -39,12 +39,8 @@ def identity_costs(y: np.ndarray, last: np.ndarray, cost: np.ndarray, scratch: n
             n = 0
             for j in range(J):
                 d = _distance(y[b, j], last[a, j])
-                if not math.isnan(d):  # insertion into the sorted scratch (np.sort would
-                    i = n  # compile numba's quicksort: seconds of a first run)
-                    while i > 0 and scratch[i - 1] > d:
-                        scratch[i] = scratch[i - 1]
-                        i -= 1
-                    scratch[i] = d
+                if not math.isnan(d):  # (np.sort would compile numba's quicksort:
+                    insert_sorted(scratch, n, d)  # seconds of a first run)
                     n += 1
             cost[a, b] = middle(scratch, n)
 
