@@ -112,6 +112,13 @@ def test_c3d_real_file():
     assert np.nanmin(s.positions[:, t.index("RFHD"), 2] - s.positions[:, t.index("RANK"), 2]) > 1.2
     pelo = s.positions[:, t.index("PELO")]
     assert np.linalg.norm(pelo[-1, :2] - pelo[0, :2]) > 1.0
+    # labels, kinds and residuals follow a joint selection
+    kept = ["PELO", "LFHD", "CentreOfMass"]
+    sub = s.select_joints(kept)
+    assert sub.metadata["labels"] == kept
+    assert sub.metadata["point_kinds"] == [s.metadata["point_kinds"][t.index(k)] for k in kept]
+    assert sub.metadata["point_kinds"][0] != sub.metadata["point_kinds"][1]  # the test can fail
+    np.testing.assert_array_equal(sub.missing(), sub.metadata["residuals"] < 0)
 
 
 def test_c3d_point_selection():
@@ -244,6 +251,13 @@ def test_bvh_real_file():
     # y up: the head is above the toes
     assert np.all(
         s.positions[:, names.index("Head"), 1] > s.positions[:, names.index("LeftToe"), 1]
+    )
+    # the offsets are per joint: a joint selection keeps each kept joint's OFFSET line
+    np.testing.assert_allclose(s.metadata["offsets"], offsets * s.metadata["scale"])
+    kept = ["LeftKnee", "Hips", "RThumb"]
+    sub = s.select_joints(kept)
+    np.testing.assert_allclose(
+        sub.metadata["offsets"], offsets[[names.index(n) for n in kept]] * s.metadata["scale"]
     )
 
 

@@ -259,6 +259,58 @@ def test_select_frames_matches_numpy_and_times(mask, stamped):
         np.testing.assert_allclose(sub.times() + shift, s.times()[idx])
 
 
+def test_declared_per_joint_entries_follow_the_joints_not_the_frames(tmp_path):
+    """With T == J a per-joint array looks per-frame: ``metadata["per_joint"]`` says which
+    entries are indexed by joint, and they follow select_joints, not select_frames."""
+    import tobitkf as tk
+
+    s = _full(T=25, fps=30.0)
+    offsets = s.metadata["offsets"]
+    names = [f"n{j}" for j in range(25)]
+    s = s.replace(metadata={**s.metadata, "names": names, "per_joint": ["offsets", "names"]})
+    sub = s.select_frames([2, 3, 20])
+    assert sub.metadata["offsets"] is offsets and sub.metadata["names"] is names
+    np.testing.assert_array_equal(
+        sub.metadata["orientations"], s.metadata["orientations"][[2, 3, 20]]
+    )
+    # undeclared, an array of first axis T is taken for a per-frame one
+    bare = _full(T=25, fps=30.0).select_frames([2, 3, 20])
+    np.testing.assert_array_equal(bare.metadata["offsets"], offsets[[2, 3, 20]])
+    kept = ["HandRight", "ElbowRight", "SpineBase"]
+    j = s.topology.indices(kept)
+    part = s.select_joints(kept)
+    np.testing.assert_array_equal(part.metadata["offsets"], offsets[j])
+    assert part.metadata["names"] == [names[i] for i in j]
+    np.testing.assert_array_equal(part.metadata["orientations"], s.metadata["orientations"][:, j])
+    # NPZ keeps the declaration: the loaded sequence cuts alike
+    tk.save([s], tmp_path / "s.npz")
+    back = tk.load(tmp_path / "s.npz")[0].select_joints(kept)
+    np.testing.assert_array_equal(back.metadata["offsets"], offsets[j])
+    assert list(back.metadata["names"]) == [names[i] for i in j]
+
+
+def test_a_declared_per_joint_entry_of_the_wrong_length_is_refused():
+    s = _full()
+    s = s.replace(metadata={**s.metadata, "offsets": np.zeros((24, 3)), "per_joint": ["offsets"]})
+    with pytest.raises(ValueError, match=r"offsets.*length J = 25"):
+        s.select_joints(["HandRight"])
+
+
+def test_arrays_inside_metadata_dicts_are_cut_too():
+    """An NTU file's per-body fields are a dict of (T,) arrays: a frame selection cuts
+    them, a joint selection cuts the (T, J, ...) arrays inside dicts."""
+    T = 9
+    body = {"lean": np.arange(T) * 0.5, "id": 3, "grid": np.arange(T * 25.0).reshape(T, 25)}
+    s = _full(T=T, fps=30.0)
+    s = s.replace(metadata={**s.metadata, "ntu_body": body})
+    sub = s.select_frames([1, 4, 8])
+    np.testing.assert_array_equal(sub.metadata["ntu_body"]["lean"], [0.5, 2.0, 4.0])
+    assert sub.metadata["ntu_body"]["id"] == 3
+    part = s.select_joints(["SpineMid", "SpineBase"])
+    np.testing.assert_array_equal(part.metadata["ntu_body"]["grid"], body["grid"][:, [1, 0]])
+    np.testing.assert_array_equal(part.metadata["ntu_body"]["lean"], body["lean"])
+
+
 def test_a_selection_round_trips_through_npz(tmp_path):
     """NPZ keeps the metadata arrays: the selection's source frames and times come back."""
     import tobitkf as tk

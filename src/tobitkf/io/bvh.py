@@ -12,7 +12,8 @@ channels replaced by the channel values (the root's position); then
 ``R_j = R_parent · R_local`` and ``p_j = p_parent + R_parent · t_local``.
 
 Positions are in the file's units times ``scale`` (the CMU file here is in metres); the
-up axis is y.
+up axis is y. Each joint's OFFSET (times ``scale``) is kept as ``metadata["offsets"]``
+(J, 3), named in ``metadata["per_joint"]`` so that ``select_joints`` cuts it.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from tobitkf.io._text import (
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import PER_JOINT, SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
 __all__ = ["BvhJoint", "parse_bvh_hierarchy", "read_bvh", "sniff_bvh"]
@@ -289,6 +290,7 @@ def read_bvh(
             "frame_time": dt,
             "scale": scale,
             "offsets": np.array([joints[j].offset for j in keep]) * scale,
+            PER_JOINT: ["offsets"],
         },
     )
     return [seq]

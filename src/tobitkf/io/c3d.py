@@ -19,6 +19,10 @@ suffixes). Up axis z (Vicon/Qualisys convention).
 * ``"joint_centres"``: the origins (``…O``) of the Plug-in Gait segment frames (PELO,
   LFEO, LTIO, LHUO, ...), usable as joint centres.
 
+The kept entries' labels and kinds are ``metadata["labels"]`` and
+``metadata["point_kinds"]`` (named in ``metadata["per_joint"]``, so that ``select_joints``
+cuts them), their residuals ``metadata["residuals"]`` (T, J).
+
 Entries left out are counted by kind in ``metadata["reader_warnings"]`` (e.g. "left out
 80 of 193 POINT entries (26 angles, 20 forces, 18 moments, 16 powers)").
 """
@@ -35,7 +39,7 @@ import numpy as np
 from tobitkf.io._text import check_positions, check_rate
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import PER_JOINT, SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
 __all__ = ["classify_labels", "read_c3d", "sniff_c3d"]
@@ -236,6 +240,7 @@ def read_c3d(
             "units_in_file": unit,
             "residuals": np.ascontiguousarray(residual[:, keep]),
             "reader_warnings": notes,
+            PER_JOINT: ["labels", "point_kinds"],
         },
     )
     return [seq]

@@ -77,6 +77,37 @@ class SampleState(IntEnum):
 #: recording the frames were first selected from, int64 (T,)
 SOURCE_FRAMES = "source_frames"
 
+#: ``metadata`` key listing the names of the metadata entries indexed by joint along
+#: their first axis (arrays or lists of length J, e.g. a BVH file's ``offsets`` (J, 3), a
+#: C3D file's ``labels``): :meth:`SkeletonSequence.select_joints` cuts them, and
+#: :meth:`SkeletonSequence.select_frames` leaves them whole even when T == J
+PER_JOINT = "per_joint"
+
+
+def _per_joint_keys(metadata: dict[str, Any]) -> frozenset[str]:
+    keys = metadata.get(PER_JOINT)
+    if isinstance(keys, (list, tuple)):
+        return frozenset(k for k in keys if isinstance(k, str))
+    return frozenset()
+
+
+def _cut_frames(v: Any, T: int, idx: np.ndarray) -> Any:
+    """``v`` at the frames ``idx`` if it is an array with first axis T (inside dicts too)."""
+    if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == T:
+        return v[idx]
+    if isinstance(v, dict):
+        return {k: _cut_frames(x, T, idx) for k, x in v.items()}
+    return v
+
+
+def _cut_joints(v: Any, T: int, J: int, idx: np.ndarray) -> Any:
+    """``v`` at the joints ``idx`` if it is an array of shape (T, J, ...) (inside dicts too)."""
+    if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[:2] == (T, J):
+        return v[:, idx]
+    if isinstance(v, dict):
+        return {k: _cut_joints(x, T, J, idx) for k, x in v.items()}
+    return v
+
 
 @dataclass(frozen=True, eq=False)
 class SkeletonSequence:
@@ -309,21 +340,29 @@ class SkeletonSequence:
     def select_joints(self, names: Sequence[str]) -> SkeletonSequence:
         """Sequence restricted to the given joints (in the given order).
 
-        Per-joint metadata arrays of shape ``(T, J, ...)`` (e.g. ``orientations``) are
-        sliced too.
+        Metadata arrays of shape ``(T, J, ...)`` (e.g. ``orientations``) are cut on their
+        second axis, also inside dicts; the entries that ``metadata["per_joint"]`` names
+        (indexed by joint on their first axis: arrays or lists of length J, e.g. a BVH
+        file's ``offsets``) on their first.
         """
         idx = self.topology.indices(names)
         topo = self.topology.subset(names)
+        T, J = self.n_frames, self.n_joints
+        per_joint = _per_joint_keys(self.metadata)
         meta = {}
         for k, v in self.metadata.items():
-            if (
-                isinstance(v, np.ndarray)
-                and v.ndim >= 2
-                and v.shape[:2] == (self.n_frames, self.n_joints)
-            ):
-                meta[k] = v[:, idx]
+            if k in per_joint:
+                if not (
+                    (isinstance(v, (list, tuple)) and len(v) == J)
+                    or (isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == J)
+                ):
+                    raise ValueError(
+                        f"metadata[{k!r}] is listed in metadata[{PER_JOINT!r}] but is not "
+                        f"an array or list of length J = {J}"
+                    )
+                meta[k] = v[idx] if isinstance(v, np.ndarray) else type(v)(v[i] for i in idx)
             else:
-                meta[k] = v
+                meta[k] = _cut_joints(v, T, J, idx)
         return self.replace(
             positions=self.positions[:, idx],
             topology=topo,
@@ -341,7 +380,8 @@ class SkeletonSequence:
 
         Every per-frame field is cut alike: positions, tracking states, timestamps,
         standard deviations, sample states, confidences, and the metadata arrays whose
-        first axis has length T (orientations, frame numbers, ...).
+        first axis has length T (orientations, frame numbers, ...; also inside dicts),
+        except the per-joint entries that ``metadata["per_joint"]`` names.
         ``metadata["source_frames"]`` holds each frame's index in the recording first
         selected from (a selection of a selection keeps the first one's indices). Each
         frame keeps its time: with ``timestamps``, its own; a sequence timed by ``fps``
@@ -377,9 +417,9 @@ class SkeletonSequence:
                 f"comes after frame {int(idx[k])}"
             )
         run = bool((steps == 1).all())
+        per_joint = _per_joint_keys(self.metadata)
         meta = {
-            k: v[idx] if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == T else v
-            for k, v in self.metadata.items()
+            k: v if k in per_joint else _cut_frames(v, T, idx) for k, v in self.metadata.items()
         }
         if not isinstance(self.metadata.get(SOURCE_FRAMES), np.ndarray):
             meta[SOURCE_FRAMES] = idx.astype(np.int64)  # (a selection's are sliced above)
