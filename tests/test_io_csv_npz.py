@@ -232,6 +232,81 @@ def test_csv_multibody_keeps_64_bit_ids_and_never_merges_bodies(tmp_path):
             np.testing.assert_array_equal(a.positions, b.positions)
 
 
+POOL = ("snout", "ear_left", "ear_right", "tail", "corner_a", "corner_b")
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.permutations(POOL).flatmap(lambda p: st.integers(1, 6).map(lambda k: p[:k])),
+             min_size=2, max_size=4),
+    st.integers(1, 5),
+    st.booleans(),
+    st.integers(0, 2**31),
+)  # fmt: skip
+def test_csv_bodies_with_different_joints_round_trip(tmp_path_factory, joint_sets, T, extra, seed):
+    """Bodies of different joints (in any order) share one table: the union's columns,
+    each body's own joints, order, bones and values back from the sidecar."""
+    rng = np.random.default_rng(seed)
+    seqs = []
+    for k, names in enumerate(joint_sets):
+        J = len(names)
+        parents = [-1] + [int(rng.integers(0, j)) for j in range(1, J)]
+        pos = rng.normal(size=(T, J, 2)) * 100
+        pos[rng.random((T, J)) < 0.2] = np.nan
+        seqs.append(
+            SkeletonSequence(
+                pos, Topology.from_names(list(names), parents, name=f"t{k}"), fps=30.0,
+                body_id=f"animal{k}", units="px",
+                confidence=rng.random((T, J)) if extra else None,
+                std=rng.random((T, J)) if extra else None,
+            )
+        )  # fmt: skip
+    p = tmp_path_factory.mktemp("csv") / "ma.csv"
+    save(seqs, p, format="csv")
+    pd = pytest.importorskip("pandas")
+    union = list(dict.fromkeys(n for names in joint_sets for n in names))
+    table = pd.read_csv(p)
+    assert [c[: -len("_x")] for c in table.columns if c.endswith("_x")] == union
+    assert len(table) == T * len(seqs)
+    back = load(p)
+    assert [s.body_id for s in back] == [s.body_id for s in seqs]
+    for a, b in zip(seqs, back, strict=True):
+        assert b.joint_names == a.joint_names
+        assert b.topology.parents == a.topology.parents
+        np.testing.assert_array_equal(b.positions, a.positions)
+        for name in ("confidence", "std"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
+    # the table alone (no sidecar): every body gets the union, NaN where it had no joint
+    save(seqs, p, format="csv", sidecar=False)
+    p.with_suffix(".json").unlink()
+    for a, b in zip(seqs, load(p), strict=True):
+        assert list(b.joint_names) == union
+        np.testing.assert_array_equal(b.select_joints(a.joint_names).positions, a.positions)
+
+
+def test_csv_sidecar_body_joints_are_checked(tmp_path):
+    import json
+
+    a = SkeletonSequence(np.zeros((2, 2, 2)), Topology.from_names(["a", "b"]), body_id="x")
+    c = SkeletonSequence(np.ones((2, 1, 2)), Topology.from_names(["c"]), body_id="y")
+    p = tmp_path / "m.csv"
+    save([a, c], p, format="csv")
+    side = p.with_suffix(".json")
+    doc = json.loads(side.read_text())
+    assert [b["joints"] for b in doc["bodies"]] == [["a", "b"], ["c"]]
+    for joints, words in ((["a", "zz"], "'zz' has no columns"), (["a", "a"], "repeat"),
+                          ("a", "list of names"), ([], "list of names")):  # fmt: skip
+        doc["bodies"][0]["joints"] = joints
+        doc["bodies"][0].pop("parents", None)
+        side.write_text(json.dumps(doc))
+        with pytest.raises(ReadError, match=words):
+            load(p)
+    doc["bodies"][0]["joints"], doc["bodies"][0]["parents"] = ["a", "b"], [-1]
+    side.write_text(json.dumps(doc))
+    with pytest.raises(ReadError, match="parent index for each"):
+        load(p)
+
+
 @settings(max_examples=20, deadline=None)
 @given(
     hnp.arrays(

@@ -203,7 +203,10 @@ def test_smoothed_output_round_trips_and_keeps_the_files_meta(tmp_path):
     np.testing.assert_allclose(back.positions, smoothed.positions)
     np.testing.assert_allclose(back.std, smoothed.std)
     np.testing.assert_array_equal(back.sample_state, smoothed.sample_state)
-    np.testing.assert_allclose(back.confidence, smoothed.confidence)
+    # the glitch's samples were filled: their score is 0 (no detection lies there)
+    filled = tk.SampleState.filled(smoothed.sample_state)
+    assert filled[5:9, 9].all()
+    np.testing.assert_allclose(back.confidence, np.where(filled, 0.0, scores))
     assert back.topology == seq.topology and back.metadata["person_ids"] == "track_id"
 
 

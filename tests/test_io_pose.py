@@ -189,6 +189,70 @@ def test_writers_read_by_the_tools(tmp_path):
     np.testing.assert_array_equal(r.confidence, raw.confidence)
 
 
+def test_filled_samples_are_written_with_score_zero(tmp_path):
+    """A smoother's fills carry no detection: DeepLabCut, LightningPose and movement get
+    likelihood 0 there (read back by movement itself), measured samples keep theirs."""
+    ds, pos, conf, _ = _movement_ds(fps=30)
+    seqs = tk.smooth(tk.from_movement(ds))
+    gone = np.isnan(pos[:, 0]).transpose(2, 0, 1)  # (individual, T, keypoint) not detected
+    filled = np.stack([tk.SampleState.filled(s.sample_state) for s in seqs])
+    measured = np.stack([s.sample_state == tk.SampleState.MEASURED for s in seqs])
+    assert (gone & filled).any() and measured.any()
+    assert not (measured & gone).any()
+    for name, suffix, reader in [
+        ("deeplabcut", ".h5", load_poses.from_dlc_file),
+        ("deeplabcut", ".csv", load_poses.from_dlc_file),
+        ("movement", ".nc", lambda p, fps: xr.open_dataset(p, engine="h5netcdf")),
+    ]:
+        path = tmp_path / f"out{suffix}"
+        tk.save(seqs, path, format=name)
+        theirs = reader(path, fps=30)["confidence"].values.transpose(2, 0, 1)
+        assert (theirs[filled] == 0).all()
+        np.testing.assert_array_equal(theirs[measured], conf.transpose(2, 0, 1)[measured])
+    tk.save([seqs[1]], tmp_path / "lp.csv", format="lightningpose")
+    theirs = load_poses.from_lp_file(tmp_path / "lp.csv")["confidence"].values[..., 0]
+    assert (theirs[filled[1]] == 0).all()
+
+
+def test_deeplabcut_unique_bodyparts_written_back(tmp_path):
+    """A multi-animal project's ``single`` individual (unique body parts) keeps its own
+    body parts in the DeepLabCut and CSV outputs; movement's one array refuses it."""
+    T, scorer = 40, "DLC_dlcrnetms5_maSep1shuffle1_100000"
+    rng = np.random.default_rng(3)
+    cols, data = [], []
+    for ind, parts in (
+        ("m1", ["snout", "tail"]),
+        ("m2", ["snout", "tail"]),
+        ("single", ["A", "B"]),
+    ):
+        for part in parts:
+            for c in ("x", "y", "likelihood"):
+                cols.append((scorer, ind, part, c))
+                v = (
+                    rng.uniform(0.5, 1, T)
+                    if c == "likelihood"
+                    else 100 + np.cumsum(rng.normal(0, 1, T))
+                )
+                data.append(v)
+    index = pd.MultiIndex.from_tuples(cols, names=["scorer", "individuals", "bodyparts", "coords"])
+    df = pd.DataFrame(np.array(data).T, columns=index)
+    src = tmp_path / "ma.h5"
+    df.to_hdf(src, key="df_with_missing", format="table", mode="w")
+    seqs = tk.load(src, fps=30)
+    assert [s.joint_names for s in seqs] == [("snout", "tail")] * 2 + [("A", "B")]
+    out = tmp_path / "out.h5"
+    tk.save(seqs, out, format="deeplabcut")
+    back = pd.read_hdf(out)
+    assert list(back.columns) == list(df.columns)
+    np.testing.assert_array_equal(back.values, df.values)
+    tk.save(seqs, tmp_path / "out.csv", format="csv")
+    for a, b in zip(seqs, tk.load(tmp_path / "out.csv"), strict=True):
+        assert (b.body_id, b.joint_names) == (a.body_id, a.joint_names)
+        np.testing.assert_array_equal(b.positions, a.positions)
+    with pytest.raises(ValueError, match=r"different keypoints.*single: A, B"):
+        tk.save(seqs, tmp_path / "out.nc", format="movement")
+
+
 def test_pose_readers_errors(tmp_path):
     bad = tmp_path / "x.h5"
     bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)

@@ -13,20 +13,23 @@ import numpy as np
 
 from tobitkf.io._text import check_positions, option_rate
 from tobitkf.io.errors import ReadError
-from tobitkf.skeleton.sequence import SkeletonSequence
+from tobitkf.skeleton.sequence import SampleState, SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
 __all__ = [
     "HDF5_MAGIC",
     "PoseArrays",
+    "check_alike",
     "check_hdf5_opens",
     "check_hdf5_reads",
     "hdf5_open_error",
     "hdf5_reason",
+    "individual_names",
     "is_hdf5",
     "pose_arrays",
     "require",
     "sequences_from_arrays",
+    "written_confidence",
 ]
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -208,36 +211,74 @@ def _name(ind: Any) -> Any:
     return ind
 
 
+def written_confidence(seq: SkeletonSequence) -> np.ndarray | None:
+    """The score a pose file gets for each sample (T, J): the sequence's confidence, and
+    0 where a smoother filled the sample (rejected, missing or extrapolated: no detection
+    lies at the written position, and a reader that keeps samples above a score cut-off
+    must not take the fill for a sure detection); NaN where there is no score; None when
+    the sequence has neither scores nor filled samples."""
+    conf = seq.confidence
+    if seq.sample_state is None:
+        return conf
+    filled = SampleState.filled(seq.sample_state)
+    if not filled.any():
+        return conf
+    out = np.full(filled.shape, np.nan) if conf is None else conf.copy()
+    out[filled] = 0.0
+    return out
+
+
+def check_alike(seqs: list[SkeletonSequence]) -> None:
+    """ValueError unless the individuals of one pose file share dimension and frame count."""
+    first = seqs[0]
+    for s in seqs[1:]:
+        if (s.n_dims, s.n_frames) != (first.n_dims, first.n_frames):
+            raise ValueError(
+                "all individuals written to one pose file must share dimension and frame "
+                f"count; found {first.n_dims}-D x {first.n_frames} frames and "
+                f"{s.n_dims}-D x {s.n_frames} frames"
+            )
+
+
+def _keypoint_sets(seqs: list[SkeletonSequence]) -> str:
+    """The distinct keypoint lists of ``seqs`` by body, for an error message."""
+    seen: dict[tuple[str, ...], list[str]] = {}
+    for k, s in enumerate(seqs):
+        seen.setdefault(s.joint_names, []).append(str(k if s.body_id is None else s.body_id))
+    return "; ".join(f"{', '.join(b)}: {', '.join(j)}" for j, b in seen.items())
+
+
 class PoseArrays:
     """Sequences laid out for a pose writer: ``positions (T, I, J, D)``, ``confidence
-    (T, I, J)`` (NaN where none), ``keypoints``, ``individuals`` (names), ``fps``."""
+    (T, I, J)`` (:func:`written_confidence`; NaN where none), ``keypoints``,
+    ``individuals`` (names), ``fps``."""
 
     def __init__(self, seqs: list[SkeletonSequence]) -> None:
         first = seqs[0]
-        for s in seqs[1:]:
-            if (s.joint_names, s.n_dims, s.n_frames) != (
-                first.joint_names, first.n_dims, first.n_frames,
-            ):  # fmt: skip
-                raise ValueError(
-                    "all sequences written to one pose file must share keypoints, dimension "
-                    "and frame count"
-                )
+        if any(s.joint_names != first.joint_names for s in seqs):
+            raise ValueError(
+                "the individuals of this file have different keypoints, which this format "
+                f"cannot hold in one array ({_keypoint_sets(seqs)}); write it as deeplabcut, "
+                "csv or npz"
+            )
+        check_alike(seqs)
         self.positions = np.stack([s.positions for s in seqs], axis=1)
+        scores = [written_confidence(s) for s in seqs]
         self.confidence = np.stack(
             [
-                np.full(s.positions.shape[:2], np.nan) if s.confidence is None else s.confidence
-                for s in seqs
+                np.full(s.positions.shape[:2], np.nan) if c is None else c
+                for s, c in zip(seqs, scores, strict=True)
             ],
             axis=1,
         )
         self.keypoints = list(first.joint_names)
-        self.individuals = _individual_names(seqs)
+        self.individuals = individual_names(seqs)
         self.fps = first.fps
         self.n_dims = first.n_dims
         self.topology = first.topology
 
 
-def _individual_names(seqs: list[SkeletonSequence]) -> list[str]:
+def individual_names(seqs: list[SkeletonSequence]) -> list[str]:
     """Distinct text names: the body ids when they are distinct, else ``individual_<k>``."""
     ids = [s.body_id for s in seqs]
     names = [str(b) for b in ids]

@@ -19,7 +19,10 @@ file declares no skeleton (it lives in the project's ``config.yaml``): pass
 Write (:func:`write_deeplabcut`): the same layout, so the output goes back into
 DeepLabCut (or movement, or any tool reading its files): ``.h5`` or ``.csv`` by the
 path's suffix, ``likelihood`` = the confidence (1 where a position is given without
-one, NaN where it is missing), scorer ``tobitkf`` unless the input's is kept.
+one, 0 where a smoother filled it: no detection lies there, so DeepLabCut's ``pcutoff``
+and movement's confidence filter do not take it for a sure one; NaN where the position
+is missing), scorer ``tobitkf`` unless the input's is kept; each individual with its own
+body parts (the ``single`` individual of unique body parts keeps them).
 Needs pandas (and PyTables for ``.h5``): ``pip install 'tobitkf[pose]'``.
 """
 
@@ -33,13 +36,15 @@ from typing import Any
 import numpy as np
 
 from tobitkf.io._pose import (
+    check_alike,
     check_hdf5_reads,
     hdf5_open_error,
     hdf5_reason,
+    individual_names,
     is_hdf5,
-    pose_arrays,
     require,
     sequences_from_arrays,
+    written_confidence,
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format, require_frames
@@ -192,29 +197,34 @@ def read_deeplabcut(
 
 
 def dlc_frame(sequences: Sequence[SkeletonSequence], scorer: str | None = None) -> Any:
-    """The DeepLabCut DataFrame of sequences (one individual each)."""
+    """The DeepLabCut DataFrame of sequences (one individual each, each with its own
+    body parts: a multi-animal project's ``single`` individual has the unique ones)."""
     pd = require("pandas", "writing DeepLabCut files")
     seqs = list(sequences)
-    arr = pose_arrays(seqs)
+    if not seqs:
+        raise ValueError("nothing to write: no sequences")
+    check_alike(seqs)
+    first = seqs[0]
     if scorer is None:
-        scorer = str(seqs[0].metadata.get("scorer", "tobitkf"))
-    multi = len(seqs) > 1 or seqs[0].body_id is not None
-    coords = ["x", "y", "z"] if arr.n_dims == 3 else ["x", "y", "likelihood"]
-    T = arr.positions.shape[0]
-    blocks = []
-    for i in range(len(seqs)):
-        for j in range(len(arr.keypoints)):
-            p = arr.positions[:, i, j]
-            blocks += [p[:, a] for a in range(arr.n_dims)]
-            if arr.n_dims == 2:
-                c = arr.confidence[:, i, j]
+        scorer = str(first.metadata.get("scorer", "tobitkf"))
+    multi = len(seqs) > 1 or first.body_id is not None
+    n_dims, T = first.n_dims, first.n_frames
+    coords = ["x", "y", "z"] if n_dims == 3 else ["x", "y", "likelihood"]
+    blocks, columns = [], []
+    for name, s in zip(individual_names(seqs), seqs, strict=True):
+        score = written_confidence(s)
+        for j, part in enumerate(s.joint_names):
+            p = s.positions[:, j]
+            blocks += [p[:, a] for a in range(n_dims)]
+            if n_dims == 2:
+                c = np.full(T, np.nan) if score is None else score[:, j]
                 present = ~np.isnan(p).any(axis=-1)
                 blocks.append(np.where(present, np.where(np.isnan(c), 1.0, c), np.nan))
-    levels = [[scorer], *([arr.individuals] if multi else []), arr.keypoints, coords]
+            columns += [(scorer, *([name] if multi else []), part, c) for c in coords]
     level_names = _LEVELS if multi else ("scorer", "bodyparts", "coords")
-    columns = pd.MultiIndex.from_product(levels, names=list(level_names))
+    index = pd.MultiIndex.from_tuples(columns, names=list(level_names))
     data = np.stack(blocks, axis=1) if blocks else np.empty((T, 0))
-    return pd.DataFrame(data, columns=columns, index=range(T))
+    return pd.DataFrame(data, columns=index, index=range(T))
 
 
 def write_deeplabcut(

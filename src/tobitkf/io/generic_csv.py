@@ -45,6 +45,12 @@ skipped), the sidecar's values taking precedence where both exist.
 
 The topology is the named built-in when its joints match the header, else the built-in
 whose joints equal the header's, else a custom one from the names.
+
+Bodies with different joints (a multi-animal pose file's individuals and its ``single``
+one of unique body parts) share one table: its columns are the union of their joints, a
+body leaves the fields of joints it lacks empty, and the sidecar's entry of each body
+lists its own joints (``joints``) and its topology (``topology``, ``parents``), which
+the reader takes back (so too for bodies of the same joints but different bones).
 """
 
 from __future__ import annotations
@@ -335,33 +341,57 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     for group_id, members in groups.items():
         d = data[members]
         nos = [numbers[k] for k in members]
-        idx = np.array(xyz, dtype=int)
+        entry = side.get("bodies", {}).get(group_id, {})
+        g_joints, g_xyz, g_extra, g_topo = joints, xyz, extra, topo
+        if "joints" in entry:  # this body's own joints, of the header's union
+            absent = [n for n in entry["joints"] if n not in joints]
+            if absent:
+                raise ReadError(
+                    sidecar_path(path), None,
+                    f"tobitkf CSV sidecar: body {group_id}'s joint {absent[0]!r} has no "
+                    "columns in the table",
+                )  # fmt: skip
+            sel = [joints.index(n) for n in entry["joints"]]
+            g_joints = [joints[j] for j in sel]
+            g_xyz = [xyz[j] for j in sel]
+            g_extra = {
+                k: {new: cols[j] for new, j in enumerate(sel) if j in cols}
+                for k, cols in extra.items()
+            }
+            try:
+                g_topo = _topology(g_joints, entry.get("topology"), up_axis, entry.get("parents"))
+            except ValueError as exc:
+                raise ReadError(sidecar_path(path), None, f"tobitkf CSV sidecar: {exc}") from None
+        idx = np.array(g_xyz, dtype=int)
         positions = d[:, idx]  # (T, J, 3); parse_rows has rejected inf
         state = None
-        if extra["_state"]:
-            state = np.full((len(d), len(joints)), 2, dtype=np.int8)
-            for j, c in extra["_state"].items():
+        if g_extra["_state"]:
+            state = np.full((len(d), len(g_joints)), 2, dtype=np.int8)
+            for j, c in g_extra["_state"].items():
                 col = d[:, c]
                 col = np.where(np.isnan(col), 0, col)
                 bad = ~np.isin(col, (0, 1, 2))
                 if bad.any():
                     k = int(np.flatnonzero(bad)[0])
                     raise ReadError(
-                        path, nos[k], f"expected a state 0, 1 or 2 for {joints[j]}, found {col[k]}"
+                        path,
+                        nos[k],
+                        f"expected a state 0, 1 or 2 for {g_joints[j]}, found {col[k]}",
                     )
                 state[:, j] = col
-        std = _float_columns(path, d, nos, extra["_sd"], joints, "a standard deviation >= 0", 0.0)
-        sample = _sample_columns(path, d, nos, extra["_sample"], joints)
-        confidence = _float_columns(
-            path, d, nos, extra["_confidence"], joints, "a confidence in [0, 1]", 0.0, 1.0
+        std = _float_columns(
+            path, d, nos, g_extra["_sd"], g_joints, "a standard deviation >= 0", 0.0
         )
-        check_positions(path, positions, nos, implausible, names=joints, state=state, units=units)
+        sample = _sample_columns(path, d, nos, g_extra["_sample"], g_joints)
+        confidence = _float_columns(
+            path, d, nos, g_extra["_confidence"], g_joints, "a confidence in [0, 1]", 0.0, 1.0
+        )
+        check_positions(path, positions, nos, implausible, names=g_joints, state=state, units=units)
         timestamps = None
         if time_col is not None:
             timestamps = d[:, time_col]
             check_times(path, timestamps, nos)
         body_id = group_id
-        entry = side.get("bodies", {}).get(group_id, {})
         if "body_id" in entry:
             body_id = entry["body_id"]
         elif body_col is None and "body_id" in comments:
@@ -377,7 +407,7 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         out.append(
             SkeletonSequence(
                 positions=positions,
-                topology=topo,
+                topology=g_topo,
                 tracking_state=state,
                 timestamps=timestamps,
                 fps=fps,
@@ -505,6 +535,28 @@ def _read_sidecar(path) -> dict[str, Any]:
         ):
             raise bad(f"expected an int or str body id, found {body_id!r}")
         entry = {k: e[k] for k in ("body_id", "provenance") if k in e}
+        if e.get("joints") is not None:
+            joints = e["joints"]
+            if not (
+                isinstance(joints, list) and joints and all(isinstance(n, str) for n in joints)
+            ):
+                raise bad(f"expected a body's joints as a list of names, found {joints!r}")
+            if len(set(joints)) != len(joints):
+                raise bad(f"a body's joints repeat a name: {joints!r}")
+            entry["joints"] = joints
+            parents = e.get("parents")
+            if parents is not None:
+                if not (
+                    isinstance(parents, list)
+                    and len(parents) == len(joints)
+                    and all(isinstance(q, int) and not isinstance(q, bool) for q in parents)
+                ):
+                    raise bad(
+                        f"expected a parent index for each of the body's joints, found {parents!r}"
+                    )
+                entry["parents"] = parents
+            if isinstance(e.get("topology"), str):
+                entry["topology"] = e["topology"]
         key = e.get("body")
         if key is not None and (isinstance(key, bool) or not isinstance(key, int)):
             raise bad(f"expected an int body column value, found {key!r}")
@@ -533,9 +585,11 @@ def write_csv(
     """Write sequences as a generic CSV plus its JSON sidecar (exact round trip through
     :func:`read_csv`).
 
-    All sequences must share the same joints. Columns: ``time`` (when any sequence has
+    Columns: ``time`` (when any sequence has
     timestamps), ``body`` (when more than one sequence: the body ids when they are
-    distinct integers, else 0, 1, ...), then per joint ``_x, _y[, _z]``, ``_state`` (when
+    distinct integers, else 0, 1, ...), then per joint (the union of the sequences'
+    joints, in order of first appearance; a body leaves the fields of joints it lacks
+    empty) ``_x, _y[, _z]``, ``_state`` (when
     tracking states are present), ``_sd`` (when a posterior standard deviation is),
     ``_sample`` (when sample states are) and ``_confidence`` (when confidences are); a
     body without one of them leaves those fields empty. The sidecar
@@ -550,12 +604,9 @@ def write_csv(
     require_frames(seqs, "CSV")
     if sep not in _SEPARATORS:
         raise ValueError(f"sep must be one of {_SEPARATORS}, found {sep!r}")
-    names = seqs[0].joint_names
+    names = list(dict.fromkeys(n for s in seqs for n in s.joint_names))  # the union, in order
     for n in names:
         _check_writable(n, "joint name")
-    for s in seqs[1:]:
-        if s.joint_names != names:
-            raise ValueError("all sequences written to one CSV must have the same joints")
     multi = len(seqs) > 1
     # the body column holds the sequences' own ids when they are distinct integers, else
     # their index: a mix (ids 1 and None -> 1 and 1) would merge two bodies on reading
@@ -620,7 +671,13 @@ def write_csv(
         pos = fmt_floats(s.positions)
         std = None if s.std is None else fmt_floats(s.std)
         conf = None if s.confidence is None else fmt_floats(s.confidence)
-        for j in range(J):
+        own = {n: j for j, n in enumerate(s.joint_names)}
+        for name in names:
+            j = own.get(name)
+            if j is None:  # a joint of another body: empty fields
+                width = n_dims + with_state + with_std + with_sample + with_conf
+                cols += [[""] * T] * width
+                continue
             cols += [pos[j * n_dims + a :: J * n_dims] for a in range(n_dims)]
             if with_state:
                 st = s.tracking_state
@@ -653,6 +710,12 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
     """The sidecar's JSON text (see the module docstring); ``ids``: the body column's
     values, None for a single body (no body column)."""
     first = seqs[0]
+    union = list(dict.fromkeys(n for s in seqs for n in s.joint_names))
+    own_joints = any(  # each body's own joints and bones when they are not all alike
+        list(s.joint_names) != union
+        or (s.topology.name, s.topology.parents) != (first.topology.name, first.topology.parents)
+        for s in seqs
+    )
     provs = [s.metadata.get("provenance") for s in seqs]
     texts = [json.dumps(to_jsonable(p), sort_keys=True) for p in provs]
     shared = provs[0] if len(set(texts)) == 1 else None
@@ -666,6 +729,10 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         )
         if shared is None and provs[k] is not None:
             entry["provenance"] = provs[k]
+        if own_joints:
+            entry["joints"] = list(s.joint_names)
+            entry["topology"] = s.topology.name
+            entry["parents"] = list(s.topology.parents)
         bodies.append(entry)
     doc = {
         "format": SIDECAR_FORMAT,

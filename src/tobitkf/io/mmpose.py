@@ -38,6 +38,7 @@ import numpy as np
 from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
+from tobitkf.io._pose import written_confidence
 from tobitkf.io._text import check_output_size, check_positions, option_rate
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format, require_frames
@@ -285,7 +286,8 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
     ``meta_info`` is the one read from an MMPose file (if any) with ``tobitkf``, the
     output's provenance, and ``fps`` added (the reader takes the rate back from it).
     Each person present in a frame is an instance with ``keypoints``,
-    ``keypoint_scores`` (the confidence, where there is one), ``track_id`` (the body
+    ``keypoint_scores`` (the confidence, where there is one; 0 where a smoother filled
+    the sample: no detection lies there), ``track_id`` (the body
     id) and, for smoothed output, ``keypoint_std`` and ``keypoint_states`` (tobitkf's
     sample states); a missing value is ``null``. Frames are numbered as in the file
     read (``metadata["frame_id_start"]``), else from 0.
@@ -304,9 +306,10 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
     frames: list[dict[str, Any]] = [{"frame_id": int(start) + t, "instances": []} for t in range(T)]
     for k, s in enumerate(seqs):
         track = k if s.body_id is None else s.body_id
+        score = written_confidence(s)
         for t in np.flatnonzero(~np.isnan(s.positions).all(axis=(1, 2))):
             inst: dict[str, Any] = {"keypoints": s.positions[t]}
-            for key, values in zip(_PER_KEYPOINT, (s.confidence, s.std, s.sample_state)):
+            for key, values in zip(_PER_KEYPOINT, (score, s.std, s.sample_state)):
                 if values is not None:
                     inst[key] = values[t]
             inst["track_id"] = track
