@@ -202,6 +202,23 @@ def test_smooth_never_replaces_a_foreign_file_and_skips_its_own_outputs(tmp_path
     assert "not recordings" not in " ".join(res.output.split())
 
 
+def test_a_recording_named_like_an_output_in_a_format_tobitkf_never_writes_is_smoothed(tmp_path):
+    """``<name>.<method><ext>`` marks an earlier output only for extensions tobitkf
+    writes: 'kinect' is a method and a natural word in a Kinect recording's name."""
+    from test_io_mocap import BVH_SMALL
+
+    src = tmp_path / "in"
+    src.mkdir()
+    text = BVH_SMALL.format(root_order="Zrotation Yrotation Xrotation", r0="0 0 0", r1="0 0 9")
+    (src / "dance.kinect.bvh").write_text(text)
+    (src / "walk.sgf.bvh").write_text(text)
+    res = _invoke("smooth", src, "-o", tmp_path / "out")
+    assert res.exit_code == 0, res.output
+    outputs = sorted(p.name for p in (tmp_path / "out").glob("*.csv"))
+    assert outputs == ["dance.kinect.robust.csv", "walk.sgf.robust.csv"]
+    assert "earlier run" not in " ".join(res.output.split())
+
+
 def test_outputs_get_the_umask_mode(tmp_path):
     save([_recording()], tmp_path / "a.csv", format="csv")
     old = os.umask(0o022)

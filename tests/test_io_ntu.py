@@ -119,6 +119,24 @@ def test_a_frame_selection_keeps_the_body_fields(ntu_file, tmp_path):
     np.testing.assert_array_equal(back.positions[0, 10], b.positions[0, 10])
 
 
+def test_writer_refuses_frames_it_would_read_at_other_times(tmp_path):
+    """An NTU file has no times and is read at 30 fps: a 15 fps sequence, or one with a
+    dropped frame, is refused; 30 fps with jitter is written."""
+    rng = np.random.default_rng(4)
+    pos = rng.normal(size=(6, 25, 3))
+    p = tmp_path / "x.skeleton"
+    for seq, frame in (
+        (SkeletonSequence(pos, "kinect_v2", fps=15.0), 1),
+        (SkeletonSequence(pos, "kinect_v2", timestamps=np.r_[0, 1, 2, 4, 5, 6] / 30), 3),
+    ):
+        with pytest.raises(ValueError, match=rf"30 Hz.*frame {frame},"):
+            write_ntu([seq], p)
+        assert not p.exists()
+    jitter = np.array([0, 4, -3, 5, 0, 2]) * 1e-3
+    write_ntu([SkeletonSequence(pos, "kinect_v2", timestamps=np.arange(6) / 30 + jitter)], p)
+    assert load(p)[0].n_frames == 6
+
+
 def test_writer_from_plain_sequence(tmp_path):
     rng = np.random.default_rng(3)
     pos = rng.normal(size=(4, 25, 3))

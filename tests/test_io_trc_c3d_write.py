@@ -194,6 +194,27 @@ def test_c3d_units_option(tmp_path):
         save([seq, seq], tmp_path / "two.c3d")
 
 
+def test_c3d_keeps_a_rate_not_times_and_refuses_frames_off_its_grid(tmp_path):
+    """C3D has no times: frames within half a frame of the rate's grid are written (read
+    back at the grid's times), a dropped or irregular frame is refused, nothing written."""
+    pytest.importorskip("c3d")
+    base = _seq(["A", "B"], T=8, fps=None)
+    grid = np.arange(8) / 50.0
+    jitter = np.array([0, 1, -1, 1, 0, -1, 1, 0]) * 1e-3  # a clock's, 0.05 frame at 50 Hz
+    p = tmp_path / "j.c3d"
+    save(base.replace(timestamps=grid + jitter), p)
+    (back,) = load(p)
+    assert back.fps == pytest.approx(50.0, rel=0.01)
+    np.testing.assert_allclose(back.times(), grid, atol=0.1 / 50)
+    dropped = np.r_[grid[:4], grid[4:] + 1 / 50]  # a frame dropped after the fourth
+    late = np.r_[grid[:3], grid[3:] + 0.015]  # frame 3 on, three quarters of a frame late
+    for times, frame in ((dropped, 4), (late, 3)):
+        q = tmp_path / f"bad{frame}.c3d"
+        with pytest.raises(ValueError, match=rf"keep a frame rate.*frame {frame},"):
+            save(base.replace(timestamps=times), q)
+        assert not q.exists()
+
+
 def test_new_formats_are_registered():
     from tobitkf.io import formats, writable_formats
 

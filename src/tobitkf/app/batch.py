@@ -182,8 +182,10 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
 
     The rule: the name is ``<name>.<method><ext>`` with a registered method, and the file's
     provenance (the CSV's sidecar, an NPZ's metadata) names that method. A format that
-    keeps no provenance (NTU) is recognised by its name alone.
+    keeps no provenance (NTU) is recognised by its name alone, and only when tobitkf
+    writes files of its extension: a recording named ``dance.kinect.bvh`` is an input.
     """
+    from tobitkf.io import output_extension, writable_formats
     from tobitkf.smoothing.api import method_names
 
     p = Path(path)
@@ -211,6 +213,8 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
         except Exception:
             return None
         return method if isinstance(prov, dict) and prov.get("method") == method else None
+    if not any(lower.endswith(output_extension(f)) for f in writable_formats()):
+        return None  # tobitkf writes no such file: a recording's own name
     return method  # no provenance kept in the format: the name decides
 
 

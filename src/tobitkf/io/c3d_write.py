@@ -2,7 +2,10 @@
 
 Writes one sequence of 3-D positions as the POINT data of a C3D file: floating-point
 samples (``POINT:SCALE`` -1; C3D stores float32, so values are rounded to float32),
-``POINT:RATE`` = fps (or the median rate of the timestamps), ``POINT:UNITS`` = the
+``POINT:RATE`` = fps (or the timestamps' rate: the least-squares step on the median
+step's frame grid; C3D keeps no times, so a
+sequence with frames more than half a frame off that rate's grid, irregular or dropped,
+is refused with a ValueError), ``POINT:UNITS`` = the
 sequence's length unit (``m``, ``cm`` or ``mm``; ``units`` converts), ``POINT:LABELS`` = the
 joint names, a missing sample written with residual -1 (the C3D convention that
 :func:`tobitkf.io.c3d.read_c3d` and every C3D reader read as "no data"), no analog
@@ -23,7 +26,7 @@ import numpy as np
 
 from tobitkf.io._marker_writer import one_3d_sequence
 from tobitkf.io.c3d import _import_c3d
-from tobitkf.io.registry import get_format, register_format
+from tobitkf.io.registry import get_format, register_format, require_rate_grid
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = ["write_c3d"]
@@ -65,6 +68,13 @@ def write_c3d(
         if not dt.size:
             raise ValueError("cannot write POINT:RATE: the sequence has no fps and no time steps")
         rate = float(1.0 / np.median(dt))
+        # refined over the whole recording: the frame numbers on the median step's grid,
+        # then the least-squares step (jitter of single steps evens out)
+        t = seq.times()
+        k = np.round((t - t[0]) * rate)
+        if k[-1] > 0:
+            rate = float(1.0 / np.polyfit(k, t, 1)[0])
+    require_rate_grid(seq, rate, "C3D")
     c3d = _import_c3d()
     pos = seq.positions * scale
     missing = np.isnan(pos).any(axis=-1)

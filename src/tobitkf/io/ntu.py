@@ -47,7 +47,7 @@ from tobitkf.io._text import (
     zeros_to_nan,
 )
 from tobitkf.io.errors import ReadError
-from tobitkf.io.registry import register_format
+from tobitkf.io.registry import register_format, require_rate_grid
 from tobitkf.skeleton.sequence import SampleState, SkeletonSequence, TrackingState
 from tobitkf.skeleton.topology import get_topology
 
@@ -289,6 +289,10 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
     written as ``0 0 0`` with state NOT_TRACKED; a body whose frame is entirely NaN (or
     marked absent in ``metadata["ntu_present"]``) is left out of that frame.
 
+    The file has no times and is read at 30 fps: a sequence whose frames are not 30 fps
+    apart (another rate, dropped or irregular frames; jitter within half a frame aside)
+    is refused with a ValueError rather than written at the wrong times.
+
     A smoothed sequence (``sample_state`` set) has its filled joints (rejected, missing or
     extrapolated, :class:`~tobitkf.skeleton.sequence.SampleState`) written as INFERRED,
     not as the state read from the input, and joints without an estimate as NOT_TRACKED.
@@ -325,6 +329,8 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
                 f"NTU files hold metres; the sequence's units are {s.units!r}: give its "
                 "length unit (seq.replace(units='m'), 'cm' or 'mm'), or use format='csv' or 'npz'"
             )
+    for s in seqs:  # the file has no times: its frames are read at 30 fps
+        require_rate_grid(s, FPS, "NTU")
     # the file holds metres: a sequence in centimetres or millimetres is converted
     seqs = [s if s.units == "m" else _in_metres(s) for s in seqs]
     prepared = []

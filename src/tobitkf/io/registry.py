@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tobitkf.io._text import read_head
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -137,6 +139,27 @@ def require_frames(sequences: Iterable[SkeletonSequence], fmt: str) -> None:
         raise ValueError(
             f"the recording has no frame, and {fmt} files without one cannot be read back "
             "(format='npz' keeps an empty recording)"
+        )
+
+
+def require_rate_grid(seq: SkeletonSequence, rate: float, fmt: str) -> None:
+    """Refuse a recording whose frames a format that keeps a frame rate and no times (C3D,
+    NTU) would read back at other times: a ``ValueError`` naming the first frame more than
+    half a frame off the grid ``first + k / rate`` (irregular or dropped frames, another
+    rate). Timing jitter within half a frame is kept as the grid's times."""
+    if seq.timestamps is None and seq.fps is None:
+        return  # no timing to keep
+    t = seq.times()
+    if t.size < 2:
+        return
+    off = (t - t[0]) * rate - np.arange(t.size)
+    bad = np.abs(off) > 0.5
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(
+            f"{fmt} files keep a frame rate ({rate:g} Hz), not each frame's time: frame {k}, "
+            f"{t[k] - t[0]:.4g} s after the first, would be read back at {k / rate:.4g} s; "
+            "write trc, csv or npz, which keep the times"
         )
 
 
