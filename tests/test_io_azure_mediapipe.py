@@ -238,6 +238,36 @@ def test_mediapipe_csv_from_pandas_matches_json(tmp_path):
     np.testing.assert_array_equal(world[0].positions[0], _array(frames[0][0][1], "xyz"))
 
 
+def test_mediapipe_frames_without_a_stamp_get_times_from_their_frame_number(tmp_path):
+    """A CSV has no rows for a frame where nobody was detected: the frames around keep
+    their stamps (60 fps here), the empty ones are placed by their frame number."""
+    rng = np.random.default_rng(6)
+    rows = []
+    for t in range(12):
+        if t in (0, 1, 5, 6, 7):  # nobody: no rows (also before the first stamp)
+            continue
+        for j, lm in enumerate(_landmarks(rng, np.array([0.5, 0.5, 0]))):
+            row = {"frame": t, "timestamp_ms": 1000 + 1000 * t / 60, "pose": 0}
+            row["landmark"] = MEDIAPIPE_POSE_JOINTS[j]
+            rows.append({**row, **lm})
+    pd.DataFrame(rows).to_csv(tmp_path / "gaps.csv", index=False)
+    (seq,) = read_mediapipe(tmp_path / "gaps.csv", landmarks="image")
+    np.testing.assert_allclose(seq.timestamps, 1 + np.arange(12) / 60, rtol=1e-12)
+    assert np.isnan(seq.positions[[0, 1, 5, 6, 7]]).all()
+    # JSON frames without a timestamp_ms likewise; one stamp alone gives no times
+    frames = _mp_frames(rng, T=4)
+    doc = json.loads(_mp_json(frames, tmp_path / "p.json").read_text())
+    del doc["frames"][1]["timestamp_ms"]
+    (tmp_path / "p.json").write_text(json.dumps(doc))
+    np.testing.assert_allclose(
+        read_mediapipe(tmp_path / "p.json")[0].timestamps, 0.033 * np.arange(4)
+    )
+    for fr in doc["frames"][1:]:
+        fr.pop("timestamp_ms", None)
+    (tmp_path / "p.json").write_text(json.dumps(doc))
+    assert read_mediapipe(tmp_path / "p.json")[0].timestamps is None
+
+
 def test_mediapipe_legacy_single_pose_and_nulls(tmp_path):
     lms = _landmarks(np.random.default_rng(5), np.array([0.5, 0.5, 0.0]))
     lms[3]["visibility"] = None  # unset in the dataclass

@@ -210,6 +210,24 @@ def test_smoothed_output_round_trips_and_keeps_the_files_meta(tmp_path):
     assert back.topology == seq.topology and back.metadata["person_ids"] == "track_id"
 
 
+def test_a_sequence_from_another_tool_keeps_its_keypoints_and_bones(tmp_path):
+    """Without an MMPose file's meta, the writer gives MMPose's own: the names
+    (keypoint_id2name) and bones (skeleton_links) that read back as the same skeleton."""
+    import tobitkf as tk
+
+    names = ["head", "thorax", "abdomen", "wing_l", "wing_r"]
+    topo = tk.Topology.from_names(names, [-1, 0, 1, 1, 1], name="fly")
+    rng = np.random.default_rng(2)
+    seq = tk.SkeletonSequence(rng.uniform(0, 500, (4, 5, 2)), topo, fps=25.0, units="px")
+    tk.save([seq], tmp_path / "fly.json", format="mmpose")
+    meta = json.loads((tmp_path / "fly.json").read_text())["meta_info"]
+    assert meta["keypoint_id2name"] == {str(j): n for j, n in enumerate(names)}
+    assert sorted(map(tuple, meta["skeleton_links"])) == [(0, 1), (1, 2), (1, 3), (1, 4)]
+    (back,) = tk.load(tmp_path / "fly.json")
+    assert back.joint_names == tuple(names) and back.topology.parents == topo.parents
+    np.testing.assert_array_equal(back.positions, seq.positions)
+
+
 def test_writer_several_people_and_missing_values(tmp_path):
     import tobitkf as tk
 

@@ -253,6 +253,25 @@ def test_deeplabcut_unique_bodyparts_written_back(tmp_path):
         tk.save(seqs, tmp_path / "out.nc", format="movement")
 
 
+def test_frame_numbers_are_written_back(tmp_path):
+    """A movement dataset timed in frames and cut to frames 50..61, and a DeepLabCut
+    table whose rows are numbered from 50, keep their frame numbers in the outputs."""
+    ds = _movement_ds(T=62)[0].isel(time=slice(50, 62))
+    ds.attrs = {k: v for k, v in ds.attrs.items() if v is not None}
+    ds.to_netcdf(tmp_path / "in.nc", engine="h5netcdf")
+    seqs = tk.load(tmp_path / "in.nc")
+    tk.save(seqs, tmp_path / "out.nc", format="movement")
+    with xr.open_dataset(tmp_path / "out.nc", engine="h5netcdf") as out:
+        assert out.attrs["time_unit"] == "frames"
+        np.testing.assert_array_equal(out["time"].values, np.arange(50, 62))
+    save_poses.to_dlc_file(_movement_ds()[0], tmp_path / "in.h5", split_individuals=False)
+    df = pd.read_hdf(tmp_path / "in.h5")
+    df.index = np.arange(50, 50 + len(df))
+    df.to_hdf(tmp_path / "in50.h5", key="df_with_missing", format="table", mode="w")
+    tk.save(tk.load(tmp_path / "in50.h5"), tmp_path / "out.h5", format="deeplabcut")
+    np.testing.assert_array_equal(pd.read_hdf(tmp_path / "out.h5").index, df.index)
+
+
 def test_pose_readers_errors(tmp_path):
     bad = tmp_path / "x.h5"
     bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)

@@ -22,6 +22,7 @@ __all__ = [
     "check_alike",
     "check_hdf5_opens",
     "check_hdf5_reads",
+    "frame_numbers",
     "hdf5_open_error",
     "hdf5_reason",
     "individual_names",
@@ -226,6 +227,16 @@ def written_confidence(seq: SkeletonSequence) -> np.ndarray | None:
     out = np.full(filled.shape, np.nan) if conf is None else conf.copy()
     out[filled] = 0.0
     return out
+
+
+def frame_numbers(seq: SkeletonSequence) -> np.ndarray | None:
+    """The frame numbers a pose file gave its rows (``metadata["frames"]``, kept by the
+    DeepLabCut and movement readers when they are not 0, 1, ...), or None."""
+    frames = seq.metadata.get("frames")
+    if isinstance(frames, np.ndarray) and frames.shape == (seq.n_frames,):
+        if np.issubdtype(frames.dtype, np.integer):
+            return frames
+    return None
 
 
 def check_alike(seqs: list[SkeletonSequence]) -> None:

@@ -38,6 +38,7 @@ import numpy as np
 from tobitkf.io._pose import (
     check_alike,
     check_hdf5_reads,
+    frame_numbers,
     hdf5_open_error,
     hdf5_reason,
     individual_names,
@@ -224,7 +225,8 @@ def dlc_frame(sequences: Sequence[SkeletonSequence], scorer: str | None = None) 
     level_names = _LEVELS if multi else ("scorer", "bodyparts", "coords")
     index = pd.MultiIndex.from_tuples(columns, names=list(level_names))
     data = np.stack(blocks, axis=1) if blocks else np.empty((T, 0))
-    return pd.DataFrame(data, columns=index, index=range(T))
+    frames = frame_numbers(first)  # the input's row numbers, else 0, 1, ...
+    return pd.DataFrame(data, columns=index, index=range(T) if frames is None else frames)
 
 
 def write_deeplabcut(

@@ -37,8 +37,10 @@ Reading (``landmarks``):
 * People are bodies 0, 1, ... linked across frames by nearest neighbour on the image
   landmarks (:mod:`tobitkf.io._association`; world landmarks are all centred on the hips
   and cannot tell people apart).
-* Timestamps: ``timestamp_ms`` × 1e-3 when every frame has one; fps from the option or
-  the file.
+* Timestamps: ``timestamp_ms`` × 1e-3 when at least two frames have one; a frame
+  without (a CSV frame with no rows: nobody detected) gets its time from its frame
+  number, between its neighbours' (beyond the first or last stamp, at their median
+  step); fps from the option or the file.
 """
 
 from __future__ import annotations
@@ -128,9 +130,28 @@ def _read_json(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[
         frames.append(people)
         ts = fr.get("timestamp_ms")
         stamps.append(None if ts is None else number_array(path, [ts], f"{where}.timestamp_ms")[0])
-    times = np.array(stamps, dtype=float) * 1e-3 if stamps and None not in stamps else None
+    times = _frame_times(np.array([np.nan if t is None else t for t in stamps], dtype=float))
     extra = {k: doc[k] for k in ("fps", "image_size") if k in doc}
     return frames, times, extra
+
+
+def _frame_times(ms: np.ndarray) -> np.ndarray | None:
+    """Seconds of each frame from its ``timestamp_ms`` (NaN where it has none): a frame
+    without is placed by its frame number between the stamped ones around it (beyond
+    the first or last, at their median step per frame); None with fewer than two stamps
+    (one frame: its own)."""
+    known = np.flatnonzero(~np.isnan(ms))
+    if known.size == ms.size:
+        return ms * 1e-3 if ms.size else None
+    if known.size < 2:
+        return None
+    k = np.arange(ms.size)
+    t = np.interp(k, known, ms[known])
+    step = float(np.median(np.diff(ms[known]) / np.diff(known)))
+    first, last = known[0], known[-1]
+    t[:first] = ms[first] - (first - k[:first]) * step
+    t[last + 1 :] = ms[last] + (k[last + 1 :] - last) * step
+    return t * 1e-3
 
 
 def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[str, Any]]:
@@ -224,8 +245,7 @@ def _read_csv(path: Path) -> tuple[list[list[Person]], np.ndarray | None, dict[s
         if clash.any():
             k = int(np.argmax(clash))
             raise ReadError(path, lines[k], f"frame {frame[k]} has two timestamps")
-        if not np.isnan(per_frame).any():
-            times = per_frame * 1e-3
+        times = _frame_times(per_frame)
     image = np.full((len(rows), 5), np.nan)
     for f, c in enumerate(_FIELDS):
         if c in v:

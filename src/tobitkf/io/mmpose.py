@@ -284,7 +284,9 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
     [...]}, ...]}``.
 
     ``meta_info`` is the one read from an MMPose file (if any) with ``tobitkf``, the
-    output's provenance, and ``fps`` added (the reader takes the rate back from it).
+    output's provenance, and ``fps`` added (the reader takes the rate back from it);
+    without one, the keypoints' names (``keypoint_id2name``) and bones
+    (``skeleton_links``), as MMPose's dataset meta gives them.
     Each person present in a frame is an instance with ``keypoints``,
     ``keypoint_scores`` (the confidence, where there is one; 0 where a smoother filled
     the sample: no detection lies there), ``track_id`` (the body
@@ -316,6 +318,11 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
             frames[t]["instances"].append(inst)
     meta = next((s.metadata["mmpose_meta"] for s in seqs if "mmpose_meta" in s.metadata), {})
     meta = dict(meta)
+    topo = seqs[0].topology
+    if "keypoint_id2name" not in meta and topo.name != UNNAMED:  # the names read back
+        meta["keypoint_id2name"] = {str(j): name for j, name in enumerate(topo.joints)}
+        if "skeleton_links" not in meta and topo.bones:
+            meta["skeleton_links"] = [[int(a), int(b)] for a, b in topo.bones]
     if seqs[0].fps is not None:  # MMPose keeps none; tobitkf's reader takes it back
         meta["fps"] = seqs[0].fps
     if "provenance" in seqs[0].metadata:

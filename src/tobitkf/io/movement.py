@@ -30,6 +30,7 @@ import numpy as np
 from tobitkf.core.version import __version__
 from tobitkf.io._pose import (
     check_hdf5_opens,
+    frame_numbers,
     hdf5_reason,
     is_hdf5,
     pose_arrays,
@@ -119,7 +120,9 @@ def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any
     elif first.fps is not None:
         time, unit = np.arange(first.n_frames) / first.fps, "seconds"
     else:
-        time, unit = np.arange(first.n_frames, dtype=float), "frames"
+        frames = frame_numbers(first)  # the input's frame numbers, else 0, 1, ...
+        time = np.arange(first.n_frames) if frames is None else frames
+        time, unit = np.asarray(time, dtype=float), "frames"
     attrs: dict[str, Any] = {
         "source_software": f"tobitkf {__version__}",
         "ds_type": "poses",
