@@ -165,3 +165,19 @@ def test_what_stream_gates_refuse():
         tk.smooth(seq, "robust", gates="stream")
     with pytest.raises(ValueError, match="gates_from='stream'"):  # named as a way out
         tk.LiveSmoother(TOPO).update(y[0])
+
+
+def test_a_gate_parameter_given_is_not_replaced_by_the_measured_one():
+    """In pixels the gates are measured on the recording (or the stream), except the ones
+    the caller gives: a speed bound of a million px/s rejects no glitch, batch and live."""
+    _, noisy = _people(seed=2)
+    (one,) = noisy[:1]
+    measured = tk.smooth(one)
+    assert (measured.sample_state == tk.SampleState.REJECTED).sum() > 20  # the glitches
+    loose = tk.smooth(one, v_max=1e6, margin=1e6, bone_tol_abs=1e6, bone_tol_rel=1e6)
+    assert (loose.sample_state == tk.SampleState.REJECTED).sum() == 0
+    assert set(np.ravel(loose.metadata["provenance"]["params"]["v_max"])) == {1e6}
+    kw = {"v_max": 1e6, "margin": 1e6, "bone_tol_abs": 1e6, "bone_tol_rel": 1e6}
+    (batch,) = tk.smooth([one], "robust_online", gates="stream", untangle=False, **kw)
+    assert (batch.sample_state == tk.SampleState.REJECTED).sum() == 0
+    np.testing.assert_array_equal(_live([one], untangle=False, **kw)[:, 0], batch.positions)

@@ -336,11 +336,12 @@ def smooth(
     _check_offline(spec, offline)
     guard = as_bool("step_guard", step_guard)
     opts = (offline, up_axis, factor, min_conf, untangle, guard)
+    given_params = frozenset(params)
     described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology,
                  "timestamps": timestamps}  # fmt: skip
     if isinstance(sequence, np.ndarray):
         seq, single = sequence_from_array(sequence, **described)
-        est = _smooth_group([seq], spec, full, *opts)[0].positions
+        est = _smooth_group([seq], spec, full, *opts, given=given_params)[0].positions
         return est[:, 0] if single else est
     _refuse_other_containers(sequence)
     given = [k for k, v in described.items() if v is not None]
@@ -351,7 +352,7 @@ def smooth(
         )
     if isinstance(sequence, SkeletonSequence):
         _per_body(spec, full, 1)
-        return _smooth_group([sequence], spec, full, *opts)[0]
+        return _smooth_group([sequence], spec, full, *opts, given=given_params)[0]
     if isinstance(sequence, (str, bytes)) or not isinstance(sequence, Sequence):
         raise TypeError(
             "smooth expects a SkeletonSequence, a list of them or a NumPy array, got "
@@ -381,7 +382,9 @@ def smooth(
     per_body = _per_body(spec, full, len(seqs))  # each group runs with its bodies' own
     for idx in groups.values():
         mine = {n: tuple(full[n][i] for i in idx) for n in per_body}
-        res = _smooth_group([seqs[i] for i in idx], spec, {**full, **mine}, *opts)
+        res = _smooth_group(
+            [seqs[i] for i in idx], spec, {**full, **mine}, *opts, given=given_params
+        )
         for i, r in zip(idx, res, strict=True):
             out[i] = r
     return out
@@ -414,9 +417,10 @@ def _smooth_group(
     min_conf: float = DEFAULT_MIN_CONFIDENCE,
     untangle: Any = "auto",
     step_guard: bool = False,
+    given: frozenset[str] = frozenset(),
 ) -> list[SkeletonSequence]:
     """Smooth bodies sharing frames, topology, time base, dimension and units, stacked
-    on a body axis."""
+    on a body axis (``given``: the parameters the caller gave, :class:`SmoothInput`)."""
     untangled = None
     if untangle is True or (untangle == "auto" and length_scale(seqs[0].units) is None):
         # gates measured on the frames so far: the untangling is causal too (what a live
@@ -457,6 +461,7 @@ def _smooth_group(
         confidence=confidence,
         units="m" if scale is not None else ref.units,
         n_dims=n_dims,
+        given=given,
     )
     if ref.n_frames == 0:
         result = SmoothOutput(positions.copy())

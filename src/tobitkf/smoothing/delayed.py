@@ -569,7 +569,7 @@ class DelayedSmoother:
             )
             for b in range(P.shape[1])
         ]
-        return self._hold.run(k, seqs, self.method, {**self._options, **self.params})
+        return self._hold.run(k, seqs, self.method, {**self._options, **self._given})
 
     def _give(
         self, out: list[SkeletonSequence], rows: list[int], last: int

@@ -787,7 +787,10 @@ class LiveSmoother:
         if gates.n == gates.next:
             measured = recording_gates(np.stack(gates.frames), np.asarray(gates.steps),
                                        self.topology.parents, self._dims)  # fmt: skip
-            params = {**self.params, **{k: measured[k] for k in GATE_PARAMS}}
+            params = {
+                **self.params,
+                **{k: measured[k] for k in GATE_PARAMS if k not in self._given},
+            }
             if gates.stepper is None:
                 gates.stepper = self.spec.live(
                     self.topology, self.up_axis, self.inferred_noise_factor, **params

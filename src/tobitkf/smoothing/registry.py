@@ -78,6 +78,8 @@ class SmoothInput:
     n_dims : coordinates of the sequence (2 or 3); a 2-D sequence reaches the method
         with a third axis of zeros (NaN where missing), so ``ys`` is always
         ``(T, B, J, 3)``, and that axis is dropped from the output
+    given : the names of the parameters the caller gave (the others are defaults): a
+        parameter a method could measure on the recording is the caller's when given
     """
 
     positions: Array
@@ -94,6 +96,7 @@ class SmoothInput:
     confidence: Array | None = None
     units: str | None = "m"
     n_dims: int = 3
+    given: frozenset[str] = frozenset()
 
     @property
     def n_frames(self) -> int:

@@ -618,11 +618,13 @@ def _robust_bodies(
     confidence: Any = None,
     units: str | None = "m",
     n_dims: int = 3,
+    given: frozenset[str] = frozenset(),
 ) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any]]:
     """Gate and smooth every body: ys (T, B, J, 3) NaN where missing.
 
     The parameters taken from the recording (pixels, unknown units) pool all bodies and
-    are derived once, from the whole batch; everything else is per body and runs a chunk
+    are derived once, from the whole batch (a gate parameter the caller gave, named in
+    ``given``, is the caller's); everything else is per body and runs a chunk
     of bodies at a time (:mod:`tobitkf.smoothing.chunks`) into outputs allocated once,
     so the working set stays bounded and the numbers are those of one piece.
 
@@ -634,13 +636,13 @@ def _robust_bodies(
         raise ValueError(f"noise: {len(params['noise'])} fits given for {B} bodies (one per body)")
     if params["gates"] == "stream":  # online only (its validator)
         return _stream_gated(ys, missing, states, times, steps, topo, params, factor,
-                             confidence, n_dims)  # fmt: skip
+                             confidence, n_dims, given)  # fmt: skip
     derived: dict[str, Any] = {}
     centre = None
     if use_recording_gates(params, units):
         derived = recording_gates(ys, steps, topo.parents, n_dims)
         centre = derived.pop("bone_centre", None)
-        params = {**params, **derived}
+        params = {**params, **{k: v for k, v in derived.items() if k not in given}}
     setup = _Setup(topo, params, n_dims)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
@@ -715,6 +717,7 @@ def _stream_gated(
     factor: float,
     confidence: Any,
     n_dims: int,
+    given: frozenset[str] = frozenset(),
 ) -> tuple[Array, Array, list[dict[str, Any]], dict[str, Any], None]:
     """``robust_online`` with ``gates="stream"``: the frames before the first of
     :func:`stream_gate_frames` as measured (no sd), then the online frame function with
@@ -739,7 +742,8 @@ def _stream_gated(
     for a, b in zip(frames, [*frames[1:], T], strict=True):
         derived = recording_gates(ys[:a], steps[:a], topo.parents, n_dims)
         derived.pop("bone_centre", None)
-        setup = _Setup(topo, {**params, **derived}, n_dims)
+        mine = {k: v for k, v in derived.items() if k not in given}  # the caller's win
+        setup = _Setup(topo, {**params, **mine}, n_dims)
         history.append({"frame": a, **{g: derived[g] for g in GATE_PARAMS}})
         segments.append((a, b, setup))
     state = _online_run(y_all, missing, (inferred, rinf, guesses), times, steps, segments,
@@ -858,7 +862,7 @@ def _run(inp: SmoothInput, offline: bool, params: dict[str, Any]) -> SmoothOutpu
     """Runner: every body of ``inp`` gated and smoothed on its own, all in one call."""
     est, std, diags, resolved, body_params = _robust_bodies(
         inp.ys, inp.missing, inp.tracking_state, inp.times, inp.steps, inp.topology, params,
-        inp.inferred_noise_factor, offline, inp.confidence, inp.units, inp.n_dims,
+        inp.inferred_noise_factor, offline, inp.confidence, inp.units, inp.n_dims, inp.given,
     )  # fmt: skip
     return SmoothOutput(est, std=std, diagnostics=tuple(diags), params=resolved if diags else {},
                         body_params=body_params)  # fmt: skip
