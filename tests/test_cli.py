@@ -348,3 +348,33 @@ def test_evaluate_pairs_a_truth_in_the_tracks_own_skeleton_by_name(tmp_path):
     (raw,) = [r for r in table["scores"] if r["method"] == "raw"]
     assert 1.5 < 100 * raw["rmse"] < 1.9  # metres
     assert len(table["paired_joints"]) == truth.n_joints
+
+
+def test_the_individuals_of_a_file_are_smoothed_together(tmp_path):
+    """Two animals in pixels whose identities the tracker swapped for a second: the CLI
+    smooths a file's bodies in one call, as tk.smooth(list) does, so the swap is undone
+    (each body smoothed alone keeps it)."""
+    from tobitkf.skeleton.topology import Topology
+
+    T, t = 150, np.arange(150)
+    topo = Topology.from_names(["snout", "ear_l", "ear_r", "tail"], [-1, 0, 0, 0])
+    true = np.zeros((T, 2, 4, 2))
+    for k in range(2):
+        for j in range(4):
+            true[:, k, j] = np.c_[200 + 250 * k + 40 * np.sin(t / 15 + k) + 15 * j,
+                                  200 + 40 * np.cos(t / 15 + k) + 5 * j]  # fmt: skip
+    seen = true + np.random.default_rng(0).normal(0, 1, true.shape)
+    seen[60:90] = seen[60:90, ::-1]  # the identities swapped
+    seqs = [SkeletonSequence(seen[:, k], topo, fps=30.0, body_id=f"m{k}", units="px")
+            for k in range(2)]  # fmt: skip
+    save(seqs, tmp_path / "two.csv", format="csv")
+    assert _run("smooth", str(tmp_path / "two.csv"), "-o", str(tmp_path / "out")).exit_code == 0
+    out = load(tmp_path / "out" / "two.robust.csv")
+    for a, b in zip(out, smooth_api(seqs), strict=True):
+        np.testing.assert_array_equal(a.positions, b.positions)
+
+    def rmse(results):
+        est = np.stack([s.positions for s in results], 1)
+        return float(np.sqrt(np.mean(np.sum((est - true) ** 2, -1))))
+
+    assert rmse(out) < 2.0 < 10.0 < rmse([smooth_api(s) for s in seqs])

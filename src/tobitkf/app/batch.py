@@ -460,7 +460,9 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         sequences, rate = _with_rate(sequences, job.input_fps)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            smoothed = [smooth(seq, method=method, offline=offline, **params) for seq in sequences]
+            # one call: the bodies of a file are smoothed together, as tk.smooth(list)
+            # does (pose estimators' individuals: their swaps undone, their gates pooled)
+            smoothed = smooth(sequences, method=method, offline=offline, **params)
         read = [str(n) for seq in sequences for n in seq.metadata.get("reader_warnings") or ()]
         said = tuple(dict.fromkeys([*read, *rate, *(str(w.message) for w in caught)]))
         for s in smoothed:  # the file read, whatever the sequence's metadata says (NPZ)
