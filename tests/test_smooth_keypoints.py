@@ -187,3 +187,21 @@ def test_live_2d_equals_batch_online():
     np.testing.assert_allclose(out, batch.positions, atol=1e-9)
     with pytest.raises(ValueError, match="2 coordinates"):
         live.update(np.zeros((len(NAMES), 3)))
+
+
+@pytest.mark.parametrize("T", [1, 2])
+def test_a_recording_too_short_to_read_its_noise_gets_no_sd(T):
+    """In pixels the noise is read from second differences: with fewer than three frames
+    nothing measured it, so the sd is NaN (with a warning), not the floor's ~0; a given
+    noise_sd, or lengths in metres (the physical constants), give one."""
+    rng = np.random.default_rng(T)
+    pos = 300 + rng.normal(0, 2, (T, 4, 2))
+    seq = tk.SkeletonSequence(pos, tk.Topology.from_names(list("abcd")), fps=30.0, units="px")
+    with pytest.warns(UserWarning, match="three frames in a row"):
+        out = tk.smooth(seq)
+    assert np.isnan(out.std).all() and np.isfinite(out.positions).all()
+    assert (tk.smooth(seq, noise_sd=2.0).std > 0.5).all()
+    metres = seq.replace(positions=np.concatenate([pos / 1000, np.ones((T, 4, 1))], -1), units="m")
+    assert (tk.smooth(metres).std > 1e-4).all()
+    three = seq.replace(positions=300 + rng.normal(0, 2, (3, 4, 2)))
+    assert (tk.smooth(three).std > 0.1).all()

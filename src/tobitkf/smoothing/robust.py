@@ -127,6 +127,7 @@ The physical reasoning for every default is in ``docs/robust.md``.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -677,6 +678,17 @@ def _robust_bodies(
     # a variance a hair below zero is rounding (a track with almost no noise, whose fit
     # finds next to none): its sd is 0, not NaN
     std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
+    if derived and "noise_sd" not in given and not _second_differences(missing):
+        # the recording's noise could not be read (its floor stands in): an sd of ~0
+        # would claim a certainty nothing measured
+        std[...] = np.nan
+        warnings.warn(
+            f"no joint has three frames in a row ({T} frames), so the recording's noise "
+            f"cannot be measured in its units ({units!r}): no standard deviation is given "
+            "(NaN); give noise_sd= in the data's units for one",
+            UserWarning,
+            stacklevel=2,
+        )
     diags = [_body_diags(rejected, L, b) for b in range(B)]
     if offline:  # robust_shared: NaN without guesses, with too few changes or switched off
         for b in range(B):
@@ -691,19 +703,26 @@ def _robust_bodies(
                 r["units"] = units
         # per joint the values used; per region the fit itself, which `noise=` takes back
         # (tobitkf.io.read_noise_fit reads it from an output file)
-        given = params["noise"]
+        noise_given = params["noise"]
         body_params = tuple(
             {
                 **{name: a[b].tolist() for name, a in arrays.items()},
                 "noise_fit": {g: dict(r) for g, r in reports[b].items()},
                 # each body's own fit given, not the list of all of them
-                **({"noise": given[b]} if isinstance(given, tuple) else {}),
+                **({"noise": noise_given[b]} if isinstance(noise_given, tuple) else {}),
             }
             for b in range(B)
         )
         for b in range(B):
             diags[b]["noise_fit"] = reports[b]
     return est, std, diags, resolved, body_params
+
+
+def _second_differences(missing: NDArray[np.bool_]) -> bool:
+    """Whether some joint of some body is present at three frames in a row (the noise is
+    read from second differences, :func:`~tobitkf.smoothing.robust_scale.recording_gates`)."""
+    present = ~missing
+    return bool((present[2:] & present[1:-1] & present[:-2]).any())
 
 
 def _stream_gated(
