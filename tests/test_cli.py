@@ -77,7 +77,7 @@ def test_smooth_never_overwrites_and_rejects_unknown_parameters(tmp_path):
     assert res.exit_code == 2 and "'nope'" in res.output and "robust_online" in res.output
     for flag in (["--offline"], ["-p", "offline=true"]):
         res = CliRunner().invoke(app, ["smooth", str(tmp_path / "a.csv"), "-m", "sgf", *flag])
-        assert res.exit_code != 0 and "method 'sgf' does not have" in res.output
+        assert res.exit_code == 2 and "does not have" in " ".join(res.output.split())
 
 
 @pytest.mark.parametrize("fmt", ["c3d", "csv", "deeplabcut", "lightningpose", "mmpose",

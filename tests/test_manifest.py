@@ -63,6 +63,26 @@ def test_the_command_says_what_it_passed_over(src, tmp_path):
     assert "passed over 4 file(s) done by an earlier run" in " ".join(res.output.split())
 
 
+def test_failures_name_their_output_by_absolute_path_and_json_lists_every_input(
+    src, tmp_path, monkeypatch
+):
+    """A failed input's entry names where its output would be as the others do (an
+    absolute path), and --json on a re-run lists the inputs passed over as done too."""
+    (src / "broken.skeleton").write_text("3\n1\n")
+    monkeypatch.chdir(tmp_path)
+    args = ["smooth", "in", "-o", "out", "-m", METHOD, "--json"]
+    first = CliRunner().invoke(app, args)
+    assert first.exit_code == 1
+    entries = read_entries(tmp_path / "out" / MANIFEST_NAME)
+    assert len(entries) == 5
+    for e in entries.values():
+        assert e["output"].startswith(str(tmp_path / "out") + "/")
+    assert [e["status"] for e in entries.values()].count("failed") == 1
+    again = json.loads(CliRunner().invoke(app, args).output)
+    assert len(again) == 5
+    assert sum(bool(r["extra"].get("skipped")) for r in again) == 4
+
+
 def test_a_line_cut_short_by_a_kill_is_ignored_and_the_next_starts_clean(tmp_path):
     path = tmp_path / MANIFEST_NAME
     whole = {"input": "/a", "status": "ok"}

@@ -274,11 +274,12 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
             size = os.path.getsize(summary.source)
         except OSError:
             size = None
+    output = summary.output or extra.get("planned_output")  # a failure: where it would be
     return {
         "input": input_key(summary.source),
         "size": size,
         "sha256": extra.get("sha256"),
-        "output": input_key(summary.output) if summary.output else extra.get("planned_output"),
+        "output": input_key(output) if output else None,
         "status": "ok" if summary.ok else "failed",
         "error": summary.error,
         "unused_settings": unused,

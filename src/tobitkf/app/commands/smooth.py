@@ -147,7 +147,13 @@ from tobitkf.core.jsonable import dumps
     type=click.IntRange(1, 1024),
     help="Worker processes of --cluster local (default: one per core).",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the summary as JSON: one entry per input, those done by an earlier run "
+    "with extra.skipped true.",
+)
 def smooth(
     inputs,
     outdir,
@@ -196,8 +202,8 @@ def smooth(
     if offline and not get_method(method).offline_ok:
         try:  # the library's reason, naming the methods that have one
             check_params(method, {"offline": True})
-        except ValueError as exc:
-            _fail(f"--offline: {exc}")
+        except ValueError as exc:  # a usage error (exit 2), as the other options' are
+            raise click.BadParameter(str(exc), param_hint="--offline") from exc
     if step_guard:
         kwargs["step_guard"] = True  # passed to tobitkf.smooth with the method's parameters
     _check_cluster_options(cluster, workers, jobs)
@@ -277,12 +283,12 @@ def smooth(
             except Interrupted as stop:  # Ctrl-C / SIGTERM: summarise what was done
                 interrupted = stop
                 results = [stop.done[i] for i in sorted(stop.done)] + refused
+    if as_json:  # every input, those done by an earlier run too (extra.skipped)
+        click.echo(dumps([r.__dict__ for r in results]))
     skipped = [r for r in results if r.extra.get("skipped")]
     results = [r for r in results if not r.extra.get("skipped")]
     failed = [r for r in results if not r.ok]
-    if as_json:
-        click.echo(dumps([r.__dict__ for r in results]))
-    else:
+    if not as_json:
         ok = [r for r in results if r.ok]
         rows = [
             [
