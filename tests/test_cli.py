@@ -209,7 +209,7 @@ def test_info_reports_frames_and_largest_jump(tmp_path):
     assert body["frames"] == 60 and body["joints"] == 25
     top = body["jumps"][0]
     assert top["joint"] == "HandRight" and top["frame"] in (30, 31)
-    assert top["largest_jump_m"] > 0.55
+    assert top["largest_jump"] > 0.55
 
 
 def test_reproduce_covariance_example_json_keys_and_paper_agreement():

@@ -167,6 +167,7 @@ def test_implausible_position(tmp_path, name):
     with pytest.raises(ReadError, match=r"implausible position .*\|value\| <= 10000 m") as e:
         reader(p)
     assert e.value.line == line and str(p) in str(e.value)
+    assert "frame 0, counted from 0" in str(e.value)  # as info and select_frames count
     with pytest.raises(ValueError, match="implausible must be one of"):
         reader(p, implausible="drop")
     (s,) = reader(p, implausible="missing")

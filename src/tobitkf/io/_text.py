@@ -284,8 +284,9 @@ def check_positions(
         path,
         None if line_numbers is None else line_numbers[t],
         f"implausible position {float(positions[t, j, a])!r} {unit_text} ({'xyz'[a]} of "
-        f"joint {joint}, frame {t + 1}): expected |value| <= {bound:g} {unit_text}; pass "
-        "implausible='missing' to read such samples as missing",
+        f"joint {joint}, frame {t}, counted from 0): expected |value| <= {bound:g} "
+        f"{unit_text}; tobitkf.load(path, implausible='missing') reads such samples as "
+        "missing",
     )
 
 

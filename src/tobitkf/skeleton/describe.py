@@ -49,7 +49,8 @@ def describe_sequence(seq: SkeletonSequence) -> dict[str, Any]:
     out["jumps"] = [
         {
             "joint": seq.joint_names[j],
-            "largest_jump_m": None if not np.isfinite(jump[j]) else float(jump[j]),
+            # in the sequence's units (``units``; pixels for a pose estimator's keypoints)
+            "largest_jump": None if not np.isfinite(jump[j]) else float(jump[j]),
             "frame": int(frame[j]),
             "missing": int(missing[:, j].sum()),
         }

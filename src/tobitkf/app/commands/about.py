@@ -53,10 +53,10 @@ def info(path, input_format, as_json):
         if body.get("tracking_states"):
             states = ", ".join(f"{k}: {v}" for k, v in body["tracking_states"].items())
             console.print(f"  tracking states: {states}")
-        rows = [[j["joint"], j["largest_jump_m"], j["frame"], j["missing"]] for j in body["jumps"]]
+        rows = [[j["joint"], j["largest_jump"], j["frame"], j["missing"]] for j in body["jumps"]]
         _print_table(
             "largest frame-to-frame jump per joint",
-            ["joint", "jump [m]", "at frame", "missing"],
+            ["joint", f"jump [{body['units'] or 'units'}]", "at frame", "missing"],
             rows,
             digits=3,
         )
