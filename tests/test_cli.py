@@ -209,7 +209,11 @@ def test_info_reports_frames_and_largest_jump(tmp_path):
     assert body["frames"] == 60 and body["joints"] == 25
     top = body["jumps"][0]
     assert top["joint"] == "HandRight" and top["frame"] in (30, 31)
-    assert top["largest_jump"] > 0.55
+    assert top["largest_jump"] > 0.55 and body["units"] == "m"
+    assert "jump (m)" in _run("info", str(tmp_path / "a.csv")).output
+    px = SkeletonSequence(_recording().positions[..., :2] * 500, "kinect_v2", fps=30.0, units="px")
+    save([px], tmp_path / "px.csv", format="csv")
+    assert "jump (px)" in _run("info", str(tmp_path / "px.csv")).output
 
 
 def test_reproduce_covariance_example_json_keys_and_paper_agreement():

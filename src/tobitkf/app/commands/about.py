@@ -56,7 +56,7 @@ def info(path, input_format, as_json):
         rows = [[j["joint"], j["largest_jump"], j["frame"], j["missing"]] for j in body["jumps"]]
         _print_table(
             "largest frame-to-frame jump per joint",
-            ["joint", f"jump [{body['units'] or 'units'}]", "at frame", "missing"],
+            ["joint", f"jump ({body['units'] or 'units'})", "at frame", "missing"],
             rows,
             digits=3,
         )
