@@ -272,6 +272,25 @@ def test_frame_numbers_are_written_back(tmp_path):
     np.testing.assert_array_equal(pd.read_hdf(tmp_path / "out.h5").index, df.index)
 
 
+def test_a_deeplabcut_csv_cut_short_is_a_read_error(tmp_path):
+    """pandas fills a short row with NaN: a file cut within a row (its last number cut
+    too) is refused at that line, as is a short row anywhere."""
+    ds = _movement_ds()[0]
+    path = tmp_path / "pred.csv"
+    save_poses.to_dlc_file(ds, path, split_individuals=False)
+    text = path.read_text()
+    lines = text.splitlines()
+    (tmp_path / "cut.csv").write_text(text[: len(text) - len(lines[-1]) // 2 - 1])
+    with pytest.raises(ReadError, match="ends within this row") as e:
+        tk.load(tmp_path / "cut.csv")
+    assert e.value.line == len(lines)
+    lines[6] = lines[6].rsplit(",", 2)[0]
+    (tmp_path / "short.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ReadError, match="fields as in the header") as e:
+        tk.load(tmp_path / "short.csv")
+    assert e.value.line == 7
+
+
 def test_pose_readers_errors(tmp_path):
     bad = tmp_path / "x.h5"
     bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)

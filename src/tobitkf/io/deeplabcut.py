@@ -47,6 +47,7 @@ from tobitkf.io._pose import (
     sequences_from_arrays,
     written_confidence,
 )
+from tobitkf.io._text import read_bytes
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format, require_frames
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -104,6 +105,23 @@ def _read_table(path: Path, pd: Any) -> Any:
         raise ReadError(path, None, f"not a DeepLabCut table ({hdf5_reason(exc)})") from None
 
 
+def _check_row_widths(path: Path, n_header: int) -> None:
+    """A ReadError at the first row with another number of fields than the first header
+    row (pandas would fill a short row, a file cut mid-row, with NaN and take the cut
+    number for a value)."""
+    lines = read_bytes(path).split(b"\n")
+    width = lines[0].count(b",")
+    for k in range(n_header, len(lines)):
+        row = lines[k].rstrip(b"\r")
+        if row and row.count(b",") != width:
+            cut = k == len(lines) - 1  # no newline after it: the file ends mid-row
+            raise ReadError(
+                path, k + 1,
+                f"expected {width + 1} fields as in the header, found {row.count(b',') + 1}"
+                + (" (the file ends within this row: cut short?)" if cut else ""),
+            )  # fmt: skip
+
+
 def _read_frame(path: Path) -> Any:
     pd = require("pandas", "reading DeepLabCut files")
     if is_hdf5(path):
@@ -112,6 +130,7 @@ def _read_frame(path: Path) -> Any:
         raise ReadError(path, None, "not an HDF5 file (it lacks the HDF5 signature)")
     else:
         n, labelled = _header_rows(path)
+        _check_row_widths(path, n)
         try:
             df = pd.read_csv(path, header=list(range(n)), index_col=[0, 1, 2] if labelled else 0)
         except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
