@@ -291,6 +291,27 @@ def test_a_deeplabcut_csv_cut_short_is_a_read_error(tmp_path):
     assert e.value.line == 7
 
 
+def test_movement_output_keeps_the_sd_the_sample_states_and_the_pairs(tmp_path):
+    """A smoothed sequence's sd and sample states, and its left/right pairs, come back
+    from the netCDF file; movement itself still takes the dataset (to its DLC file)."""
+    ds = _movement_ds(fps=30)[0]
+    # a pair the names do not tell (the reader would find left_ear / right_ear itself)
+    topo = tk.Topology.from_names(KP, [-1, 0, 0, 0], symmetry=[(0, 3)])
+    seqs = [s.replace(topology=topo) for s in tk.smooth(tk.from_movement(ds))]
+    tk.save(seqs, tmp_path / "out.nc", format="movement")
+    back = tk.load(tmp_path / "out.nc")
+    for a, b in zip(seqs, back, strict=True):
+        np.testing.assert_array_equal(b.std, a.std)
+        np.testing.assert_array_equal(b.sample_state, a.sample_state)
+        assert b.topology.symmetry == ((0, 3),) and b.topology.parents == topo.parents
+    with xr.open_dataset(tmp_path / "out.nc", engine="h5netcdf") as theirs:
+        save_poses.to_dlc_file(theirs.load(), tmp_path / "dlc.h5", split_individuals=False)
+    np.testing.assert_allclose(
+        load_poses.from_dlc_file(tmp_path / "dlc.h5")["position"].values,
+        np.stack([s.positions for s in seqs], -1).transpose(0, 2, 1, 3),
+    )
+
+
 def test_pose_readers_errors(tmp_path):
     bad = tmp_path / "x.h5"
     bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)

@@ -11,8 +11,12 @@ A movement poses dataset (an :class:`xarray.Dataset`, ``ds_type = "poses"``) hol
 :func:`from_movement` gives one :class:`SkeletonSequence` per individual (``body_id`` =
 its name; positions in pixels for 2-D, unknown units for 3-D unless the dataset says
 ``units``); :func:`to_movement` builds such a dataset (loadable by movement, e.g.
-``movement.io.save_poses.to_dlc_file``) and records the units and the bones in the
-attributes ``tobitkf_units`` and ``tobitkf_parents`` so that a round trip loses nothing.
+``movement.io.save_poses.to_dlc_file``) and records the units, the bones and the
+left/right pairs in the attributes ``tobitkf_units``, ``tobitkf_parents`` and
+``tobitkf_symmetry``, and a smoothed sequence's posterior standard deviation and sample
+states in the variables ``tobitkf_std`` and ``tobitkf_sample_state`` (dims ``(time,
+keypoints, individuals)``; movement's own functions pass them by), so that a round trip
+loses nothing.
 The ``.nc`` files are that dataset written by ``Dataset.to_netcdf`` (movement saves and
 loads its datasets this way); :func:`read_movement` / :func:`write_movement` read and
 write them (xarray and h5netcdf: ``pip install 'tobitkf[pose]'``).
@@ -97,10 +101,34 @@ def from_movement(ds: Any, *, path: Any = "<movement dataset>") -> list[Skeleton
             topo = Topology.from_names(
                 keypoints, [int(p) for p in np.atleast_1d(parents)], name="movement"
             )
+            symmetry = np.asarray(attrs.get("tobitkf_symmetry", []), dtype=np.int64).reshape(-1, 2)
+            if symmetry.size and symmetry.min() >= 0 and symmetry.max() < len(keypoints):
+                topo = Topology(topo.name, topo.joints, topo.parents, tuple(map(tuple, symmetry)),
+                                topo.up_axis)  # fmt: skip
             seqs = [s.replace(topology=topo) for s in seqs]
         except ValueError:
             pass  # not a tree: keep the keypoints without bones
-    return seqs
+    return _smoothed_fields(ds, seqs)
+
+
+def _smoothed_fields(ds: Any, seqs: list[SkeletonSequence]) -> list[SkeletonSequence]:
+    """``seqs`` with the ``std`` and ``sample_state`` that :func:`to_movement` wrote."""
+    from tobitkf.skeleton.sequence import SampleState
+
+    fields: dict[str, np.ndarray] = {}
+    for name, var in (("std", "tobitkf_std"), ("sample_state", "tobitkf_sample_state")):
+        if var not in ds:
+            continue
+        da = ds[var]
+        if set(da.dims) != {"time", "keypoints", "individuals"}:
+            raise ValueError(f"{var} must have dims time, keypoints, individuals")
+        values = da.transpose("time", "individuals", "keypoints").values
+        if name == "sample_state" and not np.isin(values, [int(v) for v in SampleState]).all():
+            raise ValueError(f"{var} holds a value that is no sample state")
+        fields[name] = values
+    if not fields:
+        return seqs
+    return [s.replace(**{k: v[:, i] for k, v in fields.items()}) for i, s in enumerate(seqs)]
 
 
 def _text(v: Any) -> Any:
@@ -129,6 +157,8 @@ def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any
         "time_unit": unit,
         "tobitkf_parents": np.asarray(first.topology.parents, dtype=np.int64),
     }
+    if first.topology.symmetry:
+        attrs["tobitkf_symmetry"] = np.asarray(first.topology.symmetry, dtype=np.int64).ravel()
     if first.fps is not None:
         attrs["fps"] = float(first.fps)
     if first.units is not None:
@@ -136,14 +166,21 @@ def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any
     src = first.metadata.get("source")
     if src:
         attrs["source_file"] = str(src)
+    per_sample = ("time", "keypoints", "individuals")
+    variables: dict[str, Any] = {
+        "position": (
+            ("time", "space", "keypoints", "individuals"),
+            arr.positions.transpose(0, 3, 2, 1),
+        ),
+        "confidence": (per_sample, arr.confidence.transpose(0, 2, 1)),
+    }
+    if all(s.std is not None for s in seqs):  # a smoothed output: what it said of each sample
+        variables["tobitkf_std"] = (per_sample, np.stack([s.std for s in seqs], axis=2))
+    if all(s.sample_state is not None for s in seqs):
+        states = np.stack([s.sample_state for s in seqs], axis=2).astype(np.int8)
+        variables["tobitkf_sample_state"] = (per_sample, states)
     return xr.Dataset(
-        {
-            "position": (
-                ("time", "space", "keypoints", "individuals"),
-                arr.positions.transpose(0, 3, 2, 1),
-            ),
-            "confidence": (("time", "keypoints", "individuals"), arr.confidence.transpose(0, 2, 1)),
-        },
+        variables,
         coords={
             "time": np.asarray(time, dtype=float),
             "space": ["x", "y", "z"][: arr.n_dims],
