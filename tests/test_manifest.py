@@ -57,10 +57,12 @@ def test_a_rerun_passes_over_what_is_done_and_redoes_what_changed(src, tmp_path)
 def test_the_command_says_what_it_passed_over(src, tmp_path):
     out = tmp_path / "out"
     args = ["smooth", str(src), "-o", str(out), "-m", METHOD]
-    assert CliRunner().invoke(app, args).exit_code == 0
+    first = CliRunner().invoke(app, args)
+    assert first.exit_code == 0 and first.output.rstrip().endswith("4 smoothed")
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     assert "passed over 4 file(s) done by an earlier run" in " ".join(res.output.split())
+    assert res.output.rstrip().endswith("0 smoothed, 4 passed over as done")
 
 
 def test_failures_name_their_output_by_absolute_path_and_json_lists_every_input(
@@ -78,6 +80,8 @@ def test_failures_name_their_output_by_absolute_path_and_json_lists_every_input(
     for e in entries.values():
         assert e["output"].startswith(str(tmp_path / "out") + "/")
     assert [e["status"] for e in entries.values()].count("failed") == 1
+    plain = CliRunner().invoke(app, [*args[:-1], "--overwrite"])
+    assert plain.output.rstrip().endswith("4 smoothed, 1 failed")
     again = json.loads(CliRunner().invoke(app, args).output)
     assert len(again) == 5
     assert sum(bool(r["extra"].get("skipped")) for r in again) == 4

@@ -329,6 +329,11 @@ def smooth(
                 err_console.print(f"[yellow]warning[/yellow] {escape(r.source)}: {escape(w)}")
         for r in failed:
             err_console.print(f"[red]FAILED[/red] {escape(r.source)}: {escape(str(r.error))}")
+        if interrupted is None:  # the tally, last, where a long run's end is read
+            tally = [f"{len(rows)} smoothed"]
+            tally += [f"{len(failed)} failed"] if failed else []
+            tally += [f"{len(skipped)} passed over as done"] if skipped else []
+            err_console.print(("[red]" if failed else "") + ", ".join(tally))
     if interrupted is not None:
         left = len(job_list) - len(interrupted.done)
         err_console.print(
