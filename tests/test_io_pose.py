@@ -137,6 +137,31 @@ def test_sleap_files_written_by_sleap_io(tmp_path, how):
     assert seqs[0].metadata["confidence_clipped"]  # sleap's scores above 1 were clipped
 
 
+def test_a_sleap_project_of_two_videos(tmp_path):
+    """One sequence per video and track: the CSV keeps which video each came from; a
+    pose format of one video refuses them, naming the videos."""
+    labels = _sleap_labels()
+    other = sio.Video(filename="other.mp4")
+    skel, track = labels.skeletons[0], labels.tracks[0]
+    rng = np.random.default_rng(7)
+    labels.videos.append(other)
+    for t in range(9):
+        pts = rng.uniform(0, 500, (len(KP), 2))
+        inst = sio.PredictedInstance.from_numpy(pts, skel, point_scores=np.ones(4), track=track)
+        labels.labeled_frames.append(sio.LabeledFrame(video=other, frame_idx=t, instances=[inst]))
+    sio.save_slp(labels, tmp_path / "two.slp")
+    seqs = tk.load(tmp_path / "two.slp")
+    videos = [s.metadata["video"] for s in seqs]
+    assert sorted(set(videos)) == ["fake.mp4", "other.mp4"]
+    tk.save(seqs, tmp_path / "two.csv", format="csv")
+    back = tk.load(tmp_path / "two.csv")
+    assert [s.metadata["video"] for s in back] == videos
+    assert [s.n_frames for s in back] == [s.n_frames for s in seqs]
+    for fmt, suffix in (("deeplabcut", ".h5"), ("movement", ".nc"), ("mmpose", ".json")):
+        with pytest.raises(ValueError, match=r"come from 2 videos .*fake\.mp4"):
+            tk.save(seqs, tmp_path / f"two{suffix}", format=fmt)
+
+
 def test_movement_netcdf_and_objects(tmp_path):
     ds, pos, conf, names = _movement_ds(fps=30)
     path = tmp_path / "poses.nc"

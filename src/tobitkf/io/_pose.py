@@ -22,6 +22,7 @@ __all__ = [
     "check_alike",
     "check_hdf5_opens",
     "check_hdf5_reads",
+    "check_one_video",
     "frame_numbers",
     "hdf5_open_error",
     "hdf5_reason",
@@ -239,9 +240,23 @@ def frame_numbers(seq: SkeletonSequence) -> np.ndarray | None:
     return None
 
 
+def check_one_video(seqs: Sequence[SkeletonSequence]) -> None:
+    """ValueError when the sequences come from several videos (a SLEAP project's: one
+    sequence per video and track), which one pose file cannot hold."""
+    videos = list(dict.fromkeys(str(s.metadata["video"]) for s in seqs if "video" in s.metadata))
+    if len(videos) > 1:
+        raise ValueError(
+            f"the sequences come from {len(videos)} videos ({', '.join(videos[:3])}"
+            f"{', ...' if len(videos) > 3 else ''}), and a pose file holds one: write each "
+            "video's sequences to its own file (select them by metadata['video']), or "
+            "write csv or npz"
+        )
+
+
 def check_alike(seqs: list[SkeletonSequence]) -> None:
     """ValueError unless the individuals of one pose file share dimension and frame count."""
     first = seqs[0]
+    check_one_video(seqs)
     for s in seqs[1:]:
         if (s.n_dims, s.n_frames) != (first.n_dims, first.n_frames):
             raise ValueError(

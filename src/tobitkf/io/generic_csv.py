@@ -401,6 +401,8 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
         metadata: dict[str, Any] = {"source": str(path), "format": "csv"}
         if "units" not in side:  # assumed (metres in 3-D): --units may say otherwise
             metadata[UNITS_UNSTATED] = True
+        if "video" in entry:
+            metadata["video"] = entry["video"]
         provenance = entry.get("provenance", side.get("provenance"))
         if provenance is not None:
             metadata["provenance"] = provenance
@@ -535,6 +537,8 @@ def _read_sidecar(path) -> dict[str, Any]:
         ):
             raise bad(f"expected an int or str body id, found {body_id!r}")
         entry = {k: e[k] for k in ("body_id", "provenance") if k in e}
+        if isinstance(e.get("video"), str):
+            entry["video"] = e["video"]
         if e.get("joints") is not None:
             joints = e["joints"]
             if not (
@@ -729,6 +733,8 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         )
         if shared is None and provs[k] is not None:
             entry["provenance"] = provs[k]
+        if isinstance(s.metadata.get("video"), str):  # a SLEAP project's video of the body
+            entry["video"] = s.metadata["video"]
         if own_joints:
             entry["joints"] = list(s.joint_names)
             entry["topology"] = s.topology.name

@@ -38,7 +38,7 @@ import numpy as np
 from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
-from tobitkf.io._pose import written_confidence
+from tobitkf.io._pose import check_one_video, written_confidence
 from tobitkf.io._text import check_output_size, check_positions, option_rate
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format, require_frames
@@ -298,6 +298,7 @@ def write_mmpose(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[
     if not seqs:
         raise ValueError("no sequence to write")
     require_frames(seqs, "MMPose")
+    check_one_video(seqs)
     shape = {(s.n_joints, s.n_dims) for s in seqs}
     if len(shape) > 1:
         raise ValueError(f"MMPose instances share one keypoint layout; found {sorted(shape)}")
