@@ -137,6 +137,18 @@ def test_sleap_files_written_by_sleap_io(tmp_path, how):
     assert seqs[0].metadata["confidence_clipped"]  # sleap's scores above 1 were clipped
 
 
+def test_sleap_files_are_known_by_their_content_not_their_name(tmp_path):
+    """An analysis file named .slp and a .slp named .h5 (content first, extension
+    second): each is read as what it holds."""
+    labels = _sleap_labels()
+    sio.save_slp(labels, tmp_path / "labels.h5")
+    sio.save_analysis_h5(labels, tmp_path / "analysis.slp")
+    assert tk.detect_format(tmp_path / "labels.h5") == "slp"
+    assert tk.detect_format(tmp_path / "analysis.slp") == "sleap_analysis"
+    for name in ("labels.h5", "analysis.slp"):
+        assert [s.body_id for s in tk.load(tmp_path / name)] == ["fly1", "fly2"]
+
+
 def test_a_sleap_project_of_two_videos(tmp_path):
     """One sequence per video and track: the CSV keeps which video each came from; a
     pose format of one video refuses them, naming the videos."""

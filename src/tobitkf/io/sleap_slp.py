@@ -59,8 +59,21 @@ def read_slp(
 
 
 def sniff_slp(path: Path, head: str) -> int:
-    """Score: an HDF5 file named ``.slp``."""
-    return 90 if path.suffix.lower() == ".slp" and head.startswith("\ufffdHDF") else 0
+    """Score: an HDF5 file holding SLEAP's labels (``videos_json``, or ``metadata`` and
+    ``frames``), whatever its name; without h5py, an HDF5 file named ``.slp``."""
+    if not head.startswith("\ufffdHDF"):
+        return 0
+    try:
+        import h5py
+    except ImportError:
+        return 90 if path.suffix.lower() == ".slp" else 0
+    try:
+        with h5py.File(path, "r") as f:
+            if "videos_json" in f or ("metadata" in f and "frames" in f):
+                return 95
+    except (OSError, ValueError):
+        return 0
+    return 0
 
 
 register_format(
