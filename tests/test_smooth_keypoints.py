@@ -205,3 +205,15 @@ def test_a_recording_too_short_to_read_its_noise_gets_no_sd(T):
     assert (tk.smooth(metres).std > 1e-4).all()
     three = seq.replace(positions=300 + rng.normal(0, 2, (3, 4, 2)))
     assert (tk.smooth(three).std > 0.1).all()
+
+
+def test_the_assumed_frame_rate_is_in_the_provenance():
+    """Without fps or timestamps the speeds (px/s) are per 1/30 s: the provenance says
+    so, and says nothing when the rate was given."""
+    rng = np.random.default_rng(8)
+    seq = tk.SkeletonSequence(300 + rng.normal(0, 2, (40, 4, 2)),
+                              tk.Topology.from_names(list("abcd")), units="px")  # fmt: skip
+    assert tk.smooth(seq).metadata["provenance"]["assumed_fps"] == 30.0
+    assert "assumed_fps" not in tk.smooth(seq.replace(fps=50.0)).metadata["provenance"]
+    stamped = seq.replace(timestamps=np.arange(40) / 25.0)
+    assert "assumed_fps" not in tk.smooth(stamped).metadata["provenance"]

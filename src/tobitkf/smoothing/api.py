@@ -526,6 +526,8 @@ def _smooth_group(
         meta = dict(s.metadata)
         meta["diagnostics"] = diagnostics
         meta["provenance"] = _provenance(spec, used_b, s.metadata)
+        if s.fps is None and s.timestamps is None:  # the rate the parameters in /s assumed
+            meta["provenance"]["assumed_fps"] = 1.0 / float(inp.steps[0])
         out.append(
             make(
                 s,
