@@ -174,7 +174,8 @@ def smooth(
     workers,
     as_json,
 ):
-    """Smooth skeleton recordings (files or folders, searched recursively).
+    """Smooth skeleton recordings (files or folders, searched recursively; hidden files
+    and folders, named with a leading '.', are not searched).
 
     OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input); a re-run passes
     over inputs done before with the same method and parameters (--overwrite redoes them).
