@@ -186,3 +186,17 @@ def test_another_fps_redoes_only_the_files_that_used_it(tmp_path):
     )
     redone = tk.smooth_files(src, out, METHOD)  # no rate given: the bare file again
     assert _skipped(redone) == [str(src / "timed.npz")]
+
+
+def test_an_input_smoothed_by_two_methods_keeps_both_records(src, tmp_path):
+    """kf, then sgf, then kf again into one folder: the third run passes over the kf
+    outputs (the manifest keeps a line per input and output)."""
+    out = tmp_path / "out"
+    inputs = sorted(r.source for r in tk.smooth_files(src, out, "kf"))
+    assert _skipped(tk.smooth_files(src, out, "sgf")) == []
+    assert _skipped(tk.smooth_files(src, out, "kf")) == inputs
+    assert _skipped(tk.smooth_files(src, out, "sgf")) == inputs
+    lines = [json.loads(x) for x in (out / MANIFEST_NAME).read_text().splitlines()]
+    assert len(lines) == 2 * len(inputs)
+    # the latest line of each input is its last: read_entries gives the sgf runs
+    assert {e["method"] for e in read_entries(out / MANIFEST_NAME).values()} == {"sgf"}

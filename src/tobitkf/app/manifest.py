@@ -147,24 +147,35 @@ class Manifest:
             self.path = Path(MANIFEST_NAME)  # not used for a remote folder
         else:
             self.path = Path(outdir) / MANIFEST_NAME
-        self.entries: dict[str, dict[str, Any]] = self._read()
+        #: (input, output) -> the latest entry of that pair, oldest first: an input smoothed
+        #: into two outputs (two methods, two formats) keeps both, so either is passed over
+        self.pairs: dict[tuple[str, Any], dict[str, Any]] = self._read()
         self._file: IO[str] | None = None
         self._open = False
         self._flushed = time.monotonic()
 
-    def _read(self) -> dict[str, dict[str, Any]]:
+    @property
+    def entries(self) -> dict[str, dict[str, Any]]:
+        """Input -> its latest entry (of any output)."""
+        return {e["input"]: e for e in self.pairs.values()}
+
+    def _read(self) -> dict[tuple[str, Any], dict[str, Any]]:
         if self._remote is None:
-            return read_entries(self.path)
+            try:
+                with open(self.path, encoding="utf-8") as f:
+                    return parse_pairs(f)
+            except FileNotFoundError:
+                return {}
         fs, path = self._remote
         if not fs.exists(path):
             return {}
-        return parse_entries(fs.cat_file(path).decode("utf-8").splitlines())
+        return parse_pairs(fs.cat_file(path).decode("utf-8").splitlines())
 
     # -- the run's file --------------------------------------------------------
     def __enter__(self) -> Manifest:
         self._open = True
         if self._remote is not None:
-            self.entries = self._read()
+            self.pairs = self._read()
             return self
         self.path.parent.mkdir(parents=True, exist_ok=True)
         f = open(self.path, "a+", encoding="utf-8")
@@ -187,14 +198,15 @@ class Manifest:
                 if raw.read(1) != b"\n":  # a line cut short by a kill: start a new one
                     f.write("\n")
         self._file = f
-        self.entries = read_entries(self.path)  # what the lock now guarantees
+        self.pairs = self._read()  # what the lock now guarantees
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
-        """Rewrite the file with the latest line of each input, then release the lock."""
+        """Rewrite the file with the latest line of each input and output (the latest of
+        an input last), then release the lock."""
         if self._remote is not None and self._open:
             self._open = False
             self._rewrite_remote()
@@ -202,7 +214,7 @@ class Manifest:
             return
         try:
             self._file.flush()
-            _rewrite(self.path, (self.entries[k] for k in sorted(self.entries)))
+            _rewrite(self.path, self.pairs.values())
         finally:
             self._file.close()  # releases the lock
             self._file = None
@@ -210,8 +222,9 @@ class Manifest:
     def record(self, entry: Mapping[str, Any]) -> None:
         """Append one entry (a line, flushed at once)."""
         entry = _plain(dict(entry))
-        self.entries.pop(entry["input"], None)
-        self.entries[entry["input"]] = entry
+        key = _pair(entry)
+        self.pairs.pop(key, None)  # latest last
+        self.pairs[key] = entry
         if self._file is not None:
             self._file.write(json.dumps(entry, sort_keys=True) + "\n")
             self._file.flush()
@@ -221,11 +234,15 @@ class Manifest:
 
     def _rewrite_remote(self) -> None:
         fs, path = self._remote
-        lines = [json.dumps(self.entries[k], sort_keys=True) + "\n" for k in sorted(self.entries)]
+        lines = [json.dumps(e, sort_keys=True) + "\n" for e in self.pairs.values()]
         fs.pipe_file(path, "".join(lines).encode("utf-8"))
         self._flushed = time.monotonic()
 
     # -- resume ----------------------------------------------------------------
+    def entry(self, source: Any, output: Any) -> dict[str, Any] | None:
+        """The latest entry of ``source`` smoothed into ``output``, or None."""
+        return self.pairs.get((input_key(source), input_key(output) if output else None))
+
     def done_digest(
         self,
         source: str | os.PathLike[str],
@@ -241,7 +258,7 @@ class Manifest:
         at the recorded size of the input; None when it must be (re)done. The caller
         still compares the hash with the file's (a worker does). For remote storage,
         ``size`` is the input's size and ``exists`` says whether an output is there."""
-        entry = self.entries.get(input_key(source))
+        entry = self.entry(source, output)
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
             return None
         want = {**settings, "output": input_key(output)}
@@ -301,18 +318,28 @@ def read_entries(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
         return parse_entries(f)
 
 
-def parse_entries(lines: Iterable[str]) -> dict[str, dict[str, Any]]:
-    """Input path -> latest entry, from manifest lines (broken lines ignored)."""
-    out: dict[str, dict[str, Any]] = {}
+def _pair(entry: Mapping[str, Any]) -> tuple[str, Any]:
+    return entry["input"], entry.get("output")
+
+
+def parse_pairs(lines: Iterable[str]) -> dict[tuple[str, Any], dict[str, Any]]:
+    """(input, output) -> latest entry, oldest first, from manifest lines (broken lines
+    ignored)."""
+    out: dict[tuple[str, Any], dict[str, Any]] = {}
     for line in lines:
         try:
             entry = json.loads(line)
         except ValueError:
             continue
         if isinstance(entry, dict) and isinstance(entry.get("input"), str):
-            out.pop(entry["input"], None)  # latest last
-            out[entry["input"]] = entry
+            out.pop(_pair(entry), None)  # latest last
+            out[_pair(entry)] = entry
     return out
+
+
+def parse_entries(lines: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """Input path -> latest entry, from manifest lines (broken lines ignored)."""
+    return {e["input"]: e for e in parse_pairs(lines).values()}
 
 
 def _rewrite(path: Path, entries: Iterable[Mapping[str, Any]]) -> None:

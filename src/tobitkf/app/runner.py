@@ -26,7 +26,7 @@ from tobitkf.app.batch import (
     remove_partial_outputs,
     smoothing_output_method,
 )
-from tobitkf.app.manifest import MANIFEST_NAME, Manifest, input_key, make_entry, run_settings
+from tobitkf.app.manifest import MANIFEST_NAME, Manifest, make_entry, run_settings
 
 __all__ = ["Discovered", "Plan", "discover_recordings", "plan_run", "run_planned", "smooth_files"]
 
@@ -237,7 +237,7 @@ def run_planned(
 
         def done(summary: FileSummary) -> FileSummary:
             if summary.extra.get("skipped"):
-                summary = _skipped(summary, manifest.entries.get(input_key(summary.source)))
+                summary = _skipped(summary, manifest.entry(summary.source, summary.output))
             else:
                 manifest.record(make_entry(summary, settings))
             if on_done is not None:
@@ -249,9 +249,7 @@ def run_planned(
                 jobs, method, params, offline=offline, n_jobs=n_jobs, on_done=done, expect=expect
             )
             results = [
-                _skipped(r, manifest.entries.get(input_key(r.source)))
-                if r.extra.get("skipped")
-                else r
+                _skipped(r, manifest.entry(r.source, r.output)) if r.extra.get("skipped") else r
                 for r in results
             ]
         else:

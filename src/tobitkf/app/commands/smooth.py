@@ -177,8 +177,9 @@ def smooth(
     """Smooth skeleton recordings (files or folders, searched recursively; hidden files
     and folders, named with a leading '.', are not searched).
 
-    OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input); a re-run passes
-    over inputs done before with the same method and parameters (--overwrite redoes them).
+    OUTDIR gets a manifest (tobitkf-manifest.jsonl, one line per input and output); a
+    re-run passes over inputs done before into the same output with the same method and
+    parameters (--overwrite redoes them).
     Inputs and OUTDIR may be fsspec URLs (s3://bucket/folder; docs/cluster.md).
     """
     from tobitkf.app.batch import strip_extension
