@@ -57,6 +57,14 @@ W_BELOW = 3
 W_ABOVE = 4
 N_W = 5
 
+#: seconds: a duration within this of a threshold counts as equal to it (equal to
+#: min_run is not longer than it, equal to max_reject is within it). Frame times summed
+#: from 1/fps and stamps k/fps differ in their last bits, and a threshold of a whole
+#: number of frames (min_run 0.1 s = 3 steps at 30 fps) would otherwise fall on either
+#: side of a run by rounding alone (docs/robust.md, "Which choices were made on which
+#: data")
+TIME_EPS = 1e-9
+
 # float state per body and joint (sf[..., k])
 S_LAST_T = 0  # time of the last accepted sample (gate)
 S_REJ_SINCE = 1  # start of the current rejection (gate, for max_reject)
@@ -496,7 +504,7 @@ def gate_frame(
             if not (abs(_dist(y[c, 0], y[c, 1], y[c, 2], last[p, 0], last[p, 1], last[p, 2])
                         - Lc) <= tol_c):  # fmt: skip
                 continue
-            if not sb[p, B_PREV_ACC] and not (tt - sf[p, S_REJ_SINCE] <= max_reject):
+            if not sb[p, B_PREV_ACC] and not (tt - sf[p, S_REJ_SINCE] <= max_reject + TIME_EPS):
                 # the parent's rejection goes on past max_reject: no lock-out
                 continue
             blame[p] += 1
@@ -515,7 +523,7 @@ def gate_frame(
         relock = False
         if has_prev:
             raw_step = _dist(y[j, 0], y[j, 1], y[j, 2], yprev[j, 0], yprev[j, 1], yprev[j, 2])
-            relock = (tt - sf[j, S_REJ_SINCE] > max_reject) and (
+            relock = (tt - sf[j, S_REJ_SINCE] > max_reject + TIME_EPS) and (
                 raw_step <= vmax * dt_prev + margin
             )
         # a missing parent is no evidence against the joint (only a rejected one is)
@@ -732,7 +740,7 @@ def gate_pass(
 def drop_short_runs_run(
     acc: np.ndarray, rejected: np.ndarray, times: np.ndarray, min_run: float
 ) -> np.ndarray:
-    """Accepted runs shorter than ``min_run`` between two rejections are rejected."""
+    """Accepted runs not longer than ``min_run`` between two rejections are rejected."""
     out = acc.copy()
     T, B, J = acc.shape[0], acc.shape[1], acc.shape[2]
     if T < 3 or min_run <= 0:
@@ -761,7 +769,7 @@ def drop_short_runs_run(
                     t += 1
                 e = t  # the run is [s, e)
                 if s > 0 and e < T and before == 1 and nxt[e] == 1:
-                    if times[e - 1] - times[s] < min_run:
+                    if times[e - 1] - times[s] < min_run + TIME_EPS:
                         for i in range(s, e):
                             out[i, b, j] = False
                 before = 0
@@ -829,8 +837,8 @@ def confirm_frame(
     sf: np.ndarray,  # state (J, N_SF)
     out_t: np.ndarray,  # (J,) confirmed decision
 ) -> None:
-    """After a rejection of at least ``min_run``, a joint is believed again only once its
-    measurements have passed the gates for ``min_run``."""
+    """After a rejection longer than ``min_run``, a joint is believed again only once
+    its measurements have passed the gates for longer than ``min_run``."""
     for j in range(acc_t.shape[0]):
         out_t[j] = acc_t[j]
         if missing_t[j]:
@@ -843,12 +851,12 @@ def confirm_frame(
             continue
         if math.isfinite(sf[j, S_REJ_BEGIN]) and math.isnan(sf[j, S_CONF_BEGIN]):
             # the first accepted sample after a stretch: a long stretch needs confirmation
-            if tt - sf[j, S_REJ_BEGIN] >= min_run:
+            if tt - sf[j, S_REJ_BEGIN] >= min_run + TIME_EPS:
                 sf[j, S_CONF_BEGIN] = tt
             else:
                 sf[j, S_REJ_BEGIN] = math.nan
         if math.isfinite(sf[j, S_CONF_BEGIN]):
-            if tt - sf[j, S_CONF_BEGIN] < min_run:
+            if tt - sf[j, S_CONF_BEGIN] < min_run + TIME_EPS:
                 out_t[j] = False
             else:
                 sf[j, S_CONF_BEGIN] = math.nan

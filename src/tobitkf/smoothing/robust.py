@@ -46,11 +46,11 @@ A joint rejected for longer than ``max_reject`` (2 s) is re-acquired as soon as 
 plausibly from frame to frame (no lock-out behind a wrong reference).  Offline, the gate
 runs forwards and backwards in time and a measurement is rejected when either pass
 rejects it (failures often enter over 1–3 frames that only one direction flags), an
-accepted run shorter than ``min_run`` (0.1 s) between two rejections is rejected too, and
+accepted run not longer than ``min_run`` (0.1 s) between two rejections is rejected too, and
 the chain rule is applied once more to the combined mask (:func:`enforce_chain`), so a
 wrist that failed together with its elbow is not left in place beside a bridged elbow.
-Online, after a rejection of at least ``min_run`` a joint is believed again only once its
-measurements have passed the gates for ``min_run`` (:func:`confirm_reacquisition`, the
+Online, after a rejection longer than ``min_run`` a joint is believed again only once its
+measurements have passed the gates for longer than ``min_run`` (:func:`confirm_reacquisition`, the
 causal form of the same rule), the chain rule is applied forwards in time, and when a
 rejection starts the last ``lookback`` (2) accepted frames are dropped from the filter
 state (not from the output already emitted).  ``NOT_TRACKED`` joints and NaN are
@@ -1005,8 +1005,8 @@ def robust_smooth(
         that angle if more, is rejected (default 30; ``inf``: no rule).
     lookback : online only: accepted frames dropped from the state when a rejection
         starts (default 2).
-    min_run : an accepted run between two rejections shorter than this (s) is rejected
-        too offline, and must be confirmed for this long online (default 0.1).
+    min_run : an accepted run between two rejections not longer than this (s) is rejected
+        too offline, and must be confirmed for longer than this online (default 0.1).
     carry : rejected joints are carried along with their parent (pseudo-measurement at
         the parent plus the last good offset, standard deviation = that bone's length),
         instead of only being predicted by their own motion model (default True).
