@@ -446,3 +446,16 @@ def test_a_reused_frame_buffer_is_copied():
         b = reused.update(pos_buf, confidence=conf_buf)
         assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True)
     np.testing.assert_array_equal(fresh.flush(), reused.flush())
+
+
+def test_a_flush_with_nothing_left_gives_empty_rows_of_everything():
+    """delay=0 returns every frame at once: the flush has no rows, and its std and
+    sample states are empty arrays of the same shape as the positions' rows, not None."""
+    seq, _ = _recording(seconds=1.0)
+    live = tk.DelayedSmoother(seq.topology, delay=0.0, window=4.0, fps=30.0)
+    for frame in seq.positions[:20]:
+        live.update(frame)
+    rest = live.flush()
+    assert rest.shape == (0, 25, 3)
+    assert live.std.shape == (0, 25) and live.sample_state.shape == (0, 25)
+    assert live.sample_state.dtype == np.int8

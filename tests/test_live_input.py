@@ -56,3 +56,19 @@ def test_a_bad_tracking_state_is_named(bad_state):
     states[3] = bad_state
     with pytest.raises(ValueError, match=rf"found \[{bad_state}\]"):
         live.update(_frames()[0], tracking_state=states)
+
+
+@pytest.mark.parametrize("first", [None, 5.0])
+def test_a_stream_is_timed_by_stamps_at_every_frame_or_at_none(first):
+    """As DelayedSmoother: a stamp given on some frames only is refused, and the refused
+    frame leaves the stream as it was."""
+    rng = np.random.default_rng(3)
+    frames = 0.01 * rng.normal(size=(3, 25, 3)) + [0.0, 0.0, 2.5]
+    live = tk.LiveSmoother("kinect_v2", fps=30.0)
+    live.update(frames[0], timestamp=first)
+    other = 5.1 if first is None else None
+    with pytest.raises(ValueError, match="every frame of a stream or with none"):
+        live.update(frames[1], timestamp=other)
+    assert live.n_frames == 1
+    live.update(frames[1], timestamp=None if first is None else 5.1)
+    assert live.n_frames == 2

@@ -432,7 +432,10 @@ class DelayedSmoother:
         start = self.frame_index + 1
         if start >= self.n_frames:
             shape = (0, *self._shape) if self._shape is not None else (0, 0, 0)
-            self.std = self.sample_state = None
+            # no rows, as the positions: empty arrays (None: a method that gives no sd)
+            gives_sd = self.std is not None or self.n_frames == 0
+            self.std = np.empty(shape[:-1]) if gives_sd else None
+            self.sample_state = np.empty(shape[:-1], dtype=np.int8)
             return np.empty(shape)
         first = self.n_frames - self._held()
         rows = list(range(start - first, self.n_frames - first))

@@ -541,7 +541,13 @@ class LiveSmoother:
         missing = [k for k in GATE_PARAMS if k not in self._given]
         if missing:
             raise ValueError(
-                f"a stream in {units} has no physical scale, and {self.method!r}'s gates are "
+                f"a stream in {units}"
+                + (
+                    " (2-D keypoints without units= are taken as pixels)"
+                    if self.units is None
+                    else ""
+                )
+                + f" has no physical scale, and {self.method!r}'s gates are "
                 f"in metres: pass gates_from=<a recording of the same set-up> to measure "
                 f"them (as smooth() does), gates_from='stream' to measure them on the "
                 f"stream's own frames as they come, or give {', '.join(missing)} in the "
@@ -625,6 +631,10 @@ class LiveSmoother:
     def _step_seconds(self, timestamp: float | None) -> tuple[float, float | None]:
         nominal = 1.0 / self.fps
         t = timestamp_seconds(timestamp)
+        if self.n_frames and (t is None) != (self._last_timestamp is None):
+            # a stream timed by its stamps and by fps by turns has no one time base (and
+            # DelayedSmoother refuses it alike)
+            raise ValueError("timestamp: give it with every frame of a stream or with none")
         if t is None:
             return nominal, self._last_timestamp
         if self._last_timestamp is None:
