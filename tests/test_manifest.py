@@ -90,7 +90,8 @@ def test_failures_name_their_output_by_absolute_path_and_json_lists_every_input(
 def test_a_line_cut_short_by_a_kill_is_ignored_and_the_next_starts_clean(tmp_path):
     path = tmp_path / MANIFEST_NAME
     whole = {"input": "/a", "status": "ok"}
-    path.write_text(json.dumps(whole) + "\n" + '{"input": "/b", "stat')
+    odd = {"input": "/d", "output": ["not", "a", "path"]}  # a line no run wrote
+    path.write_text(json.dumps(whole) + "\n" + json.dumps(odd) + "\n" + '{"input": "/b", "stat')
     assert list(read_entries(path)) == ["/a"]
     with Manifest(tmp_path) as m:
         m.record({"input": "/c", "status": "ok"})

@@ -331,7 +331,11 @@ def parse_pairs(lines: Iterable[str]) -> dict[tuple[str, Any], dict[str, Any]]:
             entry = json.loads(line)
         except ValueError:
             continue
-        if isinstance(entry, dict) and isinstance(entry.get("input"), str):
+        if (
+            isinstance(entry, dict)
+            and isinstance(entry.get("input"), str)
+            and isinstance(entry.get("output"), (str, type(None)))
+        ):
             out.pop(_pair(entry), None)  # latest last
             out[_pair(entry)] = entry
     return out
