@@ -31,6 +31,7 @@ __all__ = [
     "pose_arrays",
     "require",
     "sequences_from_arrays",
+    "sniff_hdf5",
     "written_confidence",
 ]
 
@@ -68,6 +69,23 @@ def is_hdf5(path: str | os.PathLike[str]) -> bool:
             return fh.read(8) == HDF5_MAGIC
     except OSError:
         return False
+
+
+def sniff_hdf5(path: Any, score: int, holds: Any, without_h5py: int = 0) -> int:
+    """A sniffer's score for an HDF5 file: ``score`` when ``holds(f)`` is true of the
+    file opened with h5py, ``without_h5py`` when h5py is not installed (a guess from the
+    name, which the reader then refuses saying what to install), else 0."""
+    if not is_hdf5(path):
+        return 0
+    try:
+        import h5py
+    except ImportError:
+        return without_h5py
+    try:
+        with h5py.File(path, "r") as f:
+            return score if holds(f) else 0
+    except (OSError, ValueError):
+        return 0
 
 
 _TRACE_END = "End of HDF5 error back trace"

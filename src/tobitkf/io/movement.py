@@ -40,6 +40,7 @@ from tobitkf.io._pose import (
     pose_arrays,
     require,
     sequences_from_arrays,
+    sniff_hdf5,
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
@@ -246,19 +247,10 @@ def sniff_movement(path: Path, head: str) -> int:
     """Score: a netCDF file (HDF5 or classic) holding a ``position`` variable."""
     if head.startswith(_NETCDF3_MAGIC):
         return 80 if b"position" in head.encode("utf-8", "replace") else 10
-    if not is_hdf5(path):
-        return 0
-    try:
-        import h5py
-    except ImportError:
-        return 4 if path.suffix.lower() == ".nc" else 0
-    try:
-        with h5py.File(path, "r") as f:
-            if "position" in f and "keypoints" in f:
-                return 90
-    except (OSError, ValueError):
-        return 0
-    return 0
+    return sniff_hdf5(
+        path, 90, lambda f: "position" in f and "keypoints" in f,
+        without_h5py=4 if path.suffix.lower() == ".nc" else 0,
+    )  # fmt: skip
 
 
 register_format(

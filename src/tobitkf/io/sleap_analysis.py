@@ -35,9 +35,9 @@ import numpy as np
 from tobitkf.io._pose import (
     check_hdf5_opens,
     hdf5_reason,
-    is_hdf5,
     require,
     sequences_from_arrays,
+    sniff_hdf5,
 )
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
@@ -129,19 +129,10 @@ def read_sleap_analysis(
 
 def sniff_sleap_analysis(path: Path, head: str) -> int:
     """Score: an HDF5 file with ``tracks`` and ``track_occupancy`` (or ``node_names``)."""
-    if not is_hdf5(path):
-        return 0
-    try:
-        import h5py
-    except ImportError:
-        return 4 if path.name.lower().endswith(".analysis.h5") else 0
-    try:
-        with h5py.File(path, "r") as f:
-            if "tracks" in f and ("track_occupancy" in f or "node_names" in f):
-                return 90
-    except (OSError, ValueError):
-        return 0
-    return 0
+    return sniff_hdf5(
+        path, 90, lambda f: "tracks" in f and ("track_occupancy" in f or "node_names" in f),
+        without_h5py=4 if path.name.lower().endswith(".analysis.h5") else 0,
+    )  # fmt: skip
 
 
 register_format(

@@ -13,7 +13,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tobitkf.io._pose import check_hdf5_opens, hdf5_reason, require, sequences_from_arrays
+from tobitkf.io._pose import (
+    check_hdf5_opens,
+    hdf5_reason,
+    require,
+    sequences_from_arrays,
+    sniff_hdf5,
+)
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -61,19 +67,10 @@ def read_slp(
 def sniff_slp(path: Path, head: str) -> int:
     """Score: an HDF5 file holding SLEAP's labels (``videos_json``, or ``metadata`` and
     ``frames``), whatever its name; without h5py, an HDF5 file named ``.slp``."""
-    if not head.startswith("\ufffdHDF"):
-        return 0
-    try:
-        import h5py
-    except ImportError:
-        return 90 if path.suffix.lower() == ".slp" else 0
-    try:
-        with h5py.File(path, "r") as f:
-            if "videos_json" in f or ("metadata" in f and "frames" in f):
-                return 95
-    except (OSError, ValueError):
-        return 0
-    return 0
+    return sniff_hdf5(
+        path, 95, lambda f: "videos_json" in f or ("metadata" in f and "frames" in f),
+        without_h5py=90 if path.suffix.lower() == ".slp" else 0,
+    )  # fmt: skip
 
 
 register_format(
