@@ -28,6 +28,7 @@ Needs pandas (and PyTables for ``.h5``): ``pip install 'tobitkf[pose]'``.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -105,11 +106,11 @@ def _read_table(path: Path, pd: Any) -> Any:
         raise ReadError(path, None, f"not a DeepLabCut table ({hdf5_reason(exc)})") from None
 
 
-def _check_row_widths(path: Path, n_header: int) -> None:
-    """A ReadError at the first row with another number of fields than the first header
-    row (pandas would fill a short row, a file cut mid-row, with NaN and take the cut
-    number for a value)."""
-    lines = read_bytes(path).split(b"\n")
+def _check_row_widths(path: Path, data: bytes, n_header: int) -> None:
+    """A ReadError at the first row of ``data`` (the file's bytes) with another number of
+    fields than the first header row (pandas would fill a short row, a file cut mid-row,
+    with NaN and take the cut number for a value)."""
+    lines = data.split(b"\n")
     width = lines[0].count(b",")
     for k in range(n_header, len(lines)):
         row = lines[k].rstrip(b"\r")
@@ -130,9 +131,12 @@ def _read_frame(path: Path) -> Any:
         raise ReadError(path, None, "not an HDF5 file (it lacks the HDF5 signature)")
     else:
         n, labelled = _header_rows(path)
-        _check_row_widths(path, n)
+        data = read_bytes(path)  # read once: checked, then parsed by pandas
+        _check_row_widths(path, data, n)
         try:
-            df = pd.read_csv(path, header=list(range(n)), index_col=[0, 1, 2] if labelled else 0)
+            df = pd.read_csv(
+                io.BytesIO(data), header=list(range(n)), index_col=[0, 1, 2] if labelled else 0
+            )
         except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise ReadError(path, None, f"not a DeepLabCut CSV ({exc})") from None
     if not isinstance(df, pd.DataFrame):
