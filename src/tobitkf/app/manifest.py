@@ -154,11 +154,6 @@ class Manifest:
         self._open = False
         self._flushed = time.monotonic()
 
-    @property
-    def entries(self) -> dict[str, dict[str, Any]]:
-        """Input -> its latest entry (of any output)."""
-        return {e["input"]: e for e in self.pairs.values()}
-
     def _read(self) -> dict[tuple[str, Any], dict[str, Any]]:
         if self._remote is None:
             try:
