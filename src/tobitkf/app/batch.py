@@ -43,6 +43,9 @@ class Job:
     input_topology: str | None = None
     #: length unit for an input that states none (a CSV without sidecar, an array)
     input_units: str | None = None
+    #: what the reader does with a position beyond the plausibility bound ("error" or
+    #: "missing", :func:`tobitkf.io.load`)
+    input_implausible: str = "error"
 
 
 @dataclass(frozen=True)
@@ -276,6 +279,7 @@ def plan_jobs(
     input_fps: float | None = None,
     input_topology: str | None = None,
     input_units: str | None = None,
+    input_implausible: str = "error",
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
@@ -349,6 +353,7 @@ def plan_jobs(
                 input_fps=input_fps,
                 input_topology=input_topology,
                 input_units=input_units,
+                input_implausible=input_implausible,
             )
         )
     return jobs, refused
@@ -452,7 +457,7 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         if problem:
             return FileSummary(str(job.source), None, False, problem)
         in_fmt = detect_format(job.source) if job.input_format == "auto" else job.input_format
-        sequences = load(job.source, format=in_fmt)
+        sequences = load(job.source, format=in_fmt, implausible=job.input_implausible)
         if not sequences:
             raise ValueError("the file holds no skeleton")
         unused = _unused_settings(sequences)
@@ -469,6 +474,8 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
             s.metadata["provenance"]["source"] = {
                 "path": job.source_label or str(job.source),
                 "format": in_fmt,
+                # the reader's option: implausible positions read as missing ("missing")
+                "implausible": job.input_implausible,
             }
         atomic_save(smoothed, job.output, job.output_format)
     except Exception as exc:  # reported per file; the run goes on

@@ -99,6 +99,7 @@ def run_settings(
     input_fps: float | None = None,
     input_topology: str | None = None,
     input_units: str | None = None,
+    input_implausible: str = "error",
 ) -> dict[str, Any]:
     """What an output depends on besides its input: method, complete parameters
     (defaults filled in and validated, ``offline`` and the formats included) and the
@@ -106,7 +107,9 @@ def run_settings(
     later frames (``--offline``, or a method that is offline by itself), as the output's
     provenance says; ``input_fps`` the rate given to inputs that state none,
     ``input_topology`` the skeleton given to inputs that name none, ``input_units`` the
-    length unit given to inputs that state none."""
+    length unit given to inputs that state none, ``input_implausible`` what the readers
+    did with implausible positions (recorded when not the default, ``"error"``, so that
+    manifests written before the option still match)."""
     from tobitkf.core.version import __version__
     from tobitkf.smoothing.api import COMMON_KEYWORDS, check_params, get_method
 
@@ -120,6 +123,8 @@ def run_settings(
         full["input_topology"] = input_topology
     if input_units is not None:
         full["input_units"] = input_units
+    if input_implausible != "error":
+        full["input_implausible"] = input_implausible
     full["output_format"] = output_format
     return {"method": method, "params": _plain(full), "tobitkf_version": __version__}
 

@@ -55,6 +55,7 @@ class RemoteJob:
     input_fps: float | None = None
     input_topology: str | None = None
     input_units: str | None = None
+    input_implausible: str = "error"
 
     def side_outputs(self) -> list[str]:
         """URLs of the output's side files (the CSV's JSON sidecar)."""
@@ -81,7 +82,8 @@ class RemoteJob:
                 return FileSummary(self.source, None, False, why, extra=extra)
             out_local = Path(tmp) / "out" / self.output.rsplit("/", 1)[1]
             job = Job(local, out_local, self.output_format, self.input_format, self.source,
-                      self.input_fps, self.input_topology, self.input_units)  # fmt: skip
+                      self.input_fps, self.input_topology, self.input_units,
+                      self.input_implausible)  # fmt: skip
             summary = run_task(job, method, params, offline, expect)
             error = summary.error.replace(str(local), self.source) if summary.error else None
             ok = summary.ok
@@ -153,6 +155,7 @@ def plan_remote(
     input_fps: float | None = None,
     input_topology: str | None = None,
     input_units: str | None = None,
+    input_implausible: str = "error",
 ) -> tuple[list[RemoteJob], list[FileSummary]]:
     """Jobs for inputs named by URLs or paths (folders listed recursively) with outputs
     under ``out_url`` (a URL or a path), keeping the relative layout; the output format
@@ -206,7 +209,8 @@ def plan_remote(
             taken[out] = source
             size = listing[path].get("size")
             jobs.append(RemoteJob(source, out_fs.unstrip_protocol(out), fmt, input_format, size,
-                                  input_fps, input_topology, input_units))  # fmt: skip
+                                  input_fps, input_topology, input_units,
+                                  input_implausible))  # fmt: skip
     return jobs, refused
 
 

@@ -103,6 +103,7 @@ def plan_run(
     fps: float | None = None,
     topology: str | None = None,
     units: str | None = None,
+    implausible: str = "error",
 ) -> Plan:
     """Find the inputs and plan their outputs (:func:`~tobitkf.app.batch.plan_jobs`, or
     :func:`~tobitkf.app.remote.plan_remote` when a URL is involved).
@@ -122,6 +123,7 @@ def plan_run(
             input_fps=fps,
             input_topology=topology,
             input_units=units,
+            input_implausible=implausible,
         )
         return Plan(list(jobs), refused, Discovered([]))
     from tobitkf.io import detect_format
@@ -138,6 +140,7 @@ def plan_run(
         input_fps=fps,
         input_topology=topology,
         input_units=units,
+        input_implausible=implausible,
     )
     return Plan(list(jobs), refused, found)
 
@@ -196,6 +199,7 @@ def run_planned(
     fps: float | None = None,
     topology: str | None = None,
     units: str | None = None,
+    implausible: str = "error",
 ) -> list[FileSummary]:
     """Run planned jobs with the output folder's manifest; summaries in job order, then
     the refused inputs. A file passed over (done before, :mod:`tobitkf.app.manifest`)
@@ -210,7 +214,8 @@ def run_planned(
     manifest's settings, so that another rate redoes them; a file with its own rate
     or timestamps is not redone for it). ``topology``: the skeleton (a topology name) the
     jobs give inputs that name none, recorded alike; ``units``: the length unit given to
-    inputs that state none, alike.
+    inputs that state none, alike; ``implausible``: what the readers do with a position
+    beyond the plausibility bound (:func:`tobitkf.io.load`), recorded alike.
 
     Raises :class:`~tobitkf.app.pool.Interrupted` on Ctrl-C (the manifest keeps every
     file finished) and :class:`~tobitkf.app.manifest.ManifestBusy` when another run
@@ -225,6 +230,7 @@ def run_planned(
         input_fps=fps,
         input_topology=topology,
         input_units=units,
+        input_implausible=implausible,
     )
     with Manifest(outdir) as manifest:
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
@@ -289,6 +295,7 @@ def smooth_files(
     fps: float | None = None,
     topology: str | None = None,
     units: str | None = None,
+    implausible: str = "error",
 ) -> list[FileSummary]:
     """Smooth every recording in ``inputs`` (files or folders, searched recursively) into
     ``out_dir``, as ``tobitkf smooth`` does, and return one summary per input.
@@ -313,6 +320,9 @@ def smooth_files(
     units : length unit (``"mm"``, ``"cm"``, ``"m"``, ``"px"``) of inputs that state none
         (a CSV without its sidecar, read as metres in 3-D; a ``.npy`` array, unknown);
         files stating their own keep it.
+    implausible : ``"error"`` (default: a file with a position beyond the plausibility
+        bound fails) or ``"missing"`` (such positions are read as missing and smoothed
+        over, :func:`tobitkf.io.load`).
 
     Returns
     -------
@@ -332,6 +342,9 @@ def smooth_files(
 
     if units is not None and units not in KNOWN_UNITS:
         raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)}, got {units!r}")
+    from tobitkf.io._text import check_implausible_option
+
+    check_implausible_option(implausible)  # before any file is read
     params = dict(params or {})
     offline = bool(params.pop("offline", False)) or offline
     if isinstance(inputs, (str, os.PathLike)):
@@ -347,6 +360,7 @@ def smooth_files(
         fps=fps,
         topology=topology,
         units=units,
+        implausible=implausible,
     )
     refused = [
         *plan.refused,
@@ -368,4 +382,5 @@ def smooth_files(
         fps=fps,
         topology=topology,
         units=units,
+        implausible=implausible,
     )

@@ -165,7 +165,7 @@ def sequences_from_arrays(
             f"expected positions (frames, individuals, {len(keypoints)} keypoints, 2 or 3), "
             f"found shape {pos.shape}",
         )
-    if np.isinf(pos).any():
+    if implausible != "missing" and np.isinf(pos).any():
         raise ReadError(path, None, "positions hold inf; expected numbers or NaN")
     names = [str(k) for k in keypoints]
     if len(set(names)) != len(names):

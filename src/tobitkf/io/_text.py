@@ -265,8 +265,7 @@ def check_positions(
     in ``state``), in place.
     """
     check_implausible_option(implausible)
-    per_unit = None if units is None else KNOWN_UNITS.get(units)
-    bound = MAX_ABS_POSITION_OTHER if per_unit is None else MAX_ABS_POSITION_M / per_unit
+    bound = _bound(units)
     unit_text = "(unknown units)" if units is None else units
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(positions) <= bound) & ~np.isnan(positions)
@@ -285,9 +284,30 @@ def check_positions(
         None if line_numbers is None else line_numbers[t],
         f"implausible position {float(positions[t, j, a])!r} {unit_text} ({'xyz'[a]} of "
         f"joint {joint}, frame {t}, counted from 0): expected |value| <= {bound:g} "
-        f"{unit_text}; tobitkf.load(path, implausible='missing') reads such samples as "
-        "missing",
+        f"{unit_text}; tobitkf.load(path, implausible='missing') (tobitkf smooth "
+        "--implausible missing) reads such samples as missing",
     )
+
+
+def _bound(units: str | None) -> float:
+    per_unit = None if units is None else KNOWN_UNITS.get(units)
+    return MAX_ABS_POSITION_OTHER if per_unit is None else MAX_ABS_POSITION_M / per_unit
+
+
+def plausible_only(points: np.ndarray, units: str | None, implausible: str) -> np.ndarray:
+    """``points`` (..., D) as a reader with ``implausible="missing"`` will read them: a
+    copy with NaN rows where a coordinate is beyond the bound of :func:`check_positions`
+    (``points`` itself otherwise). For the association of unlabelled people, which
+    must not see such a coordinate as a second person."""
+    if implausible != "missing":
+        return points
+    with np.errstate(invalid="ignore"):
+        bad = (~(np.abs(points) <= _bound(units)) & ~np.isnan(points)).any(axis=-1)
+    if not bad.any():
+        return points
+    out = np.array(points, dtype=float)
+    out[bad] = np.nan
+    return out
 
 
 def nonempty(lines: Sequence[str], start: int = 0) -> tuple[list[str], list[int]]:

@@ -62,6 +62,7 @@ from tobitkf.io._text import (
     check_rate,
     decode,
     parse_rows,
+    plausible_only,
     read_bytes,
     read_head,
 )
@@ -276,6 +277,7 @@ def read_mediapipe(
     image_size: tuple[float, float] | None = None,
     fps: float | None = None,
     max_distance: float | None = None,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read MediaPipe Pose landmarks (JSON or CSV layout of the module docstring).
 
@@ -287,6 +289,9 @@ def read_mediapipe(
     fps : float, optional
     max_distance : float, optional
         Association gate in normalised image units (default: the body's size).
+    implausible : {"error", "missing"}
+        What to do with a coordinate beyond the plausibility bound: raise a ReadError,
+        or read the landmark as missing.
     """
     if landmarks not in ("auto", "world", "image"):
         raise OptionError(f"landmarks must be 'auto', 'world' or 'image', found {landmarks!r}")
@@ -316,7 +321,11 @@ def read_mediapipe(
         if scale.shape != (2,) or not np.all(np.isfinite(scale) & (scale > 0)):
             raise OptionError(f"image_size must be (width, height) > 0, found {image_size!r}")
     key = "image" if has_image else "world"
-    tracks = associate([[q[key][:, :2] for q in fr] for fr in frames], max_distance)
+    near = "m" if key == "world" else None  # image landmarks: normalised, unknown unit
+    tracks = associate(
+        [[plausible_only(q[key][:, :2], near, implausible) for q in fr] for fr in frames],
+        max_distance,
+    )
     T = len(frames)
     dims = 3 if kind == "world" else 2
     out = []
@@ -335,7 +344,7 @@ def read_mediapipe(
         if kind == "image" and scale is not None:
             pos *= scale
         units = "m" if kind == "world" else ("px" if scale is not None else None)
-        check_positions(p, pos, None, "error", names=MEDIAPIPE_POSE_JOINTS, units=units)
+        check_positions(p, pos, None, implausible, names=MEDIAPIPE_POSE_JOINTS, units=units)
         meta: dict[str, Any] = {"source": str(p), "format": "mediapipe", "landmarks": kind}
         meta["presence"] = presence.copy()
         if kind == "image":

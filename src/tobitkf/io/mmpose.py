@@ -39,7 +39,7 @@ from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
 from tobitkf.io._pose import check_one_video, written_confidence
-from tobitkf.io._text import check_output_size, check_positions, option_rate
+from tobitkf.io._text import check_output_size, check_positions, option_rate, plausible_only
 from tobitkf.io.errors import ReadError
 from tobitkf.io.registry import register_format, require_frames
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -164,12 +164,14 @@ def read_mmpose(
     fps: float | None = None,
     max_distance: float | None = None,
     topology: Topology | str | None = None,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read MMPose predictions (module docstring): one sequence per person, with the
     video's frame rate ``fps`` (the file has none), for people without a ``track_id``
     the association's gate ``max_distance`` as OpenPose's reader takes it, and
     ``topology`` (a name or a Topology) for a file whose meta does not name its keypoints
-    (instead of the guess by their count)."""
+    (instead of the guess by their count). ``implausible`` (``"error"`` or
+    ``"missing"``): what to do with a coordinate beyond the plausibility bound."""
     p = Path(path)
     fps = option_rate(p, fps)
     frames, meta = _frames(p, load_json(p))
@@ -215,7 +217,11 @@ def read_mmpose(
         by_frame = dict(zip(at, dets, strict=True))
     else:
         by_frame = dict(zip(at, dets, strict=True))
-        poses = [[inst[0] for inst in by_frame.get(t, [])] for t in range(T)]
+        units = "px" if dims == 2 else None
+        poses = [
+            [plausible_only(inst[0], units, implausible) for inst in by_frame.get(t, [])]
+            for t in range(T)
+        ]
         tracks = associate(poses, max_distance)
         bodies = list(range(len(tracks)))
     check_output_size(p, len(tracks) * T * n_joints * (dims + 1) * 8, size, f"{len(tracks)} people")
@@ -236,7 +242,9 @@ def read_mmpose(
             pos[t], conf[t], std[t], states[t] = by_frame[t][d][:4]
         clipped = bool(np.any((conf > 1) | (conf < 0)))  # scores, not probabilities
         conf = np.clip(conf, 0.0, 1.0)  # NaN (no score) stays NaN
-        check_positions(p, pos, None, names=topo.joints, units="px" if dims == 2 else None)
+        check_positions(
+            p, pos, None, implausible, names=topo.joints, units="px" if dims == 2 else None
+        )
         meta_out: dict[str, Any] = {
             "source": str(p),
             "format": "mmpose",

@@ -52,8 +52,12 @@ __all__ = ["from_movement", "read_movement", "sniff_movement", "to_movement", "w
 _NETCDF3_MAGIC = "CDF\x01", "CDF\x02", "CDF\x05"
 
 
-def from_movement(ds: Any, *, path: Any = "<movement dataset>") -> list[SkeletonSequence]:
-    """Sequences (one per individual) of a movement poses dataset (module docstring)."""
+def from_movement(
+    ds: Any, *, path: Any = "<movement dataset>", implausible: str = "error"
+) -> list[SkeletonSequence]:
+    """Sequences (one per individual) of a movement poses dataset (module docstring).
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a coordinate beyond
+    the plausibility bound (or infinite)."""
     xr = require("xarray", "movement datasets")
     if not isinstance(ds, xr.Dataset):
         raise TypeError(f"expected an xarray Dataset (movement poses), got {type(ds).__name__}")
@@ -94,7 +98,7 @@ def from_movement(ds: Any, *, path: Any = "<movement dataset>") -> list[Skeleton
         meta["source_file"] = str(attrs["source_file"])
     seqs = sequences_from_arrays(
         path, pos, conf, keypoints, individuals, fmt="movement", units=units, fps=fps,
-        timestamps=timestamps, metadata=meta,
+        timestamps=timestamps, metadata=meta, implausible=implausible,
     )  # fmt: skip
     parents = attrs.get("tobitkf_parents")
     if parents is not None and len(np.atleast_1d(parents)) == len(keypoints):
@@ -192,8 +196,11 @@ def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any
     )
 
 
-def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
-    """Read a movement poses dataset saved as netCDF (``Dataset.to_netcdf``)."""
+def read_movement(
+    path: str | os.PathLike[str], implausible: str = "error"
+) -> list[SkeletonSequence]:
+    """Read a movement poses dataset saved as netCDF (``Dataset.to_netcdf``);
+    ``implausible`` as for :func:`from_movement`."""
     p = Path(path)
     xr = require("xarray", "reading movement netCDF files")
     engine = _engine_for(p)
@@ -205,7 +212,7 @@ def read_movement(path: str | os.PathLike[str]) -> list[SkeletonSequence]:
             kind = ds.attrs.get("ds_type", "poses")
             if kind != "poses":
                 raise ReadError(p, None, f"a movement {kind!r} dataset, not poses")
-            return from_movement(ds, path=p)
+            return from_movement(ds, path=p, implausible=implausible)
     except ReadError:
         raise
     except ImportError:

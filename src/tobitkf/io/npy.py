@@ -114,8 +114,11 @@ def read_npy(
     topology: Topology | str | None = None,
     fps: float | None = None,
     units: str | None = None,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
-    """Read a ``.npy`` array of keypoints (module docstring): one sequence per body."""
+    """Read a ``.npy`` array of keypoints (module docstring): one sequence per body.
+    ``implausible`` (``"error"`` or ``"missing"``): what to do with a coordinate beyond
+    the plausibility bound."""
     p = Path(path)
     try:
         size = p.stat().st_size
@@ -162,7 +165,7 @@ def read_npy(
     sequences = []
     for b in range(bodies.shape[1]):
         pos = np.ascontiguousarray(bodies[:, b])
-        check_positions(p, pos, None, names=topo.joints, units=units)
+        check_positions(p, pos, None, implausible, names=topo.joints, units=units)
         sequences.append(
             SkeletonSequence(
                 positions=pos,

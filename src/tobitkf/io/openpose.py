@@ -36,7 +36,13 @@ import numpy as np
 
 from tobitkf.io._association import associate
 from tobitkf.io._json import as_list, as_object, load_json, number_array
-from tobitkf.io._text import check_output_size, check_rate, read_head
+from tobitkf.io._text import (
+    check_output_size,
+    check_positions,
+    check_rate,
+    plausible_only,
+    read_head,
+)
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -119,6 +125,7 @@ def read_openpose(
     fps: float | None = None,
     dims: int | None = None,
     max_distance: float | None = None,
+    implausible: str = "error",
 ) -> list[SkeletonSequence]:
     """Read an OpenPose JSON output folder (or one ``*_keypoints.json`` file).
 
@@ -131,6 +138,9 @@ def read_openpose(
     max_distance : float, optional
         Gate of the association of unlabelled people, in the keypoints' units (default:
         the body's size).
+    implausible : {"error", "missing"}
+        What to do with a coordinate beyond the plausibility bound: raise a ReadError,
+        or read the keypoint as missing.
 
     Returns
     -------
@@ -185,7 +195,11 @@ def read_openpose(
         if any(len(set(pids)) != len(pids) for pids in ids):
             raise ReadError(p, None, "a person_id appears twice in one frame")
     else:
-        poses = [[_missing_to_nan(kp)[:, :dims] for kp in dets] for dets in frames]
+        units = "px" if dims == 2 else None
+        poses = [
+            [plausible_only(_missing_to_nan(kp)[:, :dims], units, implausible) for kp in dets]
+            for dets in frames
+        ]
         tracks = associate(poses, max_distance)
         bodies = list(range(len(tracks)))
     input_bytes = sum(f.stat().st_size for f in files)
@@ -206,6 +220,8 @@ def read_openpose(
             raise ReadError(
                 files[t], None, f"confidence {conf[t, j]!r} of keypoint {j} outside [0, 1]"
             )
+        units = "px" if dims == 2 else None
+        check_positions(p, pos, None, implausible, names=topo.joints, units=units)
         out.append(
             SkeletonSequence(
                 positions=pos,
@@ -213,7 +229,7 @@ def read_openpose(
                 fps=fps,
                 body_id=body,
                 confidence=conf,
-                units="px" if dims == 2 else None,
+                units=units,
                 metadata={
                     "source": str(p),
                     "format": "openpose",

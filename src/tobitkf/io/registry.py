@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._text import read_head
+from tobitkf.io._text import check_implausible_option, read_head
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.skeleton.sequence import SkeletonSequence
 
@@ -327,7 +327,9 @@ def load(
     format : str
         A registered format name, or ``"auto"`` (:func:`detect_format`).
     **options
-        Passed to the reader (e.g. ``points="markers"`` for C3D).
+        Passed to the reader (e.g. ``points="markers"`` for C3D). Every built-in reader
+        takes ``implausible="missing"``: a coordinate beyond the plausibility bound is
+        read as missing instead of raising a ReadError.
 
     Raises
     ------
@@ -341,6 +343,8 @@ def load(
     spec = get_format(name)
     if spec.reader is None:
         raise ValueError(f"format {spec.name!r} has no reader")
+    if "implausible" in options:
+        options = _implausible_option(spec, options)
     try:
         result = spec.reader(p, **options)
     except (ReadError, OptionError, ImportError, OSError, TypeError):
@@ -348,6 +352,27 @@ def load(
     except (ValueError, IndexError, KeyError, ArithmeticError) as exc:  # safety net
         raise ReadError(p, None, f"invalid {spec.name} content ({exc})") from exc
     return list(result)
+
+
+def _implausible_option(spec: FormatSpec, options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` for ``spec``'s reader: ``implausible`` checked, and left out for a
+    registered reader without that parameter when it asks for the default (``"error"``);
+    asking such a reader for ``"missing"`` is an :class:`OptionError`."""
+    import inspect
+
+    check_implausible_option(options["implausible"])
+    try:
+        params = inspect.signature(spec.reader).parameters  # type: ignore[arg-type]
+    except (TypeError, ValueError):  # no signature: pass it on
+        return options
+    if "implausible" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return options
+    if options["implausible"] == "error":
+        return {k: v for k, v in options.items() if k != "implausible"}
+    raise OptionError(
+        f"the {spec.name} reader has no implausible option: it cannot read implausible "
+        "positions as missing"
+    )
 
 
 def save(

@@ -85,6 +85,16 @@ from tobitkf.core.jsonable import dumps
     "track in millimetres needs --units mm. Files stating their own keep it."
 )
 @click.option(
+    "--implausible",
+    type=click.Choice(["error", "missing"]),
+    default="error",
+    show_default=True,
+    help="A position beyond the plausibility bound (10 km, or 1e8 px in pixels or unknown "
+    "units): "
+    "error fails the file, naming the frame and joint; missing reads such samples as "
+    "missing, and the method fills them.",
+)
+@click.option(
     "--overwrite",
     is_flag=True,
     help="Replace files at the output names that are not earlier tobitkf outputs "
@@ -163,6 +173,7 @@ def smooth(
     fps,
     topology,
     units,
+    implausible,
     overwrite,
     params,
     noise_from,
@@ -223,6 +234,7 @@ def smooth(
             fps=fps,
             topology=topology,
             units=units,
+            implausible=implausible,
         )
     except (FileNotFoundError, ImportError) as exc:
         _fail(str(exc))
@@ -279,6 +291,7 @@ def smooth(
                     fps=fps,
                     topology=topology,
                     units=units,
+                    implausible=implausible,
                 )
             except ManifestBusy as exc:
                 _fail(str(exc))
