@@ -239,6 +239,24 @@ def _terminal(monkeypatch) -> io.StringIO:
     return buf
 
 
+@pytest.mark.parametrize("width", [50, 60, 100])
+def test_the_progress_line_keeps_counts_and_time_in_a_narrow_terminal(monkeypatch, width):
+    """What a long run shows: the files done of all, the frames, the elapsed time; the
+    bar is dropped and the name shortened first."""
+    buf = io.StringIO()
+    monkeypatch.setattr(
+        commands, "err_console", Console(file=buf, force_terminal=True, width=width)
+    )
+    with commands._progress(False, "{task.fields[frames]} frames", transient=False) as p:
+        task = p.add_task("smoothing (robust_online)", total=100000, frames=0)
+        p.update(task, advance=12345, frames=1234567)
+    last = Text.from_ansi(buf.getvalue().split("\r")[-1]).plain.splitlines()[-1]
+    assert len(last) <= width
+    for shown in ("12345/100000", "1234567 frames", "0:00:0"):
+        assert shown in last, (shown, last)
+    assert ("━" in last) == (width >= commands._BAR_MIN_WIDTH)
+
+
 def test_progress_on_a_terminal_for_evaluate_benchmark_and_fit(tmp_path, monkeypatch):
     track = tmp_path / "a.csv"
     save([_recording()], track, format="csv")

@@ -234,12 +234,23 @@ def _need_matplotlib(what: str) -> None:
         _fail(f"{what} needs matplotlib, which is not installed: pip install 'tobitkf[plot]'")
 
 
+#: narrowest terminal (columns) whose progress line has a bar
+_BAR_MIN_WIDTH = 80
+
+
 @contextmanager
 def _progress(quiet: bool = False, field: str = "{task.fields[now]}", transient: bool = True):
-    """A progress display on stderr, shown only on a terminal (pipes and logs get none)."""
+    """A progress display on stderr, shown only on a terminal (pipes and logs get none);
+    a terminal narrower than :data:`_BAR_MIN_WIDTH` gets no bar and a shorter name, so
+    that the counts and the elapsed time fit on the line."""
+    from rich.table import Column
+
+    wide = err_console.width >= _BAR_MIN_WIDTH
+    # narrow: no bar, and the name cut to what the counts and the time leave
+    name = None if wide else Column(width=max(8, err_console.width - 42), no_wrap=True)
     with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
+        TextColumn("[bold]{task.description}", table_column=name),
+        *([BarColumn()] if wide else []),
         MofNCompleteColumn(),
         TextColumn(field),
         TimeElapsedColumn(),
