@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+import tobitkf as tk
 from conftest import data_file
 from tobitkf.io import ReadError, detect_format, load, save
 from tobitkf.io._text import NUMBER, fmt_floats
@@ -217,9 +218,9 @@ def test_csv_multibody_keeps_64_bit_ids_and_never_merges_bodies(tmp_path):
     assert [s.body_id for s in back] == [72057594037931101, 72057594037931102]
     for a, b in zip(ntu, back, strict=True):
         _assert_same(a, b)
-    # an id that equals another body's index, or ids that are not integers: numbered in
-    # the body column, the ids themselves in the sidecar
-    for ids in ((1, None), ("a", "b"), (3, 3)):
+    # ids that are neither all integers nor all names that read back as they are, or
+    # that repeat: numbered in the body column, the ids themselves in the sidecar
+    for ids in ((1, None), ("a", 2), (3, 3), ("x", "x"), ("1", "2"), ("a,b", "c"), ("NA", "b")):
         seqs = [_random_sequence(rng, 4, topo, body_id=b) for b in ids]
         save(seqs, p, format="csv")
         back = load(p)
@@ -230,6 +231,63 @@ def test_csv_multibody_keeps_64_bit_ids_and_never_merges_bodies(tmp_path):
         assert sorted(set(body_column)) == ["0", "1"]
         for a, b in zip(seqs, back, strict=True):
             np.testing.assert_array_equal(a.positions, b.positions)
+
+
+NAMES = st.text(st.characters(codec="utf-8", exclude_categories=("Cs",)), min_size=1, max_size=8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(NAMES, st.integers(-5, 5), st.none()), min_size=2, max_size=4))
+def test_csv_body_names_are_in_the_column_and_every_id_comes_back(tmp_path_factory, ids):
+    """Whatever the ids (names of any text, numbers, None, repeats), the bodies come back
+    apart with their ids, and pandas sees as many bodies in the column as there are."""
+    pd = pytest.importorskip("pandas")
+    rng = np.random.default_rng(0)
+    seqs = [
+        _random_sequence(rng, 3, get_topology("kinect_v2"), body_id=b, times=False) for b in ids
+    ]
+    p = tmp_path_factory.mktemp("csv") / "ids.csv"
+    try:
+        save(seqs, p, format="csv")
+    except ValueError as exc:  # an id the sidecar's JSON cannot hold is refused, not lost
+        assert "body id" in str(exc)
+        return
+    back = load(p)
+    assert [s.body_id for s in back] == list(ids)
+    column = pd.read_csv(p, keep_default_na=False, dtype={"body": str})["body"]
+    assert column.nunique() == len(ids)
+    for a, b in zip(seqs, back, strict=True):
+        np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_csv_body_names_for_pandas_and_from_a_table_alone(tmp_path):
+    """Animals named by the tracker: their names in the body column, so that pandas
+    users select them by name; a third-party table with names reads by them."""
+    pd = pytest.importorskip("pandas")
+    rng = np.random.default_rng(3)
+    topo = get_topology("kinect_v2")
+    seqs = [_random_sequence(rng, 4, topo, body_id=b) for b in ("mouse1", "mouse 2")]
+    p = tmp_path / "two.csv"
+    save(seqs, p, format="csv")
+    table = pd.read_csv(p)
+    assert list(dict.fromkeys(table["body"])) == ["mouse1", "mouse 2"]
+    np.testing.assert_array_equal(
+        table.loc[table["body"] == "mouse 2", "SpineBase_x"], seqs[1].positions[:, 0, 0]
+    )
+    back = tk.from_dataframe(table)
+    assert [s.body_id for s in back] == ["mouse1", "mouse 2"]
+    third = tmp_path / "third.csv"
+    third.write_text("time,body,a_x,a_y\n0,left,1,2\n0,7,3,4\n0.1,left,5,6\n0.1,7,7,8\n")
+    left, seven = load(third)
+    assert (left.body_id, seven.body_id) == ("left", 7)
+    np.testing.assert_array_equal(left.positions[:, 0], [[1, 2], [5, 6]])
+    np.testing.assert_array_equal(seven.positions[:, 0], [[3, 4], [7, 8]])
+    # without a time column the body's field starts the row: a name starting with the
+    # comment mark would hide the row
+    hashed = [_random_sequence(rng, 4, topo, body_id=b, times=False) for b in ("#a", "b")]
+    save(hashed, p, format="csv")
+    assert p.read_text().splitlines()[0].startswith("body,")
+    assert [s.body_id for s in load(p)] == ["#a", "b"]
 
 
 POOL = ("snout", "ear_left", "ear_right", "tail", "corner_a", "corner_b")
@@ -276,10 +334,13 @@ def test_csv_bodies_with_different_joints_round_trip(tmp_path_factory, joint_set
         np.testing.assert_array_equal(b.positions, a.positions)
         for name in ("confidence", "std"):
             np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
-    # the table alone (no sidecar): every body gets the union, NaN where it had no joint
+    # the table alone (no sidecar): every body gets the union, NaN where it had no joint;
+    # the names are in the body column
     save(seqs, p, format="csv", sidecar=False)
     p.with_suffix(".json").unlink()
+    assert list(dict.fromkeys(table["body"])) == [s.body_id for s in seqs]
     for a, b in zip(seqs, load(p), strict=True):
+        assert b.body_id == a.body_id
         assert list(b.joint_names) == union
         np.testing.assert_array_equal(b.select_joints(a.joint_names).positions, a.positions)
 

@@ -6,10 +6,11 @@ Layout (a plain table: ``pandas.read_csv(path)`` loads it with no options)::
     0.0,0.1,0.2,2.5,2,0.004,0,...
 
     time,body,snout_x,snout_y,snout_confidence,...      (2-D keypoints with a score)
-    0.0,0,312.5,200.25,0.98,...
+    0.0,mouse1,312.5,200.25,0.98,...
 
 * header (first line): an optional ``time`` or ``timestamp`` column (seconds), an optional
-  ``body`` column (several bodies: rows are grouped by its value), then for every joint
+  ``body`` column (several bodies: rows are grouped by its value, a number or a name),
+  then for every joint
   ``<joint>_x``, ``<joint>_y``, ``<joint>_z`` (case-insensitive suffixes, in this order,
   joints in file order; ``_x``, ``_y`` alone for 2-D keypoints, the same for every joint)
   and, after them in any order, optionally ``<joint>_state`` (tracking state: 0 not
@@ -70,6 +71,7 @@ from tobitkf.core.jsonable import to_jsonable
 from tobitkf.core.version import __version__
 from tobitkf.io._text import (
     INTEGER,
+    NUMBER,
     check_positions,
     check_rate,
     check_times,
@@ -254,6 +256,29 @@ def _body_id(text: str) -> int | float:
         return int(v) if v.is_integer() else v
 
 
+def _body_keys(rows: list[str], sep: str, col: int) -> list[int | float | str | None]:
+    """Each row's body: its number (:func:`_body_id`), or its name when the field is text
+    (a track's or an animal's name); None for a row too short to have the field, or an
+    empty one (the numbers' parser reports both)."""
+    keys: list[int | float | str | None] = []
+    for r in rows:
+        fields = r.split(sep)
+        text = fields[col].strip() if col < len(fields) else ""
+        if not text:
+            keys.append(None)
+        elif NUMBER.fullmatch(text):
+            keys.append(_body_id(text))
+        else:
+            keys.append(text)
+    return keys
+
+
+def _set_field(row: str, sep: str, col: int, value: str) -> str:
+    fields = row.split(sep)
+    fields[col] = value
+    return sep.join(fields)
+
+
 def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[SkeletonSequence]:
     """Read a generic skeleton CSV (see the module docstring for the layout).
 
@@ -297,6 +322,12 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
     rows = [r.rstrip() for r in rows]
     rows = [r[: -len(sep)] if r.endswith(sep) and r.count(sep) == ncols else r for r in rows]
     rows = [_blank_na(r, sep) if "a" in r or "A" in r else r for r in rows]
+    keys = None if body_col is None else _body_keys(rows, sep, body_col)
+    if keys is not None:  # names parse as 0: the numbers' parser sees only numbers
+        rows = [
+            _set_field(r, sep, body_col, "0") if isinstance(key, str) else r
+            for r, key in zip(rows, keys, strict=True)
+        ]
     data = parse_rows(
         path,
         rows,
@@ -332,9 +363,9 @@ def read_csv(path: str | os.PathLike[str], implausible: str = "error") -> list[S
             raise ReadError(path, numbers[k], "expected a body id, found an empty field")
         # from the text, not the float: 64-bit Kinect body ids (NTU: 72057594037931101)
         # do not fit a double, and neighbouring ids would merge into one body
-        groups: dict[int | float | None, list[int]] = {}  # in order of first appearance
-        for k, r in enumerate(rows):
-            groups.setdefault(_body_id(r.split(sep)[body_col]), []).append(k)
+        groups: dict[int | float | str | None, list[int]] = {}  # in order of first appearance
+        for k, key in enumerate(keys or ()):
+            groups.setdefault(key, []).append(k)
     else:
         groups = {None: list(range(len(rows)))}
     out = []
@@ -562,8 +593,8 @@ def _read_sidecar(path) -> dict[str, Any]:
             if isinstance(e.get("topology"), str):
                 entry["topology"] = e["topology"]
         key = e.get("body")
-        if key is not None and (isinstance(key, bool) or not isinstance(key, int)):
-            raise bad(f"expected an int body column value, found {key!r}")
+        if key is not None and (isinstance(key, bool) or not isinstance(key, (int, str))):
+            raise bad(f"expected an int or str body column value, found {key!r}")
         bodies[key] = entry
     out["bodies"] = bodies
     return out
@@ -591,7 +622,9 @@ def write_csv(
 
     Columns: ``time`` (when any sequence has
     timestamps), ``body`` (when more than one sequence: the body ids when they are
-    distinct integers, else 0, 1, ...), then per joint (the union of the sequences'
+    distinct integers, or distinct names that read back as they are (not numbers nor
+    ``NA``, no separator, quote, surrounding white space or leading ``#``), else
+    0, 1, ...; the sidecar has the ids either way), then per joint (the union of the sequences'
     joints, in order of first appearance; a body leaves the fields of joints it lacks
     empty) ``_x, _y[, _z]``, ``_state`` (when
     tracking states are present), ``_sd`` (when a posterior standard deviation is),
@@ -612,14 +645,7 @@ def write_csv(
     for n in names:
         _check_writable(n, "joint name")
     multi = len(seqs) > 1
-    # the body column holds the sequences' own ids when they are distinct integers, else
-    # their index: a mix (ids 1 and None -> 1 and 1) would merge two bodies on reading
-    ids = [s.body_id for s in seqs]
-    if not (
-        all(isinstance(b, (int, np.integer)) and not isinstance(b, bool) for b in ids)
-        and len(set(ids)) == len(ids)
-    ):
-        ids = list(range(len(seqs)))
+    ids = _column_ids(seqs)
     with_state = any(s.tracking_state is not None for s in seqs)
     with_std = any(s.std is not None for s in seqs)
     with_sample = any(s.sample_state is not None for s in seqs)
@@ -669,7 +695,7 @@ def write_csv(
         if with_time:
             cols.append(fmt_floats(s.times()))
         if multi:
-            cols.append([str(int(ids[k]))] * T)
+            cols.append([str(ids[k])] * T)
         # each array formatted in one call, its columns then taken as strided slices
         J = s.n_joints
         pos = fmt_floats(s.positions)
@@ -729,7 +755,7 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         entry: dict[str, Any] = (
             {"body": None, "body_id": s.body_id}
             if ids is None
-            else {"body": int(ids[k]), "body_id": s.body_id}
+            else {"body": ids[k], "body_id": s.body_id}
         )
         if shared is None and provs[k] is not None:
             entry["provenance"] = provs[k]
@@ -754,6 +780,32 @@ def _sidecar(seqs: list[SkeletonSequence], ids: list[Any] | None) -> str:
         "provenance": shared,
     }
     return json.dumps(to_jsonable(doc), indent=2) + "\n"  # ASCII: any name survives
+
+
+def _column_ids(seqs: list[SkeletonSequence]) -> list[int | str]:
+    """The body column's values: the sequences' own ids when they are distinct integers
+    or distinct names that read back as they are (:func:`_plain_name`), else their
+    index. A mix (ids 1 and None -> 1 and 1; 1 and "1") would merge bodies on reading."""
+    ids = [s.body_id for s in seqs]
+    if len(set(map(str, ids))) == len(ids):
+        if all(isinstance(b, (int, np.integer)) and not isinstance(b, bool) for b in ids):
+            return [int(b) for b in ids]
+        if all(_plain_name(b) for b in ids):
+            return list(ids)
+    return list(range(len(seqs)))
+
+
+def _plain_name(body_id: object) -> bool:
+    """True for a body id the body column holds as text and reads back the same: a str
+    that is not a number nor a missing value, without white space around it, a
+    separator, a quote, a control character or a leading comment mark."""
+    if not isinstance(body_id, str) or not body_id or body_id != body_id.strip():
+        return False
+    if NUMBER.fullmatch(body_id) or _NA_FIELD.fullmatch(body_id) or body_id.lower() == "nan":
+        return False
+    if body_id.startswith("#") or any(c in body_id for c in "\",;\t'\n\r"):
+        return False
+    return all(unicodedata.category(c) not in ("Cc", "Cs", "Zl", "Zp") for c in body_id)
 
 
 def _ints(a: np.ndarray) -> list[str]:
