@@ -201,3 +201,45 @@ def test_an_input_smoothed_by_two_methods_keeps_both_records(src, tmp_path):
     assert len(lines) == 2 * len(inputs)
     # the latest line of each input is its last: read_entries gives the sgf runs
     assert {e["method"] for e in read_entries(out / MANIFEST_NAME).values()} == {"sgf"}
+
+
+def test_a_format_typed_or_resolved_is_one_format(src, tmp_path):
+    """NTU inputs: ``auto`` reads NTU and writes NTU, as ``-F ntu -f ntu`` does; a re-run
+    that only spells the formats out passes over every file."""
+    out = tmp_path / "out"
+    first = tk.smooth_files(src, out, METHOD)
+    inputs = sorted(r.source for r in first)
+    assert all(r.ok for r in first)
+    for fmt in ({"output_format": "ntu"}, {"input_format": "ntu"},
+                {"input_format": "ntu", "output_format": "ntu"}):  # fmt: skip
+        assert _skipped(tk.smooth_files(src, out, METHOD, **fmt)) == inputs, fmt
+    # another format under its own name is another output; CSV is done once
+    assert _skipped(tk.smooth_files(src, out, METHOD, output_format="csv")) == []
+    assert _skipped(tk.smooth_files(src, out, METHOD, output_format="csv")) == inputs
+
+
+def test_formats_compare_as_read_and_written():
+    from tobitkf.app.manifest import same_formats
+
+    entry = {"formats": {"input": "ntu", "output": "ntu"},
+             "params": {"input_format": "auto", "output_format": "auto"}}  # fmt: skip
+    assert same_formats(entry, {"input_format": "auto"}, "ntu")
+    assert same_formats(entry, {"input_format": "ntu"}, "ntu")
+    assert not same_formats(entry, {"input_format": "csv"}, "ntu")  # another reader
+    assert not same_formats(entry, {"input_format": "auto"}, "csv")  # another writer
+    # explicit then, auto now: the reader auto picks is not known without reading
+    explicit = {**entry, "params": {"input_format": "ntu"}}
+    assert same_formats(explicit, {"input_format": "ntu"}, "ntu")
+    assert not same_formats(explicit, {"input_format": "auto"}, "ntu")
+
+
+def test_entries_without_the_formats_compare_them_as_typed(src, tmp_path):
+    """A manifest written before the formats were recorded: as before, the typed ones."""
+    out = tmp_path / "out"
+    inputs = sorted(r.source for r in tk.smooth_files(src, out, METHOD))
+    path = out / MANIFEST_NAME
+    lines = [json.loads(ln) for ln in path.read_text().splitlines()]
+    assert all(e["formats"] == {"input": "ntu", "output": "ntu"} for e in lines)
+    path.write_text("".join(json.dumps({**e, "formats": None}) + "\n" for e in lines))
+    assert _skipped(tk.smooth_files(src, out, METHOD)) == inputs
+    assert _skipped(tk.smooth_files(src, out, METHOD, output_format="ntu")) == []

@@ -503,7 +503,11 @@ def run_job(job: Job, method: str, params: dict[str, Any], offline: bool = False
         seconds=time.perf_counter() - start,
         input_format=in_fmt,
         warnings=said,
-        extra={"unused_settings": unused},
+        # the formats as read and written (for resume: auto and what it resolved to)
+        extra={
+            "unused_settings": unused,
+            "formats": {"input": in_fmt, "output": job.output_format},
+        },
     )
 
 

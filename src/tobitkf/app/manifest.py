@@ -10,7 +10,8 @@ short by a kill is ignored when read. At the end of a run the file is rewritten 
 a temporary file and a rename) with one line per input, the latest, sorted by input.
 
 **Resume**: an input is done when its latest entry is ``ok``, names the same method,
-parameters and version, the same output, and that output (with its side files) exists;
+parameters and version (the formats as read and written, :func:`same_formats`), the
+same output, and that output (with its side files) exists;
 the worker that would process it first hashes the input and passes over it when the hash
 is the recorded one (:func:`~tobitkf.app.batch.run_task`). ``--overwrite`` redoes
 everything. One module for the local pool and for a Dask cluster.
@@ -252,12 +253,17 @@ class Manifest:
         *,
         size: int | None = None,
         exists: Callable[[Any], bool] = os.path.isfile,
+        output_format: str | None = None,
     ) -> str | None:
         """The recorded sha256 of ``source`` when its latest entry says it was done with
         these settings into ``output`` and that output still exists (with its side files)
         at the recorded size of the input; None when it must be (re)done. The caller
         still compares the hash with the file's (a worker does). For remote storage,
-        ``size`` is the input's size and ``exists`` says whether an output is there."""
+        ``size`` is the input's size and ``exists`` says whether an output is there.
+
+        ``output_format``: the format this job writes (``auto`` resolved for this file).
+        With it, the formats are compared as the files were read and written
+        (:func:`same_formats`), not as typed."""
         entry = self.entry(source, output)
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
             return None
@@ -265,7 +271,13 @@ class Manifest:
         unused = entry.get("unused_settings") or ()
         if unused:  # a file with its own rate or skeleton does not depend on those given
             want["params"] = {k: v for k, v in want["params"].items() if k not in unused}
-        if any(entry.get(k) != want[k] for k in _SAME):
+        have = entry
+        if output_format is not None and isinstance(entry.get("formats"), dict):
+            if not same_formats(entry, want["params"], output_format):
+                return None
+            have = {**entry, "params": _without_formats(entry.get("params"))}
+            want["params"] = _without_formats(want["params"])
+        if any(have.get(k) != want[k] for k in _SAME):
             return None
         try:
             if (os.path.getsize(source) if size is None else size) != entry.get("size"):
@@ -275,6 +287,33 @@ class Manifest:
         if not all(exists(p) for p in (output, *side_files)):
             return None
         return str(entry["sha256"])
+
+
+_FORMAT_KEYS = ("input_format", "output_format")
+
+
+def _without_formats(params: Any) -> Any:
+    if not isinstance(params, dict):
+        return params
+    return {k: v for k, v in params.items() if k not in _FORMAT_KEYS}
+
+
+def same_formats(entry: Mapping[str, Any], params: Mapping[str, Any], output_format: str) -> bool:
+    """Whether a run with ``params`` (the formats as typed) writing ``output_format`` (as
+    resolved for the file) reads and writes the file as ``entry`` records it was:
+
+    * the output format written is the same (``-f csv`` and ``auto`` on a Kinect file are
+      one format; ``-f lightningpose`` writes another file under the same name);
+    * the input format typed is the one typed then, or the one the reader then used
+      (``-F ntu`` after ``auto`` read it as NTU). After an explicit format, ``auto`` redoes
+      the file: which reader it picks is not known without reading the file.
+    """
+    used = entry.get("formats") or {}
+    if used.get("output") != output_format:
+        return False
+    typed = params.get("input_format", "auto")
+    then = (entry.get("params") or {}).get("input_format", "auto")
+    return typed in (then, used.get("input"))
 
 
 def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
@@ -300,6 +339,7 @@ def make_entry(summary: Any, settings: Mapping[str, Any]) -> dict[str, Any]:
         "status": "ok" if summary.ok else "failed",
         "error": summary.error,
         "unused_settings": unused,
+        **({"formats": extra["formats"]} if extra.get("formats") else {}),
         **settings,
         "frames": summary.frames,
         "bodies": summary.bodies,

@@ -161,12 +161,17 @@ def _expected(manifest: Manifest, jobs: Sequence[Any], outdir: Any, settings: di
                 settings,
                 size=j.size,
                 exists=there.__contains__,
+                output_format=j.output_format,
             )
             for j in jobs
         ]
     return [
         manifest.done_digest(
-            j.source, j.output, output_files(j.output, j.output_format)[1:], settings
+            j.source,
+            j.output,
+            output_files(j.output, j.output_format)[1:],
+            settings,
+            output_format=j.output_format,
         )
         for j in jobs
     ]
