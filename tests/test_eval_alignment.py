@@ -115,3 +115,45 @@ def test_fit_offset_only_finds_zero_lag_at_known_rate() -> None:
     res = fit_time_alignment(tt, st_, sm, rate=60.0)
     assert not res.rate_fitted and res.rate_hz == 60.0
     assert res.offset_s == pytest.approx(first / 60.0, abs=0.01)
+
+
+def _periodic(t: np.ndarray) -> np.ndarray:
+    """Two signals of a 1.02 s cycle (a stride) and a slow drift: the next cycle
+    correlates almost as well as the right one (0.99 and more)."""
+    w = 2 * np.pi / 1.02
+    drift = 0.1 * np.sin(0.41 * t)
+    return np.stack(
+        [np.sin(w * t) + 0.3 * np.sin(2 * w * t + 1) + drift, np.cos(w * t + 0.2) - drift], axis=1
+    )
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.37, -0.211])
+def test_a_periodic_movement_aligns_to_its_own_cycle(offset: float) -> None:
+    """The grid's best point may sit on the next cycle (its step is a few hundredths of
+    the range): each grid maximum is refined, the true one wins."""
+    tt = np.arange(300) / 30.0
+    t_mocap = np.arange(1000) / 100.0  # mocap frame k at track time offset + k / 100
+    res = fit_time_alignment(tt, _periodic(tt), _periodic(offset + t_mocap), rate=100.0)
+    assert res.offset_s == pytest.approx(offset, abs=1e-4)
+    assert res.correlation == pytest.approx(1.0, abs=1e-6)
+
+
+def test_mocap_with_its_own_clock_aligns_on_its_timestamps() -> None:
+    """Irregular mocap frames: their own times, not k / rate, place them."""
+    rng = np.random.default_rng(3)
+    tt = np.arange(300) / 30.0
+    clock = np.cumsum(np.r_[0.0, rng.uniform(0.005, 0.02, 999)])  # about 80 Hz, jittered
+    res = fit_time_alignment(
+        tt, _periodic(tt), _periodic(0.5 + clock), rate=80.0, mocap_clock=clock
+    )
+    assert res.offset_s == pytest.approx(0.5, abs=1e-4)
+    np.testing.assert_allclose(mocap_times(3, 80.0, 1.0, clock[:3], 80.0), 1.0 + clock[:3])
+    # at another rate the clock stretches by nominal / rate
+    np.testing.assert_allclose(mocap_times(3, 40.0, 0.0, clock[:3], 80.0), 2 * clock[:3])
+
+
+def test_too_little_overlap_says_what_it_needs() -> None:
+    tt = np.arange(300) / 30.0
+    short = np.arange(100) / 100.0
+    with pytest.raises(ValueError, match=r"at least 50 % of the track's 9.97 s; it lasts 1.00 s"):
+        fit_time_alignment(tt, _periodic(tt), _periodic(short), rate=100.0)

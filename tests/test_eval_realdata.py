@@ -110,3 +110,59 @@ def test_uiprmd_doubtful_pair_is_flagged() -> None:
         _load(data_file(path.format("Kinect"))), _load(data_file(path.format("Vicon")))
     )
     assert any("covers only" in w for w in gt.notes["warnings"])
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt",
+        "krajjat/sequence_ainhoa_trimmed.tsv",  # irregular timestamps
+        "btkdata/PiG_Motion-FlatFoot-Full.c3d",  # gait: every stride correlates well
+        "cmu-mocap/scaled_131_01.bvh",
+    ],
+)
+def test_a_recording_against_itself_scores_zero(name) -> None:
+    """The exact identity: offset 0 found (not the next stride, not a grid point near
+    it), the recording's own timestamps used, registration the identity."""
+    seq = _load(data_file(name))
+    gt = prepare_truth(seq, seq)
+    assert gt.fitted_time_alignment.offset_s == pytest.approx(0.0, abs=1e-5)
+    raw = evaluate_methods(seq, gt, ["raw"]).score("raw")
+    assert raw.rmse < 1e-4 and raw.max < 1e-3
+
+
+def test_keraal_in_millimetres_scores_as_in_metres(keraal) -> None:
+    """A track in mm (units stated) is converted, not refused; the scores are the same."""
+    k = _load(data_file("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt"))
+    v = _load(data_file("keraal/G3-Vicon-CTK-P1T1-Unknown-C-0.txt"))
+    mm = k.replace(positions=k.positions * 1000.0, units="mm")
+    tab = evaluate_methods(mm, prepare_truth(mm, v), ["raw", "kf", "robust"])
+    ref = evaluate_methods(k, keraal["CTK"][0], ["raw", "kf", "robust"])
+    for method in ("raw", "kf", "robust"):
+        assert tab.score(method).rmse == pytest.approx(ref.score(method).rmse, rel=1e-6)
+
+
+def test_a_keraal_truth_cut_at_the_start_is_flagged(tmp_path) -> None:
+    """KERAAL's offset is held at its documented 0; a truth file missing its first
+    second fits 1 s off, and the scores say so."""
+    v = data_file("keraal/G3-Vicon-ELK-P1T1-Unknown-C-0.txt")
+    cut = tmp_path / "G3-Vicon-ELK-P1T1-Unknown-C-0.txt"
+    cut.write_text("".join(v.read_text().splitlines(keepends=True)[60:]))  # 60 Hz: 1 s
+    k = _load(data_file("keraal/G3-Kinect-ELK-P1T1-Unknown-C-0.txt"))
+    whole = prepare_truth(k, _load(v))
+    assert not any("fitted time offset" in w for w in whole.notes.get("warnings", []))
+    gt = prepare_truth(k, _load(cut))
+    assert gt.fitted_time_alignment.offset_s == pytest.approx(1.0, abs=1 / 30)
+    assert any("fitted time offset +1.0" in w for w in gt.notes["warnings"])
+
+
+def test_tracks_that_cannot_be_scored_against_mocap_say_why() -> None:
+    k = _load(data_file("keraal/G3-Kinect-CTK-P1T1-Unknown-C-0.txt"))
+    v = _load(data_file("keraal/G3-Vicon-CTK-P1T1-Unknown-C-0.txt"))
+    flat = k.replace(positions=k.positions[:, :, :2], units=None)
+    with pytest.raises(ValueError, match="the track is 2-D"):
+        prepare_truth(flat, v)
+    with pytest.raises(ValueError, match="the track is in unknown units"):
+        prepare_truth(k.replace(units=None), v)
+    with pytest.raises(ValueError, match="the track states no frame rate"):
+        prepare_truth(k.replace(fps=None, timestamps=None), v)

@@ -558,6 +558,10 @@ def track_report(
     methods = list(methods or DEFAULT_METHODS)
     outputs: dict[str, Any] = {}
     truth_positions = None
+    if mocap is not None:  # scored in metres: the page's traces too (truth.metric)
+        from tobitkf.evaluation.truth import metric
+
+        track = metric(track, "track")
     if mocap is not None or truth is not None:
         gt = prepare_truth(track, mocap, pairs=pairs) if mocap is not None else truth
         if mocap is not None:  # a doubtful time fit must be seen on the page, not only in a log

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import minimize
+from scipy.optimize import minimize, minimize_scalar
 
 __all__ = [
     "LagEstimate",
@@ -66,11 +67,26 @@ def resample(times_src: ArrayLike, values: ArrayLike, times_dst: ArrayLike) -> N
     return out
 
 
-def mocap_times(n_frames: int, rate: float, offset: float = 0.0) -> NDArray[np.float64]:
-    """Track-clock times of mocap frames: ``offset + k / rate``, k = 0..n-1 (seconds)."""
+def mocap_times(
+    n_frames: int,
+    rate: float,
+    offset: float = 0.0,
+    clock: ArrayLike | None = None,
+    nominal: float | None = None,
+) -> NDArray[np.float64]:
+    """Track-clock times of mocap frames: ``offset + k / rate``, k = 0..n-1 (seconds).
+
+    ``clock``: the mocap's own frame times from its first (s), for a file with timestamps
+    (irregular frames); they are read at its ``nominal`` rate, so that at ``rate`` they
+    stretch by ``nominal / rate``: ``offset + clock * nominal / rate``."""
     if rate <= 0:
         raise ValueError(f"mocap rate must be positive, got {rate}")
-    return offset + np.arange(n_frames) / float(rate)
+    if clock is None:
+        return offset + np.arange(n_frames) / float(rate)
+    c = np.asarray(clock, dtype=float)
+    if len(c) != n_frames:
+        raise ValueError(f"clock has {len(c)} times for {n_frames} mocap frames")
+    return offset + c * (float(nominal or rate) / float(rate))
 
 
 def distance_signals(
@@ -207,13 +223,18 @@ def fit_time_alignment(
     offset_range: tuple[float, float] | None = None,
     min_overlap: float = 0.5,
     grid: int = 41,
+    mocap_clock: ArrayLike | None = None,
+    candidates: int = 8,
 ) -> TimeAlignment:
     """Fit the mocap time offset (and optionally its rate) to the track.
 
     The score is the mean Pearson correlation, over the signal columns, of the track
     signal and the mocap signal resampled at the track times (linear interpolation),
     computed on the overlap; offsets that leave less than ``min_overlap`` of the track
-    covered are rejected.  A grid search over (offset, rate) is refined by Nelder–Mead.
+    covered are rejected.  A grid search over (offset, rate) is refined by Nelder–Mead
+    (a fine local grid when the rate is held), from each of the ``candidates`` best local
+    maxima of the grid: in a periodic movement (gait) the next cycle's peak can top the
+    grid while the true one, refined, is higher.
 
     Parameters
     ----------
@@ -226,6 +247,9 @@ def fit_time_alignment(
     offset_range : (lo, hi) seconds; default ± the longer recording's duration.
     min_overlap : minimum covered fraction of the track.
     grid : grid points per searched dimension.
+    mocap_clock : (N,) the mocap's own frame times from its first (s), at ``rate``, for a
+        mocap with timestamps (:func:`mocap_times`); default ``k / rate``.
+    candidates : grid maxima refined.
 
     Returns
     -------
@@ -243,7 +267,9 @@ def fit_time_alignment(
     N = len(b)
     if rate_range is None:
         rate_range = (0.75 * rate, 1.1 * rate) if fit_rate else (rate, rate)
-    dur = max(tt[-1] - tt[0], N / rate_range[0])
+    clock = None if mocap_clock is None else np.asarray(mocap_clock, dtype=float)
+    span = N / rate if clock is None else float(clock[-1] - clock[0]) + 1.0 / rate
+    dur = max(tt[-1] - tt[0], span * rate / rate_range[0])
     if offset_range is None:
         offset_range = (tt[0] - dur, tt[-1] + 0.0)
     need = max(int(np.ceil(min_overlap * len(tt))), 5)
@@ -251,7 +277,7 @@ def fit_time_alignment(
     def score(offset: float, r: float) -> tuple[float, float]:
         if r <= 0:
             return -np.inf, 0.0
-        mt = mocap_times(N, r, offset)
+        mt = mocap_times(N, r, offset, clock, rate)
         res = resample(mt, b, tt)
         cover = np.isfinite(res).all(axis=1)
         if cover.sum() < need:
@@ -260,45 +286,88 @@ def fit_time_alignment(
 
     offs = np.linspace(*offset_range, max(grid * 4, 2))
     rates = np.linspace(*rate_range, grid) if fit_rate else np.array([rate])
-    best = (-np.inf, offs[0], rates[0])
-    for r in rates:
-        for o in offs:
-            s, _ = score(o, r)
-            if np.isfinite(s) and s > best[0]:
-                best = (s, o, r)
-    if not np.isfinite(best[0]):
-        raise ValueError("fit_time_alignment: no offset gives enough overlap")
+    table = np.array([[score(o, r)[0] for o in offs] for r in rates])  # (rates, offsets)
+    if not np.isfinite(table).any():
+        raise ValueError(
+            "fit_time_alignment: no offset gives enough overlap (the motion capture must "
+            f"cover at least {100 * min_overlap:.0f} % of the track's {tt[-1] - tt[0]:.2f} s; "
+            f"it lasts {span:.2f} s at {rate:g} Hz)"
+        )
     step_o = offs[1] - offs[0] if len(offs) > 1 else 0.1
-    if fit_rate:
-        step_r = rates[1] - rates[0] if len(rates) > 1 else 1.0
+    step_r = rates[1] - rates[0] if len(rates) > 1 else 1.0
+    found = []
+    for i, k in _grid_maxima(table, candidates):
+        start = (float(table[i, k]), float(offs[k]), float(rates[i]))
+        o, r = _refine(score, start, step_o, step_r, rate, rate_range, fit_rate)
+        s, _ = score(o, r)
+        if not (np.isfinite(s) and s >= start[0] - 1e-12):
+            (s, o, r) = start
+        found.append((s, o, r))
+    s, o, r = max(found)
+    s, cover = score(o, r)
+    return TimeAlignment(o, r, float(s), float(cover), bool(fit_rate))
 
-        def f(x):
-            if not rate_range[0] <= x[1] <= rate_range[1]:
-                return 1e3
-            s, _ = score(x[0], x[1])
+
+def _grid_maxima(table: NDArray[np.float64], n: int) -> list[tuple[int, int]]:
+    """Indices (rate, offset) of the ``n`` highest local maxima of a score grid (finite
+    cells at least as high as their finite neighbours), highest first."""
+    t = np.where(np.isfinite(table), table, -np.inf)
+    padded = np.pad(t, 1, constant_values=-np.inf)
+    peak = np.isfinite(t)
+    R, K = t.shape
+    for di in (-1, 0, 1):
+        for dk in (-1, 0, 1):
+            if di or dk:
+                peak &= t >= padded[1 + di : 1 + di + R, 1 + dk : 1 + dk + K]
+    cells = np.argwhere(peak)
+    order = np.argsort(-t[peak], kind="stable")[:n]
+    return [(int(cells[j][0]), int(cells[j][1])) for j in order]
+
+
+def _refine(
+    score: Any,
+    start: tuple[float, float, float],
+    step_o: float,
+    step_r: float,
+    rate: float,
+    rate_range: tuple[float, float],
+    fit_rate: bool,
+) -> tuple[float, float]:
+    """A grid maximum refined: Nelder–Mead over (offset, rate), or a fine grid of
+    offsets when the rate is held."""
+    _, o0, r0 = start
+    if not fit_rate:  # a fine grid, then a bounded scalar search between its points
+        fine = np.linspace(o0 - step_o, o0 + step_o, 81)
+        vals = np.array([score(o, rate)[0] for o in fine])
+        if not np.isfinite(vals).any():
+            return o0, float(rate)
+        o1 = float(fine[int(np.nanargmax(np.where(np.isfinite(vals), vals, np.nan)))])
+        h = fine[1] - fine[0]
+
+        def g(o: float) -> float:
+            s, _ = score(o, rate)
             return -s if np.isfinite(s) else 1e3
 
-        res = minimize(
-            f,
-            np.array([best[1], best[2]]),
-            method="Nelder-Mead",
-            options={
-                "initial_simplex": np.array(
-                    [[best[1], best[2]], [best[1] + step_o, best[2]], [best[1], best[2] + step_r]]
-                ),
-                "xatol": 1e-4,
-                "fatol": 1e-7,
-                "maxiter": 400,
-            },
-        )
-        o, r = float(res.x[0]), float(res.x[1])
-    else:
-        # golden-section style refinement on a fine local grid
-        fine = np.linspace(best[1] - step_o, best[1] + step_o, 81)
-        vals = [score(o, rate)[0] for o in fine]
-        o, r = float(fine[int(np.nanargmax(vals))]), float(rate)
-    s, cover = score(o, r)
-    if not (np.isfinite(s) and s >= best[0] - 1e-12):
-        o, r = float(best[1]), float(best[2])
-        s, cover = score(o, r)
-    return TimeAlignment(o, r, float(s), float(cover), bool(fit_rate))
+        res = minimize_scalar(g, bounds=(o1 - h, o1 + h), method="bounded",
+                              options={"xatol": 1e-6})  # fmt: skip
+        o2 = float(res.x)
+        return (o2 if g(o2) <= g(o1) else o1), float(rate)
+
+    def f(x: NDArray[np.float64]) -> float:
+        if not rate_range[0] <= x[1] <= rate_range[1]:
+            return 1e3
+        s, _ = score(x[0], x[1])
+        return -s if np.isfinite(s) else 1e3
+
+    res = minimize(
+        f,
+        np.array([o0, r0]),
+        method="Nelder-Mead",
+        options={
+            "initial_simplex": np.array([[o0, r0], [o0 + step_o, r0], [o0, r0 + step_r]]),
+            "xatol": 1e-4,
+            "fatol": 1e-7,
+            "maxiter": 400,
+        },
+    )
+    return float(res.x[0]), float(res.x[1])

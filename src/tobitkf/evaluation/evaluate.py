@@ -61,7 +61,7 @@ from tobitkf.evaluation.scores import (
     resolve_method,
     score_estimate,
 )
-from tobitkf.evaluation.truth import GroundTruth, prepare_truth, truth_from_array
+from tobitkf.evaluation.truth import GroundTruth, metric, prepare_truth, truth_from_array
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -293,7 +293,9 @@ def evaluate_methods(
     -------
     EvaluationTable
     """
-    if not isinstance(truth, GroundTruth):
+    if isinstance(truth, GroundTruth):  # prepared in metres (prepare_truth converts)
+        track = metric(track, "track")
+    else:
         truth = truth_from_array(truth, track.joint_names)
     if truth.positions.shape != track.positions.shape:
         raise ValueError(

@@ -144,6 +144,46 @@ def detect_pairs(track_names: Sequence[str], mocap_names: Sequence[str]) -> Pair
     )
 
 
+def metric(seq: Any, name: str) -> Any:
+    """``seq`` in metres, for the comparison with motion capture: a recording in another
+    length unit converted (:meth:`SkeletonSequence.to_metres`), one in 2-D, pixels or
+    unknown units refused with a ValueError that says why. Anything without units (an
+    array-like of the caller's) is taken as it is."""
+    units = getattr(seq, "units", "m")
+    dims = np.shape(getattr(seq, "positions", seq))[-1]
+    if dims != 3:
+        raise ValueError(
+            f"the {name} is {dims}-D: scores against motion capture need 3-D positions in a "
+            "length unit (without a truth, tobitkf evaluate scores smoothness and jumps)"
+        )
+    if units == "m" or not hasattr(seq, "to_metres"):
+        return seq
+    if getattr(seq, "metres_per_unit", None) is None:
+        raise ValueError(
+            f"the {name} is in {units or 'unknown units'}: scores against motion capture "
+            "need a length unit (give it: --units m, cm or mm)"
+        )
+    return seq.to_metres()
+
+
+def _own_clock(seq: Any) -> NDArray | None:
+    """A sequence's frame times from its first when it has timestamps, else None."""
+    stamps = getattr(seq, "timestamps", None)
+    if stamps is None:
+        return None
+    t = np.asarray(stamps, dtype=float)
+    return t - t[0] if t.size else None
+
+
+def _nearest(times: NDArray, at: NDArray) -> NDArray:
+    """Index of the element of increasing ``times`` nearest each of ``at``."""
+    k = np.clip(np.searchsorted(times, at), 1, max(len(times) - 1, 1))
+    if len(times) < 2:
+        return np.zeros(len(at), dtype=int)
+    left = times[k - 1]
+    return np.where(np.abs(at - left) <= np.abs(times[k] - at), k - 1, k)
+
+
 def _check_metres(name: str, positions: NDArray) -> None:
     spread = np.nanmedian(np.linalg.norm(positions - np.nanmedian(positions, axis=(0, 1)), axis=-1))
     if np.isfinite(spread) and spread > 10:
@@ -189,8 +229,10 @@ def prepare_truth(
 
     Returns
     -------
-    GroundTruth
+    GroundTruth, in metres (a track or mocap in another length unit is converted first)
     """
+    track = metric(track, "track")
+    mocap = metric(mocap, "motion capture")
     table: PairingTable
     if pairs is None:
         table = detect_pairs(track.joint_names, mocap.joint_names)
@@ -211,9 +253,20 @@ def prepare_truth(
     q_full = resolved.mocap_quaternions(quats, J) if quats is not None else None
 
     # ---- time
+    if getattr(track, "fps", None) is None and getattr(track, "timestamps", None) is None:
+        raise ValueError(
+            "the track states no frame rate (no timestamps, no fps): the time alignment "
+            "with the motion capture needs it (give --fps, or fps= when reading)"
+        )
+    clock = _own_clock(mocap)  # a mocap with timestamps: its frames' own times
     rate = float(mocap_rate or getattr(mocap, "fps", None) or 0)
+    if rate <= 0 and clock is not None and len(clock) > 1:
+        rate = 1.0 / float(np.median(np.diff(clock)))  # its nominal rate, from its clock
     if rate <= 0:
-        raise ValueError("mocap rate unknown: give mocap_rate= or a mocap with fps")
+        raise ValueError(
+            "the motion capture states no frame rate (no fps, no timestamps): give it "
+            "(mocap_rate=, or fps= when reading it)"
+        )
     is_keraal = table.name == "keraal"
     is_uiprmd = table.name == "ui_prmd"
     if fit_rate is None:
@@ -240,22 +293,34 @@ def prepare_truth(
     if fit_rate and rate_range is None:
         rate_range = (0.6 * rate, 1.6 * rate) if is_uiprmd else (0.75 * rate, 1.1 * rate)
     fitted = fit_time_alignment(
-        tt, sig_t[:, sel], sig_m[:, sel], rate=rate, fit_rate=fit_rate, rate_range=rate_range
+        tt,
+        sig_t[:, sel],
+        sig_m[:, sel],
+        rate=rate,
+        fit_rate=fit_rate,
+        rate_range=rate_range,
+        mocap_clock=clock,
     )
     if time == "fixed":
         used = TimeAlignment(0.0, rate, float("nan"), float("nan"), False)
     else:
         used = fitted
-    mt = mocap_times(len(mp), used.rate_hz, used.offset_s)
+    mt = mocap_times(len(mp), used.rate_hz, used.offset_s, clock, rate)
     m_res = resample(mt, m_full, tt)
     rots = None
     if q_full is not None:
         # orientation of the nearest mocap frame (quaternions do not interpolate linearly)
-        k = np.clip(np.round((tt - used.offset_s) * used.rate_hz).astype(int), 0, len(mp) - 1)
-        q_res = q_full[k]
+        q_res = q_full[_nearest(mt, tt)]
     # ---- space
     notes: dict[str, Any] = {"pairing_table": table.name}
     warnings_: list[str] = []
+    frame = float(np.median(np.diff(tt))) if len(tt) > 1 else 0.0
+    if time == "fixed" and abs(fitted.offset_s - used.offset_s) > 2 * frame:
+        warnings_.append(
+            f"the fitted time offset {fitted.offset_s:+.3f} s is more than two frames from "
+            f"the fixed {used.offset_s:g} s (KERAAL's common start): the motion capture may "
+            "be cut or shifted; the scores hold the offset fixed"
+        )
     if not fitted.correlation >= 0.9:
         warnings_.append(
             f"time alignment is doubtful: signal correlation {fitted.correlation:.2f} < 0.9"

@@ -268,14 +268,6 @@ def _frames_array(meta: dict, key: str, shape: tuple[int, ...]) -> np.ndarray | 
     return None
 
 
-def _in_metres(s: SkeletonSequence) -> SkeletonSequence:
-    """``s`` (in a length unit) with its positions and standard deviations in metres."""
-    k = s.metres_per_unit
-    assert k is not None  # checked by the caller
-    std = None if s.std is None else s.std * k
-    return s.replace(positions=s.positions * k, std=std, units="m")
-
-
 def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str]) -> None:
     """Write sequences (one per body, all with the same number of frames and 25 Kinect V2
     joints, 3-D in a length unit) as an NTU ``.skeleton`` file, whose positions are
@@ -332,7 +324,7 @@ def write_ntu(sequences: Sequence[SkeletonSequence], path: str | os.PathLike[str
     for s in seqs:  # the file has no times: its frames are read at 30 fps
         require_rate_grid(s, FPS, "NTU")
     # the file holds metres: a sequence in centimetres or millimetres is converted
-    seqs = [s if s.units == "m" else _in_metres(s) for s in seqs]
+    seqs = [s.to_metres() for s in seqs]
     prepared = []
     used_ids: set[int] = set()
     for k, s in enumerate(seqs):

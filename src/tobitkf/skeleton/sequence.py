@@ -277,6 +277,20 @@ class SkeletonSequence:
         """Length of one unit of ``positions`` in metres (None for pixels / unknown)."""
         return None if self.units is None else KNOWN_UNITS[self.units]
 
+    def to_metres(self) -> SkeletonSequence:
+        """This sequence with positions and standard deviations in metres (itself when
+        they are). A ValueError for pixels or unknown units: no length to convert."""
+        k = self.metres_per_unit
+        if k is None:
+            raise ValueError(
+                f"positions in {self.units or 'unknown units'} have no length in metres "
+                "(give the recording's length unit: units='mm', --units mm, ...)"
+            )
+        if self.units == "m":
+            return self
+        std = None if self.std is None else self.std * k
+        return self.replace(positions=self.positions * k, std=std, units="m")
+
     @property
     def joint_names(self) -> tuple[str, ...]:
         """Joint names, length J."""
