@@ -737,3 +737,18 @@ def test_columns_is_read_at_each_invocation_not_at_import():
         assert widest(max(len(line) for line in out.splitlines())), (columns, out)
     out = CliRunner(env={"COLUMNS": None}).invoke(app, ["methods"]).output  # a pipe: 160
     assert 100 < max(len(line) for line in out.splitlines()) <= 160
+
+
+def test_method_labels_with_parameters_are_shown_whole(tmp_path):
+    """atkf[c=0.1] and atkf[c=0.3] are two rows, not two 'atkf' (rich markup)."""
+    track, truth = tmp_path / "a.csv", tmp_path / "truth.csv"
+    rec = _recording()
+    save([rec], track, format="csv")
+    save([rec.replace(positions=rec.positions + 0.01)], truth, format="csv")
+    methods = "raw,atkf[c=0.1],atkf[c=0.3]"
+    two = [track, track, "--truth", truth, "--truth", truth]
+    for args in (["evaluate", track], ["evaluate", track, "--truth", truth], ["evaluate", *two]):
+        args += ["--methods", methods]
+        res = _invoke(*args)
+        assert res.exit_code == 0, res.output
+        assert "atkf[c=0.1]" in res.output and "atkf[c=0.3]" in res.output, res.output

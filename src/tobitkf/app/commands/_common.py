@@ -60,8 +60,8 @@ def _print_table(title: str, columns: list[str], rows: list[list[Any]], digits: 
     for i, col in enumerate(columns):
         # long file names fold onto a second line instead of being cut to "JointPositi…"
         table.add_column(col, justify="left" if i == 0 else "right", overflow="fold")
-    for row in rows:
-        table.add_row(*[_fmt(v, digits) for v in row])
+    for row in rows:  # as Text: a method's label atkf[c=0.1] is not markup
+        table.add_row(*[Text(_fmt(v, digits)) for v in row])
     if rows and _table_width(table, columns, rows, digits) > console.width:
         # a terminal too narrow for the table: its columns would be squeezed until every
         # header and name breaks mid-word; one block per row instead, a field per line

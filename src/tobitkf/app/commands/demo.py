@@ -23,7 +23,7 @@ from tobitkf.app.commands._common import (
     type=click.Path(file_okay=False),
     help="Folder for the recordings and report.",
 )
-@click.option("--seed", default=0, show_default=True)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
 def demo(outdir, seed, no_gif):
     """The main job end to end on the built-in synthetic recording (no files needed)."""

@@ -7,9 +7,11 @@ from typing import Any
 
 import click
 from rich.markup import escape
+from rich.text import Text
 
 from tobitkf.app.commands._common import (
     _fail,
+    _finite,
     _fps_option,
     _input_format_option,
     _load_one,
@@ -111,7 +113,8 @@ def _for_units(specs: list[Any], track: Any, path: str) -> tuple[list[Any], str]
     "outdir",
     type=click.Path(file_okay=False),
     default=None,
-    help="Also write results.json (and per-recording tables) here.",
+    help="Also write results.json here: every recording's scores and the pooled table, "
+    "as --json prints them.",
 )
 @_input_format_option("--format", help="Input format of every TRACK.")
 @_input_format_option(
@@ -209,7 +212,7 @@ def evaluate(
             results[path] = table.to_dict()
             if not quiet:
                 console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
-                console.print(table.to_text(), highlight=False, soft_wrap=True)
+                console.print(Text(table.to_text()), highlight=False, soft_wrap=True)
     pooled = pool_scores(tables) if len(tables) > 1 else None
     if pooled is not None:
         results["pooled"] = pooled
@@ -314,7 +317,7 @@ def report(
     # a pipe or a log file gets the whole table; a narrow terminal a few columns, whole
     # words, instead of lines wrapped into each other
     if not console.is_terminal or max(map(len, text.splitlines()), default=0) <= console.width:
-        console.print(text, highlight=False, soft_wrap=True)
+        console.print(Text(text), highlight=False, soft_wrap=True)
     else:
         rows = summary_rows(table)
         columns = list(rows[0])
@@ -325,7 +328,13 @@ def report(
 
 # --------------------------------------------------------------------------- benchmark
 @app.command()
-@click.option("--seed", default=0, show_default=True, help="Seed of motion and corruption.")
+@click.option(
+    "--seed",
+    default=0,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Seed of motion and corruption.",
+)
 @click.option(
     "--seeds",
     default=1,
@@ -345,7 +354,14 @@ def report(
     show_default=True,
     help="'generator' (built in) or the path of a BVH file.",
 )
-@click.option("--duration", default=10.0, show_default=True, help="Seconds of motion.")
+@click.option(
+    "--duration",
+    default=10.0,
+    show_default=True,
+    type=click.FloatRange(min=0, max=3600, min_open=True),
+    callback=lambda _ctx, _param, v: _finite(v, "--duration"),
+    help="Seconds of motion.",
+)
 @click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 @click.option("--markdown", "as_markdown", is_flag=True, help="Print a Markdown table.")
@@ -394,7 +410,7 @@ def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdo
         click.echo(benchmark_markdown(spread, seed_list, seed_ball(tables)), nl=False)
         return
     if seeds == 1:
-        console.print(tables[0].to_text(), highlight=False, soft_wrap=True)
+        console.print(Text(tables[0].to_text()), highlight=False, soft_wrap=True)
         return
     keys = [k for k in spread[0] if k != "method"]
     rows = [
