@@ -106,6 +106,21 @@ def test_trc_written_file_parses_with_pandas_and_converts_units(tmp_path):
     np.testing.assert_allclose(back.positions, seq.positions, rtol=1e-15, atol=0)
 
 
+def test_trc_rows_are_whole_when_the_last_marker_is_missing(tmp_path):
+    """OpenSim's TRCFileAdapter drops empty fields at the end of a row and then refuses
+    the row ("Unexpected number of columns"); it writes a missing marker as nan."""
+    seq = _seq(["A", "B", "C"])  # frame 3 misses C, the row's last marker
+    p = tmp_path / "last.trc"
+    write_trc([seq], p)
+    rows = p.read_text().splitlines()[5:]
+    for t, row in enumerate(rows):
+        fields = row.split("\t")
+        assert len(fields) == 2 + 3 * 3 and all(f.strip() for f in fields), row
+        missing = np.isnan(seq.positions[t]).ravel()
+        assert [f == "nan" for f in fields[2:]] == missing.tolist()
+    np.testing.assert_array_equal(read_trc(p)[0].positions, seq.positions)
+
+
 def test_trc_writer_rules(tmp_path):
     p = tmp_path / "x.trc"
     with pytest.raises(ValueError, match="one set of markers"):

@@ -21,10 +21,12 @@ in ``metadata["header"]``). OpenSim's frame is y up.
 Writing (:func:`write_trc`): one sequence of 3-D positions in a length unit (``m``, ``cm``,
 ``mm``); ``units`` chooses the file's unit (default: the sequence's own, so nothing is
 rescaled). Numbers are written with the shortest text that reads back to the same float,
-missing coordinates as empty fields, ``DataRate`` = fps (or the median rate of the
-timestamps), ``Time`` = the frame times. Marker names must be non-empty, without tabs or
-line breaks (control characters) and without surrounding spaces; anything else is
-refused with a ValueError. Confidence and tracking states have no place in a TRC file.
+missing coordinates as ``nan``, as OpenSim writes them (OpenSim drops empty fields at the
+end of a row, and then refuses the row as short of columns), ``DataRate`` = fps (or the
+median rate of the timestamps), ``Time`` = the frame times. Marker names must be
+non-empty, without tabs or line breaks (control characters) and without surrounding
+spaces; anything else is refused with a ValueError. Confidence and tracking states have
+no place in a TRC file.
 """
 
 from __future__ import annotations
@@ -212,7 +214,7 @@ def write_trc(
         "\t".join(["Frame#", "Time", *(f"{n}\t\t" for n in names)]).rstrip("\t"),
         "\t\t" + "\t".join(f"X{i}\tY{i}\tZ{i}" for i in range(1, M + 1)),
     ]
-    vals = fmt_floats(pos, nan="")
+    vals = fmt_floats(pos, nan="nan")  # OpenSim's own spelling; never an empty field
     stamps = fmt_floats(times)
     W = M * 3
     for t in range(T):
