@@ -80,6 +80,25 @@ def test_plan_auto_format_keeps_ntu(tmp_path):
     assert [j.output.suffix for j in jobs] == [".skeleton", ".csv"]
 
 
+def test_a_file_no_format_claims_fails_with_its_own_reason(tmp_path):
+    """An empty S001.skeleton beside rec.csv: auto could only guess its output (CSV), which
+    would collide with the CSV's and hide why it fails."""
+    from tobitkf.io import detect_format
+    from tobitkf.io.registry import ReadError
+
+    a = tmp_path / "rec.csv"
+    a.write_text("a_x,a_y,a_z\n0,0,0\n")
+    b = tmp_path / "rec.skeleton"
+    b.write_bytes(b"")
+    with pytest.raises(ReadError) as why:
+        detect_format(b)
+    jobs, refused = plan_jobs(
+        [(a, tmp_path), (b, tmp_path)], tmp_path / "o", method="kf", detect=detect_format
+    )
+    assert [j.source for j in jobs] == [a]
+    assert [(r.source, r.error) for r in refused] == [(str(b), f"ReadError: {why.value}")]
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [

@@ -243,3 +243,47 @@ def test_entries_without_the_formats_compare_them_as_typed(src, tmp_path):
     path.write_text("".join(json.dumps({**e, "formats": None}) + "\n" for e in lines))
     assert _skipped(tk.smooth_files(src, out, METHOD)) == inputs
     assert _skipped(tk.smooth_files(src, out, METHOD, output_format="ntu")) == []
+
+
+def test_another_inputs_output_is_neither_replaced_nor_taken_for_done(tmp_path):
+    """One folder per subject, each subject's files named alike, smoothed one subject at
+    a time into one output folder: the second subject's run must not replace the first's
+    results, and a re-run of the first must not pass over outputs that now hold another
+    input's result (--overwrite replaced them)."""
+    write_ntu_like(tmp_path / "subject1", 2, seed=0, frames=(30, 40))
+    write_ntu_like(tmp_path / "subject2", 2, seed=50, frames=(30, 40))  # same names
+    out = tmp_path / "out"
+    first = tk.smooth_files(tmp_path / "subject1", out, METHOD)
+    outputs = {r.output: (out / r.output).read_bytes() for r in first}
+    second = tk.smooth_files(tmp_path / "subject2", out, METHOD)
+    assert not any(r.ok for r in second)
+    assert all("holds the result of" in r.error and "subject1" in r.error for r in second)
+    assert {o: (out / o).read_bytes() for o in outputs} == outputs  # nothing lost
+    replaced = tk.smooth_files(tmp_path / "subject2", out, METHOD, overwrite=True)
+    assert all(r.ok for r in replaced)
+    again = tk.smooth_files(tmp_path / "subject1", out, METHOD)
+    assert _skipped(again) == [] and not any(r.ok for r in again)
+    # the manifest names the input whose result each output holds
+    m = Manifest(out)
+    assert all("subject2" in m.owner(out / o) for o in outputs)
+
+
+def test_an_output_whose_sidecar_was_deleted_is_redone(tmp_path):
+    """Without its sidecar a CSV output no longer says it is tobitkf's; the manifest
+    does, so a re-run redoes it (it used to refuse it as someone else's file, forever)."""
+    write_ntu_like(tmp_path / "in", 1, frames=(30, 40))
+    out = tmp_path / "out"
+    (first,) = tk.smooth_files(tmp_path / "in", out, METHOD, output_format="csv")
+    sidecar = (out / first.output).with_suffix(".json")
+    sidecar.unlink()
+    (again,) = tk.smooth_files(tmp_path / "in", out, METHOD, output_format="csv")
+    assert again.ok and not again.extra.get("skipped"), again.error
+    assert sidecar.is_file()
+    # a CSV there that no run wrote is still left alone
+    (tmp_path / "in2").mkdir()
+    other = out / "mine.kf.csv"
+    other.write_text("a_x,a_y,a_z\n0,0,0\n")
+    write_ntu_like(tmp_path / "in2", 1, frames=(30, 40))
+    src = next((tmp_path / "in2").rglob("*.skeleton")).rename(tmp_path / "in2" / "mine.skeleton")
+    (refused,) = tk.smooth_files(src, out, METHOD, output_format="csv")
+    assert not refused.ok and "is not a tobitkf output" in refused.error

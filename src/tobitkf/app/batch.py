@@ -280,14 +280,17 @@ def plan_jobs(
     input_topology: str | None = None,
     input_units: str | None = None,
     input_implausible: str = "error",
+    recorded: Callable[[Path], bool] | None = None,
 ) -> tuple[list[Job], list[FileSummary]]:
     """Decide the output path of each input.
 
     Outputs are ``OUTDIR/<relative folder>/<name>.<method><ext>``. A planned output that
     would be an input file, or the output of an earlier input, is refused for that file.
     An existing file at an output name is replaced only when it is an earlier tobitkf
-    output (:func:`smoothing_output_method`) or ``overwrite`` is true; any other file
-    there is left alone and the input refused with the reason.
+    output (:func:`smoothing_output_method`, or ``recorded(path)``: the output folder's
+    manifest names it as an output, e.g. a CSV whose sidecar was deleted) or
+    ``overwrite`` is true; any other file there is left alone and the input refused with
+    the reason.
 
     Returns
     -------
@@ -306,8 +309,12 @@ def plan_jobs(
             if in_fmt is None and detect is not None:
                 try:
                     in_fmt = detect(src)
-                except Exception:  # the reader will report the real problem later
-                    in_fmt = None
+                except Exception as exc:  # what reading it would say (an empty file...)
+                    # refused now: a guessed output name could collide with another
+                    # input's and hide the reason
+                    why = readable_problem(src) or f"{type(exc).__name__}: {exc}"
+                    refused.append(FileSummary(str(src), None, False, why))
+                    continue
             fmt = default_output_format(in_fmt)
         from tobitkf.io import output_extension, output_files
 
@@ -333,7 +340,12 @@ def plan_jobs(
                 )
             elif f.is_dir():
                 reason = f"output {f} is a folder"
-            elif not overwrite and f.exists() and smoothing_output_method(out) is None:
+            elif (
+                not overwrite
+                and f.exists()
+                and smoothing_output_method(out) is None
+                and not (recorded is not None and recorded(out))
+            ):
                 reason = (
                     f"{f} exists and is not a tobitkf output; it is left alone "
                     "(--overwrite replaces it)"

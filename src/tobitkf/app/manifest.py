@@ -156,6 +156,7 @@ class Manifest:
         #: (input, output) -> the latest entry of that pair, oldest first: an input smoothed
         #: into two outputs (two methods, two formats) keeps both, so either is passed over
         self.pairs: dict[tuple[str, Any], dict[str, Any]] = self._read()
+        self._owners: dict[str, str] | None = None  # output -> input, built when asked
         self._file: IO[str] | None = None
         self._open = False
         self._flushed = time.monotonic()
@@ -177,6 +178,7 @@ class Manifest:
         self._open = True
         if self._remote is not None:
             self.pairs = self._read()
+            self._owners = None
             return self
         self.path.parent.mkdir(parents=True, exist_ok=True)
         f = open(self.path, "a+", encoding="utf-8")
@@ -200,6 +202,7 @@ class Manifest:
                     f.write("\n")
         self._file = f
         self.pairs = self._read()  # what the lock now guarantees
+        self._owners = None
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -226,6 +229,8 @@ class Manifest:
         key = _pair(entry)
         self.pairs.pop(key, None)  # latest last
         self.pairs[key] = entry
+        if self._owners is not None and entry.get("status") == "ok" and key[1]:
+            self._owners[key[1]] = key[0]
         if self._file is not None:
             self._file.write(json.dumps(entry, sort_keys=True) + "\n")
             self._file.flush()
@@ -240,6 +245,15 @@ class Manifest:
         self._flushed = time.monotonic()
 
     # -- resume ----------------------------------------------------------------
+    def owner(self, output: Any) -> str | None:
+        """The input whose result ``output`` holds: the input of the latest ``ok`` entry
+        naming it (None when no entry does)."""
+        if self._owners is None:
+            self._owners = {
+                out: inp for (inp, out), e in self.pairs.items() if out and e.get("status") == "ok"
+            }
+        return self._owners.get(input_key(output))
+
     def entry(self, source: Any, output: Any) -> dict[str, Any] | None:
         """The latest entry of ``source`` smoothed into ``output``, or None."""
         return self.pairs.get((input_key(source), input_key(output) if output else None))
@@ -266,6 +280,8 @@ class Manifest:
         (:func:`same_formats`), not as typed."""
         entry = self.entry(source, output)
         if not entry or entry.get("status") != "ok" or not entry.get("sha256"):
+            return None
+        if self.owner(output) != input_key(source):  # another input's result replaced it
             return None
         want = {**settings, "output": input_key(output)}
         unused = entry.get("unused_settings") or ()

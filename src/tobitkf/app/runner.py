@@ -129,6 +129,7 @@ def plan_run(
     from tobitkf.io import detect_format
 
     found = discover_recordings(inputs, pattern)
+    earlier = Manifest(outdir)  # read only: which outputs earlier runs wrote
     jobs, refused = plan_jobs(
         found.pairs,
         outdir,
@@ -141,6 +142,7 @@ def plan_run(
         input_topology=topology,
         input_units=units,
         input_implausible=implausible,
+        recorded=lambda path: earlier.owner(path) is not None,
     )
     return Plan(list(jobs), refused, found)
 
@@ -175,6 +177,32 @@ def _expected(manifest: Manifest, jobs: Sequence[Any], outdir: Any, settings: di
         )
         for j in jobs
     ]
+
+
+def _not_anothers(manifest: Manifest, jobs: Sequence[Any]) -> tuple[list[Any], list[FileSummary]]:
+    """The jobs whose output is not another input's result (by the manifest), and a
+    refusal for each of the others: smoothing it would replace that result (one folder
+    per subject into one output folder, each subject's files named alike)."""
+    from tobitkf.app.manifest import input_key
+
+    keep, refused = [], []
+    for j in jobs:
+        owner = manifest.owner(j.output)
+        if owner is None or owner == input_key(j.source):
+            keep.append(j)
+            continue
+        refused.append(
+            FileSummary(
+                str(j.source),
+                None,
+                False,
+                f"output {j.output} holds the result of {owner} (the output folder's "
+                "manifest); it is left alone: smooth this file into another output folder, "
+                "or give the folder both inputs share, whose layout the outputs keep "
+                "(--overwrite replaces it)",
+            )
+        )
+    return keep, refused
 
 
 def _skipped(summary: FileSummary, entry: dict[str, Any] | None) -> FileSummary:
@@ -238,6 +266,9 @@ def run_planned(
         input_implausible=implausible,
     )
     with Manifest(outdir) as manifest:
+        if not overwrite:
+            jobs, others = _not_anothers(manifest, jobs)
+            refused = [*others, *refused]
         expect = [None] * len(jobs) if overwrite else _expected(manifest, jobs, outdir, settings)
         for r in refused:
             manifest.record(make_entry(r, settings))
