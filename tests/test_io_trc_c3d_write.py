@@ -245,3 +245,80 @@ def test_trc_without_the_coordinate_line(tmp_path):
     (s,) = read_trc(p)
     assert s.n_frames == 3
     np.testing.assert_array_equal(s.positions[0, 0], np.array([1.5, 952.25, 120.125]) * 1e-3)
+
+
+def test_a_trial_cut_from_a_longer_capture_keeps_its_clock(tmp_path):
+    """A C3D trial whose first frame is 148 (1.47 s at 100 Hz: the force plates' and
+    analog channels' clock) is read at its times, and C3D and TRC outputs number their
+    frames from 148 again (checked with the c3d library's own reader)."""
+    c3d = pytest.importorskip("c3d")
+    seq = _seq(["A", "B"], T=6, fps=100.0)
+    seq = seq.replace(timestamps=(147 + np.arange(6)) / 100.0)
+    p = tmp_path / "trial.c3d"
+    save(seq, p)
+    with open(p, "rb") as fh:
+        reader = c3d.Reader(fh)
+        assert (reader.first_frame, reader.last_frame) == (148, 153)
+    (back,) = load(p)
+    np.testing.assert_allclose(back.times(), seq.timestamps, rtol=0, atol=1e-12)
+    assert back.metadata["first_frame"] == 148
+    t = tmp_path / "trial.trc"
+    save(back, t)
+    lines = t.read_text().splitlines()
+    header = dict(zip(lines[1].split("\t"), lines[2].split("\t")))
+    assert header["OrigDataStartFrame"] == "148"
+    assert [ln.split("\t")[0] for ln in lines[5:]] == [str(148 + k) for k in range(6)]
+    np.testing.assert_allclose(read_trc(t)[0].times(), seq.timestamps, rtol=0, atol=1e-12)
+    # a capture from its first frame stays plain: frame 1, no timestamps
+    save(_seq(["A"], fps=100.0), p)
+    (plain,) = load(p)
+    assert plain.timestamps is None and plain.metadata["first_frame"] == 1
+
+
+def test_the_pig_trial_is_read_at_its_capture_times(shared_data):
+    c3d = pytest.importorskip("c3d")
+    path = shared_data("btkdata/PiG_Motion-FlatFoot-Full.c3d")
+    with open(path, "rb") as fh:
+        reader = c3d.Reader(fh)
+        first, rate = reader.first_frame, reader.point_rate
+    (seq,) = load(path)
+    assert first > 1
+    np.testing.assert_allclose(seq.times()[:3], (first - 1 + np.arange(3)) / rate)
+
+
+def test_quarter_turns_between_up_axes_are_proper_rotations():
+    from tobitkf.io._marker_writer import rotate_up
+
+    eye = np.eye(3)
+    for up in range(3):
+        for to in range(3):
+            rot = rotate_up(eye, up, to)  # rows: the images of e_x, e_y, e_z
+            np.testing.assert_allclose(rot @ rot.T, eye, atol=1e-15)
+            assert np.linalg.det(rot) == pytest.approx(1.0)
+            np.testing.assert_array_equal(rot[up], eye[to])
+    # z up to y up: OpenSim's usual turn of lab data
+    np.testing.assert_array_equal(rotate_up(np.array([1.0, 2.0, 3.0]), 2, 1), [1.0, 3.0, -2.0])
+
+
+def test_trc_is_y_up_and_c3d_keeps_the_up_axis(tmp_path):
+    """A z-up lab recording written as TRC has its heights in OpenSim's Y column; C3D
+    records the up axis in POINT:Y_SCREEN (read by the c3d library) and reads it back."""
+    c3d = pytest.importorskip("c3d")
+    seq = _seq(["A", "B"], T=4, fps=100.0)
+    zup = seq.replace(topology=Topology.from_names(["A", "B"], up_axis=2))
+    t = tmp_path / "lab.trc"
+    save(zup, t)
+    data = pd.read_csv(t, sep="\t", skiprows=5, header=None).to_numpy(dtype=float)[:, 2:]
+    heights = data.reshape(4, 2, 3)[:, :, 1]
+    np.testing.assert_array_equal(heights, zup.positions[:, :, 2])  # nan where missing
+    (back,) = read_trc(t)
+    assert back.topology.up_axis == 1
+    for up in (1, 2):
+        s = seq.replace(topology=Topology.from_names(["A", "B"], up_axis=up))
+        p = tmp_path / f"up{up}.c3d"
+        save(s, p)
+        with open(p, "rb") as fh:
+            assert c3d.Reader(fh).get_screen_axis()[1].strip() == "+" + "XYZ"[up]
+        (b,) = load(p)
+        assert b.topology.up_axis == up
+        np.testing.assert_allclose(b.positions, s.positions, rtol=1e-6, atol=1e-6)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from tobitkf.io.errors import OptionError
 from tobitkf.io.registry import require_frames
 from tobitkf.skeleton.sequence import KNOWN_UNITS, SkeletonSequence
@@ -43,3 +45,27 @@ def one_3d_sequence(
         factor = KNOWN_UNITS[seq.units] / MARKER_UNITS[units]
     require_frames(seqs, fmt)
     return seq, units, factor
+
+
+def first_frame(seq: SkeletonSequence, rate: float) -> int:
+    """The capture's number of the sequence's first frame, for the formats that number
+    frames (C3D, TRC): frame 1 at time 0, so ``round(t0 * rate) + 1`` when the first
+    frame's time ``t0`` is at least 0; 1 otherwise (a time before the capture's zero has
+    no frame number)."""
+    t0 = float(seq.times()[0]) if seq.n_frames else 0.0
+    k = round(t0 * rate)
+    return int(k) + 1 if k >= 0 else 1
+
+
+def rotate_up(positions: np.ndarray, up: int, to: int) -> np.ndarray:
+    """``positions`` (..., 3) turned by a quarter turn about the third axis so that axis
+    ``up`` becomes axis ``to`` (a proper rotation: lengths, angles and handedness kept;
+    Z up to Y up is ``(x, y, z) -> (x, z, -y)``, OpenSim's usual turn of lab data)."""
+    if up == to:
+        return positions
+    rot = np.zeros((3, 3))
+    a = 3 - up - to  # the axis turned about
+    rot[a, a] = 1.0
+    rot[to, up] = 1.0  # e_up -> e_to
+    rot[up, to] = -1.0  # e_to -> -e_up
+    return positions @ rot.T

@@ -3,7 +3,11 @@
 Install with ``pip install tobitkf[c3d]`` (or ``pip install c3d``). POINT samples with a
 negative residual are missing (NaN); units from ``POINT:UNITS`` are converted to metres;
 the rate is ``POINT:RATE``; labels are kept (stripped; duplicates get ``_2``, ``_3``
-suffixes). Up axis z (Vicon/Qualisys convention).
+suffixes). Up axis from ``POINT:Y_SCREEN`` (the axis up on the screen; the C3D writer
+records it there), z (Vicon/Qualisys convention) when the file does not say. A file whose
+first frame is not frame 1 (a trial cut from a longer capture: the force plates' and
+analog channels' clock) keeps its time base: timestamps ``(first_frame - 1 + k) / rate``
+and ``metadata["first_frame"]``; the C3D and TRC writers number the frames from it again.
 
 ``points`` selects which POINT entries to return:
 
@@ -181,6 +185,8 @@ def read_c3d(
             unit_param = reader.get("POINT:UNITS")
             file_units = unit_param.string_value.strip() if unit_param is not None else "mm"
             expected = int(reader.frame_count)
+            first_frame = int(reader.first_frame)
+            screen = reader.get_screen_axis()
             frames = [np.array(pts[:, :4], dtype=float) for _, pts, _an in reader.read_frames()]
     except FileNotFoundError:
         raise
@@ -227,12 +233,16 @@ def read_c3d(
     view = positions[:, real]
     check_positions(path, view, None, implausible, names=[names[k] for k in real])
     positions[:, real] = view
+    # the capture's clock: frame 1 at time 0 (a trial cut from a longer capture starts later)
+    stamps = None if first_frame == 1 else (first_frame - 1 + np.arange(len(data))) / rate
     seq = SkeletonSequence(
         positions=positions,
-        topology=Topology.from_names(names, up_axis=2, name="c3d"),
+        topology=Topology.from_names(names, up_axis=_up_axis(screen), name="c3d"),
+        timestamps=stamps,
         fps=rate,
         units="m",
         metadata={
+            "first_frame": first_frame,
             "source": str(path),
             "format": "c3d",
             "labels": [labels[i] for i in keep],
@@ -244,6 +254,15 @@ def read_c3d(
         },
     )
     return [seq]
+
+
+def _up_axis(screen: tuple[str, str] | None) -> int:
+    """The up axis from ``POINT:Y_SCREEN`` (``+Z``: 2), z (Vicon's and Qualisys's) when
+    the file does not say."""
+    try:
+        return "XYZ".index(str(screen[1]).strip().upper()[-1])  # type: ignore[index]
+    except (TypeError, IndexError, ValueError):
+        return 2
 
 
 def sniff_c3d(path: Path, head: str) -> int:

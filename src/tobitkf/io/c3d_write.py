@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tobitkf.io._marker_writer import one_3d_sequence
+from tobitkf.io._marker_writer import first_frame, one_3d_sequence
 from tobitkf.io.c3d import _import_c3d
 from tobitkf.io.registry import get_format, register_format, require_rate_grid
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -88,6 +88,12 @@ def write_c3d(
         frames.append((pts, no_analog))
     writer.add_frames(frames)
     writer.set_point_labels(labels)
+    start = first_frame(seq, rate)
+    if start != 1:
+        writer.set_start_frame(start)
+    # the up axis, where C3D keeps it (POINT:Y_SCREEN, the axis up on the screen)
+    up = seq.topology.up_axis
+    writer.set_screen_axis("+Y" if up == 0 else "+X", "+" + "XYZ"[up])
     with open(path, "wb") as fh, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the library's notes on the empty analog group
         writer.write(fh)

@@ -16,14 +16,18 @@ marker names are the non-empty fields of line 4 after ``Frame#`` and ``Time`` (s
 spaces removed); data rows follow (blank lines skipped), ``Frame# Time`` then x, y, z per
 marker; an empty field or ``NaN`` is a missing coordinate, and a row cut short (trailing
 markers left out) has them missing. ``NumFrames`` may differ from the rows present (kept
-in ``metadata["header"]``). OpenSim's frame is y up.
+in ``metadata["header"]``). OpenSim's frame is y up (the sequences read have up axis 1).
 
 Writing (:func:`write_trc`): one sequence of 3-D positions in a length unit (``m``, ``cm``,
 ``mm``); ``units`` chooses the file's unit (default: the sequence's own, so nothing is
 rescaled). Numbers are written with the shortest text that reads back to the same float,
 missing coordinates as ``nan``, as OpenSim writes them (OpenSim drops empty fields at the
 end of a row, and then refuses the row as short of columns), ``DataRate`` = fps (or the
-median rate of the timestamps), ``Time`` = the frame times. Marker names must be
+median rate of the timestamps), ``Time`` = the frame times, ``Frame#`` and
+``OrigDataStartFrame`` numbered from the capture's frame at the first time (frame 1 at
+time 0: a trial cut from a longer capture keeps its numbers). A sequence whose up axis
+is not y (a C3D or Qualisys lab's z) is turned a quarter turn so that it is, as OpenSim
+expects: z up becomes ``(x, y, z) -> (x, z, -y)``. Marker names must be
 non-empty, without tabs or line breaks (control characters) and without surrounding
 spaces; anything else is refused with a ValueError. Confidence and tracking states have
 no place in a TRC file.
@@ -39,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._marker_writer import MARKER_UNITS, one_3d_sequence
+from tobitkf.io._marker_writer import MARKER_UNITS, first_frame, one_3d_sequence, rotate_up
 from tobitkf.io._text import (
     check_positions,
     check_rate,
@@ -204,13 +208,16 @@ def write_trc(
     rate = _rate(seq)
     T, M = seq.n_frames, seq.n_joints
     pos = seq.positions * scale if scale != 1.0 else seq.positions
+    # OpenSim's frame is y up (and the reader says so): a z-up lab (C3D, Qualisys) turned
+    pos = rotate_up(pos, seq.topology.up_axis, 1)
     times = seq.times()
     label = _label(Path(path).name)
+    start = first_frame(seq, rate)  # a trial cut from a longer capture keeps its numbers
     r = fmt_float(rate)
     out = [
         f"PathFileType\t4\t(X/Y/Z)\t{label}",
         "\t".join(_HEADER_KEYS),
-        "\t".join([r, r, str(T), str(M), units, r, "1", str(T)]),
+        "\t".join([r, r, str(T), str(M), units, r, str(start), str(T)]),
         "\t".join(["Frame#", "Time", *(f"{n}\t\t" for n in names)]).rstrip("\t"),
         "\t\t" + "\t".join(f"X{i}\tY{i}\tZ{i}" for i in range(1, M + 1)),
     ]
@@ -218,7 +225,7 @@ def write_trc(
     stamps = fmt_floats(times)
     W = M * 3
     for t in range(T):
-        out.append("\t".join([str(t + 1), stamps[t], *vals[t * W : (t + 1) * W]]))
+        out.append("\t".join([str(start + t), stamps[t], *vals[t * W : (t + 1) * W]]))
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(out) + "\n")
 
