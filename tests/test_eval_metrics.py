@@ -131,6 +131,20 @@ def test_joint_angles_by_name_for_kinect_and_uiprmd_names() -> None:
     assert joint_angles(p, names)["right_knee"][0] == pytest.approx(90.0)
 
 
+def test_the_best_delay_keeps_half_the_samples() -> None:
+    """Ten frames: at delay 9 one pair is compared, and it happens to match; the search
+    keeps to delays that compare at least half the samples (5 here)."""
+    truth = np.arange(10, dtype=float) * 10.0
+    est = truth + 3.0  # 3 degrees off at delay 0
+    est[9] = truth[0]  # delay +9 compares est[9] with truth[0]: exactly equal
+    assert angle_rmse_at_delay(est, truth, 9) == 0.0
+    _, d = angle_rmse_best_delay(est, truth, max_delay=9)
+    assert abs(d) <= 5
+    # NaN samples count as missing pairs: only 4 of 10 at delay 0 leave delay 2 (2 pairs)
+    holes = np.where(np.arange(10) < 4, truth, np.nan)
+    assert angle_rmse_best_delay(holes, truth, max_delay=3)[1] in (0, 1, -1)
+
+
 def test_angle_rmse_at_best_and_fixed_delay() -> None:
     t = np.linspace(0, 6, 200)
     truth = 90 + 40 * np.sin(t)

@@ -156,6 +156,15 @@ def test_a_keraal_truth_cut_at_the_start_is_flagged(tmp_path) -> None:
     gt = prepare_truth(k, _load(cut))
     assert gt.fitted_time_alignment.offset_s == pytest.approx(1.0, abs=1 / 30)
     assert any("fitted time offset +1.0" in w for w in gt.notes["warnings"])
+    # a truth too short for the fit (2.5 of 6.4 s): the offset is held anyway, so it is
+    # scored where it covers the track, and the warning says the fit could not check
+    cut.write_text("".join(v.read_text().splitlines(keepends=True)[:150]))
+    short = prepare_truth(k, _load(cut))
+    assert any("could not check the fixed offset" in w for w in short.notes["warnings"])
+    covered = np.isfinite(short.positions[:, short.paired]).all(axis=(1, 2))
+    assert covered[:70].all() and not covered[80:].any()  # 2.5 s: 75 Kinect frames
+    raw = evaluate_methods(k, short, ["raw"]).score("raw")
+    assert np.isfinite(raw.rmse)
 
 
 def test_tracks_that_cannot_be_scored_against_mocap_say_why() -> None:

@@ -121,6 +121,15 @@ def angle_rmse_at_delay(estimate: ArrayLike, truth: ArrayLike, delay: int) -> fl
     return float(np.sqrt(np.mean(d**2))) if len(d) else float("nan")
 
 
+def _pairs(e: np.ndarray, t: np.ndarray, delay: int) -> int:
+    """How many finite (estimate, truth) pairs :func:`angle_rmse_at_delay` compares."""
+    n = len(e)
+    if e.shape != t.shape or abs(delay) >= n:
+        return 0
+    a, b = (e[delay:], t[: n - delay]) if delay >= 0 else (e[: n + delay], t[-delay:])
+    return int(np.sum(np.isfinite(a) & np.isfinite(b)))
+
+
 @dataclass(frozen=True)
 class AngleScore:
     """Angle RMSE of one method for one angle.
@@ -142,9 +151,15 @@ class AngleScore:
 def angle_rmse_best_delay(
     estimate: ArrayLike, truth: ArrayLike, max_delay: int = 10
 ) -> tuple[float, int]:
-    """The smallest :func:`angle_rmse_at_delay` over ``-max_delay..max_delay`` and its delay."""
+    """The smallest :func:`angle_rmse_at_delay` over ``-max_delay..max_delay`` and its delay,
+    among the delays that keep at least half the samples compared at delay 0 (on a short
+    track a long delay would compare a handful of samples)."""
     best = (float("inf"), 0)
+    e, t = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
+    need = 0.5 * _pairs(e, t, 0)
     for d in range(-max_delay, max_delay + 1):
+        if _pairs(e, t, d) < need or _pairs(e, t, d) == 0:
+            continue
         r = angle_rmse_at_delay(estimate, truth, d)
         if np.isfinite(r) and (
             r < best[0] - 1e-12 or (abs(r - best[0]) <= 1e-12 and abs(d) < abs(best[1]))

@@ -292,15 +292,23 @@ def prepare_truth(
     sel = np.argsort(-spread)[:n_signals]
     if fit_rate and rate_range is None:
         rate_range = (0.6 * rate, 1.6 * rate) if is_uiprmd else (0.75 * rate, 1.1 * rate)
-    fitted = fit_time_alignment(
-        tt,
-        sig_t[:, sel],
-        sig_m[:, sel],
-        rate=rate,
-        fit_rate=fit_rate,
-        rate_range=rate_range,
-        mocap_clock=clock,
-    )
+    unfitted = None
+    try:
+        fitted = fit_time_alignment(
+            tt,
+            sig_t[:, sel],
+            sig_m[:, sel],
+            rate=rate,
+            fit_rate=fit_rate,
+            rate_range=rate_range,
+            mocap_clock=clock,
+        )
+    except ValueError as exc:
+        if time != "fixed":
+            raise
+        # the offset is held anyway (KERAAL): the fit could only have checked it
+        unfitted = str(exc).removeprefix("fit_time_alignment: ")
+        fitted = TimeAlignment(float("nan"), rate, float("nan"), float("nan"), False)
     if time == "fixed":
         used = TimeAlignment(0.0, rate, float("nan"), float("nan"), False)
     else:
@@ -315,17 +323,22 @@ def prepare_truth(
     notes: dict[str, Any] = {"pairing_table": table.name}
     warnings_: list[str] = []
     frame = float(np.median(np.diff(tt))) if len(tt) > 1 else 0.0
-    if time == "fixed" and abs(fitted.offset_s - used.offset_s) > 2 * frame:
+    if unfitted is not None:
+        warnings_.append(
+            f"the time fit could not check the fixed offset {used.offset_s:g} s "
+            f"({unfitted}): the motion capture is scored where it covers the track"
+        )
+    elif time == "fixed" and abs(fitted.offset_s - used.offset_s) > 2 * frame:
         warnings_.append(
             f"the fitted time offset {fitted.offset_s:+.3f} s is more than two frames from "
             f"the fixed {used.offset_s:g} s (KERAAL's common start): the motion capture may "
             "be cut or shifted; the scores hold the offset fixed"
         )
-    if not fitted.correlation >= 0.9:
+    if unfitted is None and not fitted.correlation >= 0.9:
         warnings_.append(
             f"time alignment is doubtful: signal correlation {fitted.correlation:.2f} < 0.9"
         )
-    if fitted.overlap < 0.6:
+    if unfitted is None and fitted.overlap < 0.6:
         warnings_.append(f"mocap covers only {100 * fitted.overlap:.0f} % of the track frames")
     if fit_rate and rate_range is not None:
         lo, hi = rate_range

@@ -212,7 +212,7 @@ def evaluate(
             results[path] = table.to_dict()
             if not quiet:
                 console.rule(f"[bold]{path}" + (f"  vs  {truths[i]}" if truths else ""))
-                console.print(Text(table.to_text()), highlight=False, soft_wrap=True)
+                _print_scores(table, "every column is in --json")
     pooled = pool_scores(tables) if len(tables) > 1 else None
     if pooled is not None:
         results["pooled"] = pooled
@@ -280,7 +280,7 @@ def report(
     track, truth, output, methods, pairs, no_gif, input_format, truth_format, fps, topology, units
 ):
     """Write a self-contained HTML report: metrics, traces, skeletons, animation."""
-    from tobitkf.app.report import summary_rows, track_report
+    from tobitkf.app.report import track_report
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
@@ -313,17 +313,22 @@ def report(
             _fail(f"{track}: {exc}")
     for warning in (getattr(table, "truth", None) or {}).get("notes", {}).get("warnings", []):
         err_console.print(f"[yellow]warning[/yellow] {track}: {warning}")
+    _print_scores(table, "every column is in the report")
+    console.print(f"report written to {Path(path).resolve()}")
+
+
+def _print_scores(table: Any, where: str) -> None:
+    """A recording's scores: the whole table for a pipe, a log file or a terminal wide
+    enough; a narrow terminal gets a few columns, whole words, instead of lines wrapped
+    into each other (``where`` says where the rest is)."""
+    from tobitkf.app.report import summary_rows
+
     text = table.to_text()
-    # a pipe or a log file gets the whole table; a narrow terminal a few columns, whole
-    # words, instead of lines wrapped into each other
     if not console.is_terminal or max(map(len, text.splitlines()), default=0) <= console.width:
         console.print(Text(text), highlight=False, soft_wrap=True)
-    else:
-        rows = summary_rows(table)
-        columns = list(rows[0])
-        _print_table("summary (every column is in the report)", columns,
-                     [list(r.values()) for r in rows])  # fmt: skip
-    console.print(f"report written to {Path(path).resolve()}")
+        return
+    rows = summary_rows(table)
+    _print_table(f"summary ({where})", list(rows[0]), [list(r.values()) for r in rows])
 
 
 # --------------------------------------------------------------------------- benchmark
