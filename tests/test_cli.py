@@ -382,3 +382,26 @@ def test_the_individuals_of_a_file_are_smoothed_together(tmp_path):
         return float(np.sqrt(np.mean(np.sum((est - true) ** 2, -1))))
 
     assert rmse(out) < 2.0 < 10.0 < rmse([smooth_api(s) for s in seqs])
+
+
+def test_a_data_set_gets_its_totals_not_a_row_per_file(tmp_path):
+    """More files than MAX_TABLE_ROWS: one row of totals (checked against the JSON
+    summary of the same run), the tally counts every file."""
+    from tobitkf.app.commands.smooth import MAX_TABLE_ROWS
+    from tobitkf.evaluation.ntu_like import write_ntu_like
+
+    n = MAX_TABLE_ROWS + 2
+    write_ntu_like(tmp_path / "in", n, frames=(20, 24))
+    res = CliRunner(env={"COLUMNS": "200"}).invoke(
+        app, ["smooth", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "-m", "kf"]
+    )
+    assert res.exit_code == 0, res.output
+    assert f"{n} files (every one in the manifest and --json)" in res.output
+    assert "S001C001P001R001A001" not in res.output and f"{n} smoothed" in res.output
+    again = CliRunner().invoke(
+        app, ["smooth", str(tmp_path / "in"), "-o", str(tmp_path / "j"), "-m", "kf", "--json"]
+    )
+    summary = json.loads(again.output)
+    frames, bodies = sum(r["frames"] for r in summary), sum(r["bodies"] for r in summary)
+    row = next(ln for ln in res.output.splitlines() if f"{n} files" in ln)
+    assert f" {bodies} " in row and f" {frames} " in row

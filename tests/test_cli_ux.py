@@ -757,3 +757,13 @@ def test_method_labels_with_parameters_are_shown_whole(tmp_path):
         res = _invoke(*args)
         assert res.exit_code == 0, res.output
         assert "atkf[c=0.1]" in res.output and "atkf[c=0.3]" in res.output, res.output
+
+
+def test_evaluate_says_what_is_wrong_with_its_options(tmp_path):
+    track = tmp_path / "a-Kinect-.csv"
+    save([_recording()], track, format="csv")
+    res = _invoke("evaluate", track, "--truth-replace", "-kinect-", "-Vicon-")
+    assert res.exit_code != 0 and "'-kinect-' is not in the path" in res.output
+    for command in (["evaluate", track], ["benchmark", "--duration", "1"]):
+        res = _invoke(*command, "--json", "--markdown")
+        assert res.exit_code != 0 and "give --json or --markdown, not both" in res.output

@@ -252,6 +252,11 @@ def test_a_wrong_cluster_address_is_one_clear_message(tmp_path):
     res = CliRunner().invoke(app, ["smooth", str(one), "-o", str(tmp_path / "o"), "--cluster", "x"])
     assert res.exit_code == 1 and "Traceback" not in res.output
     assert "expected a scheduler address" in " ".join(res.output.split())
+    gone = str(tmp_path / "scheduler.json")  # it used to say "missing port number"
+    res = CliRunner().invoke(
+        app, ["smooth", str(one), "-o", str(tmp_path / "o"), "--cluster", gone]
+    )
+    assert res.exit_code == 1 and f"scheduler file {gone} not found" in " ".join(res.output.split())
 
 
 def test_a_run_leaves_the_users_dask_defaults_alone(client, data, tmp_path):

@@ -272,3 +272,16 @@ def test_csv_reads_in_pandas_without_options_and_back(tmp_path):
     np.testing.assert_array_equal(r2.positions, s.positions)
     np.testing.assert_array_equal(r2.confidence, conf)
     assert r2.units is None  # no sidecar: 2-D positions in unknown units
+
+
+def test_dataframe_ids_are_python_values_and_messages_name_the_table():
+    """A body id read from a table is an int (not numpy's int64: json, equality with
+    ids elsewhere); a table without individuals is 'the table' in messages."""
+    df = pd.DataFrame(
+        {"individual": [3, 3, 7, 7], "keypoint": ["a", "b", "a", "b"], "frame": [0, 0, 0, 0],
+         "x": [1.0, 2.0, 3.0, 4.0], "y": [0.0, 0.0, 0.0, 0.0]}
+    )  # fmt: skip
+    ids = [s.body_id for s in tk.from_dataframe(df)]
+    assert ids == [3, 7] and all(type(i) is int for i in ids)
+    with pytest.raises(ValueError, match=r"^the table: a keypoint appears twice"):
+        tk.from_dataframe(df.drop(columns="individual"))

@@ -83,7 +83,9 @@ def connect(address: str, workers: int | None = None) -> Iterator[Any]:
         return
     if workers is not None:
         raise ValueError("--workers goes with --cluster local (a running cluster has its own)")
-    if address.endswith(".json") and os.path.isfile(address):
+    if address.endswith(".json") and not os.path.isfile(address):
+        raise ValueError(f"scheduler file {address} not found")
+    if address.endswith(".json"):
         with distributed.Client(scheduler_file=address, set_as_default=False) as client:
             yield client
         return

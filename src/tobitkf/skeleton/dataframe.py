@@ -97,7 +97,7 @@ def _build(
         _topology(names, attrs),
         timestamps=times,
         fps=fps,
-        body_id=ident,
+        body_id=ident.item() if isinstance(ident, np.generic) else ident,  # int, not int64
         units=units,
         **kw,
     )
@@ -141,9 +141,14 @@ def _from_wide(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
                     [per_kp[n].get(role, np.full(T, np.nan)) for n in names], axis=1
                 )
         if "x" not in values or "y" not in values:
-            raise ValueError(f"individual {ind!r}: expected x and y coordinates")
+            raise ValueError(f"{_who(ind)}: expected x and y coordinates")
         out.append(_build(values, names, times, ind, attrs))
     return out
+
+
+def _who(ind: Any) -> str:
+    """How a message names an individual (a table of one, without ids: "the table")."""
+    return "the table" if ind is None else f"individual {ind!r}"
 
 
 def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
@@ -178,7 +183,7 @@ def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
         rows = np.ones(len(df), bool) if ind_col is None else (df[ind_col] == ind).to_numpy()
         fi, ki = f_idx[rows], k_idx[rows]
         if len(set(zip(fi.tolist(), ki.tolist(), strict=True))) != rows.sum():
-            raise ValueError(f"individual {ind!r}: a keypoint appears twice in one frame")
+            raise ValueError(f"{_who(ind)}: a keypoint appears twice in one frame")
         values = {}
         for role, col in [(c, c) for c in _COORDS + _PER_SAMPLE if c in df.columns] + (
             [("confidence", conf_col)] if conf_col not in (None, "confidence") else []

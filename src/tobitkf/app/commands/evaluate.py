@@ -168,6 +168,9 @@ def evaluate(
         if truths:
             _fail("give --truth or --truth-replace, not both")
         old, new = truth_replace
+        absent = [p for p in tracks if old not in p]
+        if absent:
+            _fail(f"--truth-replace {old!r} {new!r}: {old!r} is not in the path {absent[0]}")
         truths = tuple(p.replace(old, new) for p in tracks)
         missing = [
             t for t, p in zip(truths, tracks, strict=True) if t == p or not Path(t).is_file()
@@ -176,6 +179,8 @@ def evaluate(
             _fail(f"--truth-replace {old!r} {new!r}: no motion-capture file {missing[0]}")
     if truths and len(truths) != len(tracks):
         _fail(f"{len(tracks)} tracks but {len(truths)} --truth files; give one per track")
+    if as_json and as_markdown:
+        _fail("give --json or --markdown, not both")
     if as_markdown and not truths:
         _fail("--markdown prints the tables against ground truth: give --truth")
     if outdir:  # before the work, not after it
@@ -388,6 +393,8 @@ def _print_scores(table: Any, where: str) -> None:
 )
 def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind, fps):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
+    if as_json and as_markdown:
+        _fail("give --json or --markdown, not both")
     if kind == "pose2d":
         _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, as_markdown,
                           fps)  # fmt: skip

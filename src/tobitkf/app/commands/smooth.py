@@ -317,6 +317,8 @@ def smooth(
             ]
             for r, name in zip(ok, _shown_names([r.source for r in ok]), strict=True)
         ]
+        # a data set: its totals, not a screen per file
+        shown = [_totals(rows)] if len(rows) > MAX_TABLE_ROWS else rows
         if rows:
             _print_table(
                 f"tobitkf smooth --method {method}" + (" --offline" if offline else ""),
@@ -329,7 +331,7 @@ def smooth(
                     "% not measured",  # missing, NOT_TRACKED or below min_confidence
                     "seconds",
                 ],
-                rows,
+                shown,
             )
         if skipped:
             err_console.print(
@@ -358,6 +360,31 @@ def smooth(
         sys.exit(130)
     if failed:
         sys.exit(1)
+
+
+#: files of a run listed one per row in its summary; more are summed in one row (the
+#: manifest and --json have every file)
+MAX_TABLE_ROWS = 50
+
+
+def _totals(rows: list[list]) -> list:
+    """One summary row for many files: their count, bodies, frames, widest skeleton, the
+    percentages weighted by frames, and the seconds summed."""
+    import numpy as np
+
+    frames = np.array([r[2] for r in rows], dtype=float)
+    weight = frames if frames.sum() > 0 else None
+
+    def mean(k: int) -> float:
+        v = np.array([r[k] for r in rows], dtype=float)
+        ok = np.isfinite(v)
+        if not ok.any():
+            return float("nan")
+        return float(np.average(v[ok], weights=None if weight is None else weight[ok]))
+
+    return [f"{len(rows)} files (every one in the manifest and --json)",
+            sum(r[1] for r in rows), int(frames.sum()), max(r[3] for r in rows),
+            mean(4), mean(5), sum(r[6] for r in rows)]  # fmt: skip
 
 
 def _noise_from(path: str, method: str, kwargs: dict) -> dict:
