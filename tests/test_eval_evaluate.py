@@ -242,3 +242,21 @@ def test_text_tables_give_whole_method_names(track) -> None:
     bench = run_benchmark(0, ["raw", (long, _identity)], duration=2.0).to_text().splitlines()
     assert any(line.lstrip().startswith(long + " ") for line in bench)
     assert len({len(line) for line in bench[:3]}) == 1
+
+
+def test_clipped_is_reported_only_for_methods_that_clip():
+    """A method without censoring limits clips nothing: no clipped share (None, shown
+    as "–"), not 0 %; the Tobit filters report theirs (here the track lies within the
+    limits, so 0)."""
+    import tobitkf as tk
+
+    seq = tk.generate_motion(duration=2.0)
+    noisy = seq.replace(
+        positions=seq.positions + np.random.default_rng(0).normal(0, 0.01, seq.positions.shape)
+    )
+    tab = evaluate_methods(noisy, seq.positions, ["raw", "kf", "sgf", "robust", "atkf", "tkf"])
+    clipped = {r["method"]: r["clipped_fraction"] for r in tab.rows()}
+    assert all(clipped[m] is None for m in ("raw", "kf", "sgf", "robust"))
+    assert clipped["atkf"] == 0.0 and clipped["tkf"] == 0.0
+    for method, censors in (("kf", False), ("robust", False), ("tkf", True)):
+        assert tk.smooth(noisy, method=method).metadata["diagnostics"]["censoring"] is censors

@@ -575,7 +575,10 @@ def track_report(
                 note="fine / short_glitch / sustained: samples where the RAW track is within "
                 "10 cm of the truth, off for at most 4 frames, or off for longer. "
                 "in 95% ball: % of samples whose 3-D error lies within the 95 % ball of the "
-                "method's own posterior sd (95 if the sd is honest; – : no sd).",
+                "method's own posterior sd (95 if the sd is honest; – : no sd). "
+                "clipped (%): measurements a Tobit filter took as clipped at the sensor's "
+                "limits; rejected (%): samples the robust methods judged physically "
+                "impossible and filled; – : the method does neither.",
             )
         ]
         angle_rows = [

@@ -320,7 +320,8 @@ def evaluate_methods(
         diag = (getattr(out, "metadata", None) or {}).get("diagnostics") or {}
         clipped = None
         cf = diag.get("clipped_fraction")
-        if cf is not None and np.size(cf) == len(truth.paired):
+        # None for a method that clips nothing (not 0 %: it has no limits to clip at)
+        if cf is not None and diag.get("censoring", True) and np.size(cf) == len(truth.paired):
             clipped = float(np.mean(np.asarray(cf, dtype=float)[truth.paired]))
         scores.append(
             score_estimate(

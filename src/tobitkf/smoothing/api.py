@@ -43,6 +43,7 @@ timestamps, fps, topology, body id and metadata, plus:
 
     clipped_fraction  (J,)  fraction of frames whose measurement was clipped (censored)
                             by the filter's limits (0 for methods without limits)
+    censoring         bool  whether the method censors at all (the Tobit filters)
     filled_fraction   (J,)  fraction of frames with a missing (NaN or NOT_TRACKED) or
                             rejected measurement that got an estimate
     method, params          the method name and the complete parameter set used
@@ -518,6 +519,7 @@ def _smooth_group(
             "clipped_fraction": (
                 np.zeros(missing.shape[-1]) if clipped is None else clipped[:, b].sum(axis=0) / T
             ),
+            "censoring": clipped is not None,  # the method clips at limits (Tobit filters)
             "filled_fraction": states_out.filled[b] / T,
             "method": spec.name,
             "params": used_b,

@@ -318,7 +318,8 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     k.blank_before_first(est, std, work[2])
     est = est.reshape(ys.shape)
     std = std.reshape((T, *bshape))
-    clipped = clipped.reshape((T, *bshape))
+    # the plain Kalman filter has no limits: it clips nothing (None, not zeros)
+    clipped = None if kind not in ("tkf", "atkf") else clipped.reshape((T, *bshape))
     return SmoothOutput(est, clipped=clipped, params=used, std=std)
 
 
@@ -397,7 +398,9 @@ def run_kalman_core(
     before |= ~has_any[None]
     est[before] = np.nan
     std[before] = np.nan
-    clipped = np.asarray(result.clipped, dtype=bool).any(axis=-1) & valid
+    clipped = None
+    if kind != "kf":  # the plain Kalman filter has no limits: it clips nothing
+        clipped = np.asarray(result.clipped, dtype=bool).any(axis=-1) & valid
     return SmoothOutput(est, clipped=clipped, params=used, std=std)
 
 
