@@ -752,11 +752,17 @@ def test_method_labels_with_parameters_are_shown_whole(tmp_path):
     save([rec.replace(positions=rec.positions + 0.01)], truth, format="csv")
     methods = "raw,atkf[c=0.1],atkf[c=0.3]"
     two = [track, track, "--truth", truth, "--truth", truth]
-    for args in (["evaluate", track], ["evaluate", track, "--truth", truth], ["evaluate", *two]):
-        args += ["--methods", methods]
-        res = _invoke(*args)
+    # a row per table: without truth one, with it the scores and the angles, and with
+    # two recordings the pooled table (a rich table) too
+    for args, tables in (
+        (["evaluate", track], 1),
+        (["evaluate", track, "--truth", truth], 2),
+        (["evaluate", *two], 5),
+    ):
+        res = CliRunner(env={"COLUMNS": "250"}).invoke(app, [*map(str, args), "--methods", methods])
         assert res.exit_code == 0, res.output
-        assert "atkf[c=0.1]" in res.output and "atkf[c=0.3]" in res.output, res.output
+        for label in ("atkf[c=0.1]", "atkf[c=0.3]"):
+            assert res.output.count(label) == tables, res.output
 
 
 def test_evaluate_says_what_is_wrong_with_its_options(tmp_path):
