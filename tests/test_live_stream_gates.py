@@ -181,3 +181,37 @@ def test_a_gate_parameter_given_is_not_replaced_by_the_measured_one():
     (batch,) = tk.smooth([one], "robust_online", gates="stream", untangle=False, **kw)
     assert (batch.sample_state == tk.SampleState.REJECTED).sum() == 0
     np.testing.assert_array_equal(_live([one], untangle=False, **kw)[:, 0], batch.positions)
+
+
+def test_a_gate_given_for_some_regions_keeps_the_measured_gates_of_the_others():
+    """v_max={"hands": ...} on pixel data: the hands get the caller's bound, every other
+    joint keeps the bound measured on the recording (they used to get the metre
+    constants 3, 5, 10 as px/s and a third of the samples were rejected); a region the
+    skeleton lacks changes nothing. Batch robust, and LiveSmoother's stream gates."""
+    _, noisy = _people(seed=2)
+    (one,) = noisy[:1]
+    hands = one.topology.joint_groups()["hands"]
+    others = np.setdiff1d(np.arange(one.n_joints), hands)
+    measured = np.asarray(tk.smooth(one).metadata["provenance"]["params"]["v_max"])
+    got = tk.smooth(one, v_max={"hands": 12345.0})
+    v = np.asarray(got.metadata["provenance"]["params"]["v_max"])
+    np.testing.assert_array_equal(v[others], measured[others])
+    assert set(v[hands]) == {12345.0}
+    # the stream's measured gates alike: batch (gates="stream"), and live equal to it
+    kw = {"untangle": False}
+    ref = tk.smooth([one], "robust_online", gates="stream", **kw)[0]
+    (batch,) = tk.smooth([one], "robust_online", gates="stream", v_max={"hands": 7.0}, **kw)
+    sv = np.asarray(batch.metadata["provenance"]["params"]["v_max"])
+    np.testing.assert_array_equal(
+        sv[others], np.asarray(ref.metadata["provenance"]["params"]["v_max"])[others]
+    )
+    assert set(sv[hands]) == {7.0}
+    np.testing.assert_array_equal(_live([one], v_max={"hands": 7.0}, **kw)[:, 0], batch.positions)
+    # a region this skeleton lacks (an animal's keypoints, all 'torso'): as if nothing
+    # were given
+    names = [f"point{j}" for j in range(one.n_joints)]
+    animal = one.replace(topology=tk.Topology.from_names(names, list(one.topology.parents)))
+    assert animal.topology.joint_groups()["hands"] == []
+    np.testing.assert_array_equal(
+        tk.smooth(animal, v_max={"hands": 6.0}).positions, tk.smooth(animal).positions
+    )

@@ -337,7 +337,9 @@ def smooth(
     _check_offline(spec, offline)
     guard = as_bool("step_guard", step_guard)
     opts = (offline, up_axis, factor, min_conf, untangle, guard)
-    given_params = frozenset(params)
+    from tobitkf.smoothing.robust_scale import given_names
+
+    given_params = given_names(params)  # a value per region: those regions only
     described = {"fps": fps, "confidence": confidence, "units": units, "topology": topology,
                  "timestamps": timestamps}  # fmt: skip
     if isinstance(sequence, np.ndarray):

@@ -70,7 +70,9 @@ from tobitkf.smoothing.robust_scale import (
     GATE_PARAMS,
     STREAM_FIRST,
     STREAM_LAST,
+    given_names,
     recording_gates,
+    with_given,
 )
 from tobitkf.smoothing.stream_frames import (
     INFINITE,
@@ -368,7 +370,7 @@ class LiveSmoother:
             raise ValueError(f"units must be one of {sorted(KNOWN_UNITS)} or None, got {units!r}")
         self.units = units
         self.min_confidence = check_min_confidence(min_confidence)
-        self._given = frozenset(params)
+        self._given = given_names(params)  # a value per region: those regions only
         if not self.spec.is_causal(self.params):
             raise ValueError(
                 f"method {method!r} cannot run live (it looks ahead in time); causal "
@@ -472,7 +474,10 @@ class LiveSmoother:
                 "gates would reject every step; give a recording of the set-up in use"
             )
         gates = recording_gates(ys, steps, self.topology.parents, dims)
-        measured = {k: gates[k] for k in GATE_PARAMS if k not in self._given}
+        measured = with_given(
+            {k: gates[k] for k in GATE_PARAMS}, self.params, self._given,
+            self.topology.joint_groups(),
+        )  # fmt: skip
         self.params = check_params(self.method, {**self.params, **measured})
         self._gates_dims = dims
 
@@ -538,7 +543,7 @@ class LiveSmoother:
             return
         if self.params.get("gates") == "physical":  # the user's word: in the stream's units
             return
-        missing = [k for k in GATE_PARAMS if k not in self._given]
+        missing = [k for k in GATE_PARAMS if k not in self._given]  # regions: not whole
         if missing:
             raise ValueError(
                 f"a stream in {units}"
@@ -797,10 +802,9 @@ class LiveSmoother:
         if gates.n == gates.next:
             measured = recording_gates(np.stack(gates.frames), np.asarray(gates.steps),
                                        self.topology.parents, self._dims)  # fmt: skip
-            params = {
-                **self.params,
-                **{k: measured[k] for k in GATE_PARAMS if k not in self._given},
-            }
+            mine = with_given({k: measured[k] for k in GATE_PARAMS}, self.params,
+                              self._given, self.topology.joint_groups())  # fmt: skip
+            params = {**self.params, **mine}
             if gates.stepper is None:
                 gates.stepper = self.spec.live(
                     self.topology, self.up_axis, self.inferred_noise_factor, **params

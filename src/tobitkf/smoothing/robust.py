@@ -165,7 +165,13 @@ from tobitkf.smoothing.robust_gating import (
     reject_dropped_shoulders,
 )
 from tobitkf.smoothing.robust_reweight import HuberWeights
-from tobitkf.smoothing.robust_scale import GATE_PARAMS, recording_gates, stream_gate_frames
+from tobitkf.smoothing.robust_scale import (
+    GATE_PARAMS,
+    is_given,
+    recording_gates,
+    stream_gate_frames,
+    with_given,
+)
 from tobitkf.smoothing.robust_shared import MIN_CHANGES, MIN_PAIRS
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
@@ -643,7 +649,7 @@ def _robust_bodies(
     if use_recording_gates(params, units):
         derived = recording_gates(ys, steps, topo.parents, n_dims)
         centre = derived.pop("bone_centre", None)
-        params = {**params, **{k: v for k, v in derived.items() if k not in given}}
+        params = {**params, **with_given(derived, params, given, topo.joint_groups())}
     setup = _Setup(topo, params, n_dims)
     times = np.ascontiguousarray(times, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
@@ -678,7 +684,7 @@ def _robust_bodies(
     # a variance a hair below zero is rounding (a track with almost no noise, whose fit
     # finds next to none): its sd is 0, not NaN
     std = np.sqrt(np.maximum(var, 0.0, out=var), out=var)
-    if derived and "noise_sd" not in given and not _second_differences(missing):
+    if derived and not is_given("noise_sd", given) and not _second_differences(missing):
         # the recording's noise could not be read (its floor stands in): an sd of ~0
         # would claim a certainty nothing measured
         std[...] = np.nan
@@ -761,7 +767,7 @@ def _stream_gated(
     for a, b in zip(frames, [*frames[1:], T], strict=True):
         derived = recording_gates(ys[:a], steps[:a], topo.parents, n_dims)
         derived.pop("bone_centre", None)
-        mine = {k: v for k, v in derived.items() if k not in given}  # the caller's win
+        mine = with_given(derived, params, given, topo.joint_groups())  # the caller's win
         setup = _Setup(topo, {**params, **mine}, n_dims)
         history.append({"frame": a, **{g: derived[g] for g in GATE_PARAMS}})
         segments.append((a, b, setup))

@@ -93,6 +93,46 @@ _MAD = 1.4826
 GATE_PARAMS = ("noise_sd", "speed_sd", "v_max", "margin", "bone_tol_abs", "bone_tol_rel")
 
 
+def given_names(params: dict[str, Any]) -> frozenset[str]:
+    """The parameters a caller gave, as :class:`~tobitkf.smoothing.registry.SmoothInput`
+    names them: a whole value by its name, a value per body region (``v_max={"hands":
+    6}``) by ``"<name>:<region>"`` for each region named, so that the regions not named
+    keep what the recording measured (:func:`with_given`)."""
+    out = set()
+    for k, v in params.items():
+        if isinstance(v, dict) and v and all(isinstance(g, str) for g in v):
+            out.update(f"{k}:{g}" for g in v)
+        else:
+            out.add(k)
+    return frozenset(out)
+
+
+def is_given(name: str, given: frozenset[str]) -> bool:
+    """Whether the caller gave ``name``, whole or for some body region."""
+    return name in given or any(g.startswith(name + ":") for g in given)
+
+
+def with_given(
+    derived: dict[str, Any], params: dict[str, Any], given: frozenset[str], groups: dict
+) -> dict[str, Any]:
+    """The gates measured on the recording (``derived``) less what the caller gave: a
+    parameter given whole is left out (the caller's stands), one given for some body
+    regions keeps the measured values of the joints of the other regions, with the
+    caller's at the named regions' joints (``groups``: region -> joint indices). A region
+    the skeleton does not have changes nothing."""
+    out = {}
+    for k, v in derived.items():
+        if k in given:
+            continue
+        named = [g.split(":", 1)[1] for g in given if g.startswith(k + ":")]
+        if named and np.ndim(v) == 1:
+            v = np.array(v, dtype=float)
+            for region in named:
+                v[list(groups.get(region, []))] = float(params[k][region])
+        out[k] = v
+    return out
+
+
 @contextmanager
 def _quiet() -> Iterator[None]:
     """Silence numpy's all-NaN-slice warnings (a joint never seen gives NaN)."""

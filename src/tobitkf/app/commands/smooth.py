@@ -107,7 +107,8 @@ from tobitkf.core.jsonable import dumps
     multiple=True,
     metavar="KEY=VALUE",
     help="Method parameter, e.g. -p q=0.001 -p c=0.3,0.2,0.3, per body region -p "
-    "v_max=hands:6,arms:4 (the regions not named keep their defaults); repeatable.",
+    "v_max=hands:6,arms:4 (the regions not named keep their defaults, or in pixels the "
+    "values measured on the recording); repeatable.",
 )
 @click.option(
     "--noise-from",
