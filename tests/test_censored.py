@@ -593,3 +593,18 @@ def test_far_tail_and_near_singular_covariance(h, k, rho, J):
     # measured worst 4e-11 (mpmath reference itself ~1e-11)
     assert abs(res.cov[0, 1] - expected) <= 1e-9 * abs(expected)
     assert np.linalg.eigvalsh(res.cov).min() >= 0
+
+
+@pytest.mark.parametrize(
+    ("cov", "match"),
+    [
+        ([[1.0, 2.0], [2.0, 1.0]], "not positive semi-definite"),  # correlation 2
+        ([[1.0, 0.9], [-0.9, 1.0]], "not symmetric"),
+        ([[1.0, np.nan], [np.nan, 1.0]], "NaN"),
+    ],
+)
+def test_a_covariance_that_is_not_one_is_refused(cov, match):
+    """It used to be taken as if its correlation were clipped to 1, or its off-diagonal
+    pair averaged (a correlation of 0.9 and -0.9: none)."""
+    with pytest.raises(ValueError, match=match):
+        clipped_normal_moments([0.0, 0.0], cov, [-1.0, -1.0], [1.0, 1.0])

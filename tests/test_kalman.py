@@ -301,3 +301,15 @@ def test_keep_predicted_false_leaves_the_rest_unchanged():
         for name in ("means", "cov_data", "loglik", "clipped"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
         assert np.isnan(b.predicted_cov_data).all()
+
+
+@pytest.mark.parametrize("diagonal", [True, False])
+def test_rts_refuses_a_result_without_predicted_covariances(diagonal):
+    """keep_predicted=False drops what the smoother reads: it used to return the filtered
+    means unchanged (diagonal path) or NaN (general path), silently."""
+    m = LinearGaussian.random_walk(0.01, 0.1, dim=3)
+    ys = np.random.default_rng(1).normal(size=(50, 3)).cumsum(0) * 0.1
+    kept = kalman_filter(m, ys, diagonal=diagonal)
+    assert not np.array_equal(rts_smooth(m, kept).means, kept.means)
+    with pytest.raises(ValueError, match="keep_predicted=True"):
+        rts_smooth(m, kalman_filter(m, ys, keep_predicted=False, diagonal=diagonal))

@@ -453,3 +453,22 @@ def test_skeleton_fixed_limits_without_censoring_match_gaussian():
     a = fit_skeleton_noise(obs, lower=[-50] * 3, upper=[50] * 3, **kw)
     b = fit_skeleton_noise(obs, form="gaussian", **kw)
     assert a.Q[0, 0] == pytest.approx(b.Q[0, 0], rel=1e-4)
+
+
+def test_all_censored_data_are_not_called_a_fit():
+    """Every sample at a limit: the likelihood cannot tell the noise; the fit used to
+    report 'converged' at a point that was not even its maximum."""
+    kw = {"A": np.eye(1), "H": np.eye(1), "x0": np.zeros(1), "P0": np.eye(1)}
+    f = fit_noise(np.full((100, 1), 0.5), -0.5, 0.5, R=0.09, compute_stderr=False, **kw)
+    assert not f.success and "not identified" in f.message
+    ok = fit_noise(np.r_[np.full(50, 0.5), np.zeros(50)][:, None], -0.5, 0.5, R=0.09,
+                   compute_stderr=False, **kw)  # fmt: skip
+    assert "every measurement" not in ok.message
+
+
+def test_a_start_that_is_no_covariance_is_named():
+    kw = {"A": np.eye(1), "H": np.eye(1), "x0": np.zeros(1), "P0": np.eye(1)}
+    with pytest.raises(ValueError, match="Q_init: not positive definite"):
+        fit_noise(np.zeros((10, 1)), R=0.09, Q_init=-1.0, **kw)
+    with pytest.raises(ValueError, match="R_init: not positive definite"):
+        fit_noise(np.zeros((10, 1)), fit_r=True, R_init=-0.1, **kw)

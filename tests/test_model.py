@@ -126,3 +126,17 @@ def test_embed_diagonal_and_lazy_covs():
     assert res.batch_shape == (2,) and res.n_steps == 5
     sm = SmootherResult(means=z, cov_data=full, diagonal=False)
     np.testing.assert_array_equal(sm.variances, v)
+
+
+def test_a_stack_of_covariances_is_checked_each_against_its_own_scale():
+    """Rounding tolerance is per matrix: a large matrix's rounding (eigenvalue -1e-5 at
+    scale 1e6, within 1e-10 of it) passes beside a small one, which used to be held to
+    the small one's tolerance (the tolerances broadcast across the stack)."""
+    from tobitkf.core.model import check_covariance
+
+    big = 1e6 * np.array([[1.0, 1.0], [1.0, 1.0]]) + np.diag([-1e-5, 0.0])  # eig ~ -5e-6
+    assert np.linalg.eigvalsh(big)[0] < -1e-6
+    small = np.eye(2)
+    check_covariance("stack", np.stack([big, small]))
+    with pytest.raises(ValueError, match="not positive semi-definite"):
+        check_covariance("stack", np.stack([small - np.diag([2.0, 0.0]), big]))

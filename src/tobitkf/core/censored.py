@@ -752,7 +752,28 @@ def clipped_normal_moments(
     component censored with probability 1), the negative eigenvalues of the correlation-
     scaled matrix are set to 0 and the matrix rebuilt; the change is of the order of the
     rounding error.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not fit, ``lower > upper``, or a ``cov`` that is not symmetric
+        positive semi-definite (it used to be taken as if its correlations were clipped to
+        ±1 and its off-diagonal pairs averaged).
     """
+    from tobitkf.core.model import check_covariance
+
+    S = np.asarray(cov, dtype=float)
+    if S.ndim >= 2 and S.shape[-1] == S.shape[-2]:
+        check_covariance("cov", S)
+    return clipped_moments_unchecked(mean, S, lower, upper)
+
+
+def clipped_moments_unchecked(
+    mean: ArrayLike, cov: ArrayLike, lower: ArrayLike, upper: ArrayLike
+) -> ClippedMoments:
+    """:func:`clipped_normal_moments` without the check that ``cov`` is symmetric PSD
+    (one eigen-decomposition per matrix): for the Tobit filters, whose innovation
+    covariances are symmetric PSD by construction."""
     m = np.asarray(mean, dtype=float)
     S = np.asarray(cov, dtype=float)
     if m.ndim < 1:

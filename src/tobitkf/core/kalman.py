@@ -87,8 +87,19 @@ def rts_smooth(model: LinearGaussian, result: FilterResult) -> SmootherResult:
     SmootherResult
         Means (T, *batch, n), covariances (T, *batch, n, n) (variances on the diagonal
         path) and gains.
+
+    Raises
+    ------
+    ValueError
+        When ``result`` holds no predicted covariances (a filter run with
+        ``keep_predicted=False``): the smoother needs them.
     """
     T = result.n_steps
+    if T > 1 and np.isnan(result.predicted_cov_data[1:]).all():
+        raise ValueError(
+            "the filter result holds no predicted covariances (the filter ran with "
+            "keep_predicted=False); run it with keep_predicted=True to smooth"
+        )
     xs = np.array(result.means, dtype=float)
     Ps = np.array(result.cov_data, dtype=float)
     xf, xp = result.means, result.predicted_means

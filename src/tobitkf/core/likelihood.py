@@ -222,13 +222,16 @@ class NoiseFit:
     Q : (n, n) estimated process-noise covariance.
     R : (p, p) measurement-noise covariance (estimated when ``fit_r``, else the given one).
     loglik : maximised log-likelihood (sum over time and batch).
-    success : optimiser convergence flag.
+    success : optimiser convergence flag (False also when every measurement is censored:
+        the noise is not identified).
     message : optimiser message (plus a note when the standard errors are unavailable).
     n_iter : optimiser iterations.
     stderr : ``{"Q": (n, n), "R": (p, p) or None}`` approximate standard errors of the
         entries of Q and R: inverse numerical Hessian of the negative log-likelihood in the
         unconstrained parameters, mapped by the delta method (NaN when the Hessian is not
-        positive definite, or when ``compute_stderr=False``).
+        positive definite, or when ``compute_stderr=False``). Exact-likelihood errors
+        without censoring; with censored samples the likelihood is the Tobit filter's
+        approximation and these can understate the spread (docs/reproduction.md).
     params : unconstrained parameters at the optimum (log variances / log-Cholesky).
     param_names : names of ``params``.
     params_cov : (k, k) approximate covariance of ``params`` (inverse Hessian).
@@ -319,6 +322,20 @@ def _default_q_init(ys: np.ndarray, H: np.ndarray, n: int, r_diag: np.ndarray) -
     return float(q)
 
 
+def _all_censored(ys: np.ndarray, lower: Any, upper: Any) -> bool:
+    """Whether every finite measurement lies at or beyond one of its limits."""
+    if lower is None and upper is None:
+        return False
+    try:
+        lo = np.broadcast_to(np.asarray(-np.inf if lower is None else lower, float), ys.shape)
+        up = np.broadcast_to(np.asarray(np.inf if upper is None else upper, float), ys.shape)
+    except ValueError:  # limits of another shape (per axis only): the filter checks them
+        return False
+    seen = np.isfinite(ys)
+    with np.errstate(invalid="ignore"):
+        return bool(np.all((ys[seen] <= lo[seen]) | (ys[seen] >= up[seen])))
+
+
 def fit_noise(
     ys: np.ndarray,
     lower: Any = None,
@@ -374,7 +391,7 @@ def fit_noise(
     """
     from scipy.optimize import minimize
 
-    from tobitkf.core.model import LinearGaussian
+    from tobitkf.core.model import LinearGaussian, check_covariance
 
     _check_form(form, c, lower, upper)
     if q_structure not in _Q_STRUCTURES:
@@ -419,6 +436,9 @@ def fit_noise(
         Q0 = _default_q_init(ys, H, n, np.diag(R0)) * np.eye(n)
     else:
         Q0 = as_cov(Q_init, n, "Q_init")
+    # a start the parametrisation cannot take (log variances): said here, not 17 calls deep
+    check_covariance("Q_init", Q0, definite=True)
+    check_covariance("R_init" if fit_r else "R", R0, definite=fit_r)
 
     nq = _n_q_params(q_structure, n)
     theta0 = _q_to_params(Q0, q_structure)
@@ -487,6 +507,13 @@ def fit_noise(
             f"; {', '.join(at_bound)} at the search bound {bounds_log}: the variance is not "
             "identified by these data (standard errors are not meaningful)"
         )
+    success = bool(res.success)
+    if _all_censored(ys, lower, upper):
+        success = False  # a flat, bumpy likelihood: any optimum it reports is arbitrary
+        message += (
+            "; every measurement lies at or beyond a censoring limit: the noise is not "
+            "identified by these data"
+        )
 
     se_q = np.full((n, n), np.nan)
     se_r = np.full((p, p), np.nan) if fit_r else None
@@ -523,7 +550,7 @@ def fit_noise(
         Q=Q_hat,
         R=R_hat,
         loglik=float(ll),
-        success=bool(res.success),
+        success=success,
         message=message,
         n_iter=int(getattr(res, "nit", 0)),
         stderr={"Q": se_q, "R": se_r},

@@ -84,7 +84,7 @@ def check_covariance(name: str, M: NDArray[Any], *, definite: bool = False) -> N
     if M.shape[-1] == 0:
         return
     eig = np.linalg.eigvalsh(0.5 * (M + np.swapaxes(M, -1, -2)))
-    tol = _PSD_TOL * scale[..., 0]
+    tol = _PSD_TOL * scale[..., 0, 0]  # one per matrix (a stack: one per entry)
     if definite:
         if np.any(eig[..., 0] <= 0.0):
             raise ValueError(

@@ -60,7 +60,7 @@ from scipy import special
 
 from tobitkf.core.censored import (
     censored_logpdf,
-    clipped_normal_moments,
+    clipped_moments_unchecked,
     clipped_normal_variance_diag,
     truncated_standard_normal,
 )
@@ -210,7 +210,7 @@ def tkfc_update(
         S = HP @ H.T + sm.R
         S = 0.5 * (S + np.swapaxes(S, -1, -2))
         s2 = np.diagonal(S, axis1=-2, axis2=-1)
-        cm = clipped_normal_moments(m, S, lower, upper)
+        cm = clipped_moments_unchecked(m, S, lower, upper)  # S symmetric PSD by construction
         Pa, Pu, Pb = cm.p_lower, cm.p_uncensored, cm.p_upper
         Pxy = np.swapaxes(HP, -1, -2) * Pu[..., None, :]
         Pyy = np.array(cm.cov, dtype=float, copy=True)
