@@ -773,3 +773,14 @@ def test_evaluate_says_what_is_wrong_with_its_options(tmp_path):
     for command in (["evaluate", track], ["benchmark", "--duration", "1"]):
         res = _invoke(*command, "--json", "--markdown")
         assert res.exit_code != 0 and "give --json or --markdown, not both" in res.output
+
+
+def test_the_pose2d_benchmark_table_says_nothing_scored_as_the_markdown_does():
+    """Labels with no sample (raw's missing keypoints) are "–", not "nan ± nan"; one seed
+    has no spread to show."""
+    args = ["benchmark", "--kind", "pose2d", "--duration", "2", "--methods", "raw"]
+    res = CliRunner(env={"COLUMNS": "200"}).invoke(app, args)
+    md = CliRunner().invoke(app, [*args, "--markdown"])
+    assert res.exit_code == 0 and md.exit_code == 0, res.output
+    assert "nan" not in res.output and "±" not in res.output
+    assert "–" in md.output and "–" in res.output

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -148,7 +149,7 @@ def evaluate(
     topology,
     units,
 ):
-    """Score smoothing methods on TRACK against motion capture (or without it).
+    """Score smoothing methods on each TRACK against motion capture (or without it).
 
     With --truth: per-method RMSE (pooled, per joint group, by raw glitch class), p95,
     max, frames over 10 cm, smoothness M, hand lag and joint-angle RMSE; several
@@ -482,9 +483,16 @@ def _benchmark_pose2d(seed, seeds, motion, source, duration, methods, as_json, a
         click.echo(pose2d_markdown(spread, seed_list), nl=False)
         return
     keys = [k for k in spread[0] if k != "method"]
-    rows = [[r["method"], *[f"{r[k][0]:.2f} ± {r[k][1]:.2f}" for k in keys]] for r in spread]
+
+    def cell(mean: float, sd: float) -> str:  # as --markdown: "–" where nothing is scored
+        if not math.isfinite(mean):
+            return "–"
+        return f"{mean:.2f}" if seeds == 1 else f"{mean:.2f} ± {sd:.2f}"
+
+    rows = [[r["method"], *[cell(*r[k]) for k in keys]] for r in spread]
+    over = f"seed {seed}" if seeds == 1 else f"mean ± sd over seeds {seed}..{seed + seeds - 1}"
     _print_table(
-        f"RMSE (px), mean ± sd over seeds {seed}..{seed + seeds - 1}",
+        f"RMSE (px), {over}",
         ["method", *(k.removesuffix("_px") for k in keys)],
         rows,
     )
