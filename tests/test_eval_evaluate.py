@@ -260,3 +260,10 @@ def test_clipped_is_reported_only_for_methods_that_clip():
     assert clipped["atkf"] == 0.0 and clipped["tkf"] == 0.0
     for method, censors in (("kf", False), ("robust", False), ("tkf", True)):
         assert tk.smooth(noisy, method=method).metadata["diagnostics"]["censoring"] is censors
+
+
+def test_a_fixed_delay_longer_than_the_track_is_refused():
+    """It used to print NaN for every angle at the fixed delay."""
+    seq = generate_motion(duration=1.0)
+    with pytest.raises(ValueError, match="not shorter than the track"):
+        evaluate_methods(seq, seq.positions, ["raw"], fixed_delay=seq.n_frames)

@@ -285,3 +285,16 @@ def test_dataframe_ids_are_python_values_and_messages_name_the_table():
     assert ids == [3, 7] and all(type(i) is int for i in ids)
     with pytest.raises(ValueError, match=r"^the table: a keypoint appears twice"):
         tk.from_dataframe(df.drop(columns="individual"))
+
+
+def test_a_tracking_state_that_is_no_code_is_refused():
+    """2.7 used to be read as state 2 without a word."""
+    df = pd.DataFrame({"keypoint": ["a", "b"], "frame": [0, 0], "x": [1.0, 2.0],
+                       "y": [0.0, 0.0], "tracking_state": [2.0, 2.7]})  # fmt: skip
+    with pytest.raises(
+        ValueError, match=r"tracking_state holds codes \(whole numbers\); found 2\.7"
+    ):
+        tk.from_dataframe(df)
+    assert tk.from_dataframe(df.assign(tracking_state=[2.0, 1.0]))[0].tracking_state.tolist() == [
+        [2, 1]
+    ]

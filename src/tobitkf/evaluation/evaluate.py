@@ -293,6 +293,11 @@ def evaluate_methods(
     -------
     EvaluationTable
     """
+    if abs(int(fixed_delay)) >= track.n_frames:
+        raise ValueError(
+            f"fixed_delay {fixed_delay} frames is not shorter than the track "
+            f"({track.n_frames} frames): no angle could be compared"
+        )
     if isinstance(truth, GroundTruth):  # prepared in metres (prepare_truth converts)
         track = metric(track, "track")
     else:

@@ -85,6 +85,9 @@ def _build(
             if name in ("tracking_state", "sample_state"):
                 if np.isnan(v).any():
                     raise ValueError(f"{name} has empty values")
+                if np.any(v != np.round(v)):  # a code, not a measure: 2.7 is no state
+                    bad = v[v != np.round(v)][0]
+                    raise ValueError(f"{name} holds codes (whole numbers); found {float(bad)!r}")
                 v = v.astype(np.int8)
             kw[name] = v
     units = attrs.get("units", "m" if n_dims == 3 else None)
