@@ -267,8 +267,7 @@ def check_positions(
     check_implausible_option(implausible)
     bound = _bound(units)
     unit_text = "(unknown units)" if units is None else units
-    with np.errstate(invalid="ignore"):
-        bad = ~(np.abs(positions) <= bound) & ~np.isnan(positions)
+    bad = _beyond(positions, units)
     if not bad.any():
         return
     joint_bad = bad.any(axis=-1)
@@ -294,6 +293,12 @@ def _bound(units: str | None) -> float:
     return MAX_ABS_POSITION_OTHER if per_unit is None else MAX_ABS_POSITION_M / per_unit
 
 
+def _beyond(points: np.ndarray, units: str | None) -> np.ndarray:
+    """The coordinates beyond the plausibility bound in ``units`` (inf too; NaN not)."""
+    with np.errstate(invalid="ignore"):
+        return ~(np.abs(points) <= _bound(units)) & ~np.isnan(points)
+
+
 def plausible_only(points: np.ndarray, units: str | None, implausible: str) -> np.ndarray:
     """``points`` (..., D) as a reader with ``implausible="missing"`` will read them: a
     copy with NaN rows where a coordinate is beyond the bound of :func:`check_positions`
@@ -301,8 +306,7 @@ def plausible_only(points: np.ndarray, units: str | None, implausible: str) -> n
     must not see such a coordinate as a second person."""
     if implausible != "missing":
         return points
-    with np.errstate(invalid="ignore"):
-        bad = (~(np.abs(points) <= _bound(units)) & ~np.isnan(points)).any(axis=-1)
+    bad = _beyond(points, units).any(axis=-1)
     if not bad.any():
         return points
     out = np.array(points, dtype=float)

@@ -799,13 +799,15 @@ def _plain_name(body_id: object) -> bool:
     """True for a body id the body column holds as text and reads back the same: a str
     that is not a number nor a missing value, without white space around it, a
     separator, a quote, a control character or a leading comment mark."""
-    if not isinstance(body_id, str) or not body_id or body_id != body_id.strip():
+    if not isinstance(body_id, str):
+        return False
+    try:  # control characters, surrounding white space, empty: as for a header name
+        _check_writable(body_id, "body id")
+    except ValueError:
         return False
     if NUMBER.fullmatch(body_id) or _NA_FIELD.fullmatch(body_id) or body_id.lower() == "nan":
         return False
-    if body_id.startswith("#") or any(c in body_id for c in "\",;\t'\n\r"):
-        return False
-    return all(unicodedata.category(c) not in ("Cc", "Cs", "Zl", "Zp") for c in body_id)
+    return not body_id.startswith("#") and not any(c in body_id for c in "\",;\t'")
 
 
 def _ints(a: np.ndarray) -> list[str]:

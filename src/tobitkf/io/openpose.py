@@ -188,6 +188,7 @@ def read_openpose(
     if n_joints is None:
         raise ReadError(p, None, f"no person with {dims}-D pose keypoints in the OpenPose output")
     T = len(frames)
+    units = "px" if dims == 2 else None
     labelled = all(i != -1 for pids in ids for i in pids)
     if labelled:
         bodies = sorted({i for pids in ids for i in pids})
@@ -195,7 +196,6 @@ def read_openpose(
         if any(len(set(pids)) != len(pids) for pids in ids):
             raise ReadError(p, None, "a person_id appears twice in one frame")
     else:
-        units = "px" if dims == 2 else None
         poses = [
             [plausible_only(_missing_to_nan(kp)[:, :dims], units, implausible) for kp in dets]
             for dets in frames
@@ -220,7 +220,6 @@ def read_openpose(
             raise ReadError(
                 files[t], None, f"confidence {conf[t, j]!r} of keypoint {j} outside [0, 1]"
             )
-        units = "px" if dims == 2 else None
         check_positions(p, pos, None, implausible, names=topo.joints, units=units)
         out.append(
             SkeletonSequence(

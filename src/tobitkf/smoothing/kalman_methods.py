@@ -319,7 +319,7 @@ def run_kalman(inp: SmoothInput, kind: str, variant: str | None, **params: Any) 
     est = est.reshape(ys.shape)
     std = std.reshape((T, *bshape))
     # the plain Kalman filter has no limits: it clips nothing (None, not zeros)
-    clipped = None if kind not in ("tkf", "atkf") else clipped.reshape((T, *bshape))
+    clipped = None if kind == "kf" else clipped.reshape((T, *bshape))
     return SmoothOutput(est, clipped=clipped, params=used, std=std)
 
 
