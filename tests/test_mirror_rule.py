@@ -130,7 +130,8 @@ def test_the_bone_gate_starts_after_half_a_second_at_a_low_rate(fps):
     # of them (at its refresh of frame 10; 8 good, 2 failed: the median is good) instead
     # of after 15 (a second), and the failure is rejected from frame 12 (the frames
     # before are its confirmation); 15 frames later without this. At 30 fps, 15 frames
-    # are 0.5 s: as before, the failure passes until the gate starts at frame 15.
+    # are 0.5 s: as before, the failure passes until the gate starts at frame 15 (where
+    # the failure's own window is one short, the left forearm's length stands in).
     clean = tk.generate_motion("arms", duration=3.0, seed=0, fps=fps)
     idx = [clean.topology.joints.index(n) for n in CHAIN]
     y = clean.positions.copy()
@@ -140,4 +141,47 @@ def test_the_bone_gate_starts_after_half_a_second_at_a_low_rate(fps):
     if fps < 30:
         assert rej[12:28].all()
     else:
-        assert not rej[9:16].any()
+        assert not rej[9:15].any()
+
+
+@pytest.mark.parametrize("fps", [30.0, 240.0])
+def test_a_limb_without_a_length_yet_borrows_its_mirrors(fps):
+    # the right hand chain is not seen for its first 0.7 s and then appears 40 cm further
+    # along the forearm for 0.7 s: its own bone has no length yet (nothing accepted), the
+    # left forearm's is
+    # learnt by then and stands in for it, so the failure is rejected from its first
+    # sample, and the good samples after it are accepted. Without the borrowed length
+    # the failure passes and its length is learnt.
+    clean = tk.generate_motion("arms", duration=3.0, seed=0, fps=fps)
+    idx = [clean.topology.joints.index(n) for n in CHAIN]
+    y = clean.positions + np.random.default_rng(1).normal(scale=0.003, size=clean.positions.shape)
+    a, b = int(0.7 * fps), int(1.4 * fps)
+    names = clean.topology.joints
+    d = y[a:b, idx[0]] - y[a:b, names.index("ElbowRight")]
+    y[:a, idx] = np.nan
+    y[a:b, idx] += (0.4 * d / np.linalg.norm(d, axis=-1, keepdims=True))[:, None]
+    out = tk.smooth(tk.SkeletonSequence(y, clean.topology, fps=fps), "robust_online")
+    rej = out.metadata["diagnostics"]["rejected"][:, idx[0]]
+    assert rej[a:b].all()
+    settled = slice(b + int(0.2 * fps), b + int(0.7 * fps))  # after the confirmation
+    assert not rej[settled].any()
+    err = np.linalg.norm(out.positions[settled, idx[0]] - clean.positions[settled, idx[0]], axis=-1)
+    assert np.sqrt(np.mean(err**2)) < 0.02
+
+
+def test_after_a_relock_the_own_length_is_learnt_again():
+    # a joint re-locked after max_reject (the measurement trusted over the old length)
+    # does not borrow the mirror's length while it learns its own again: the right
+    # forearm measured half as long again from 0.5 s on (another person's arm, say) is rejected
+    # until the re-lock at 2.5 s and accepted from then on
+    fps = 30.0
+    clean = tk.generate_motion("arms", duration=5.0, seed=0, fps=fps)
+    names = clean.topology.joints
+    idx = [names.index(n) for n in CHAIN]
+    y = clean.positions.copy()
+    d = y[:, idx[0]] - y[:, names.index("ElbowRight")]
+    y[15:, idx] += 0.5 * d[15:, None]
+    out = tk.smooth(tk.SkeletonSequence(y, clean.topology, fps=fps), "robust_online")
+    rej = out.metadata["diagnostics"]["rejected"][:, idx[0]]
+    assert rej[16:70].all()
+    assert not rej[80:].any()

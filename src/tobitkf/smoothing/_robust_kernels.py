@@ -91,7 +91,8 @@ B_STARTED = 2  # the joint's filter has started
 B_PREV_OK = 3  # the filter was updated with an accepted sample in the previous frame
 B_PREV_INF = 4  # the previous frame's sample was INFERRED (online guesses' error)
 B_HAS_GUESS = 5  # an INFERRED sample of the joint was accepted so far
-N_SB = 6
+B_RELEARN = 6  # online: the joint was re-locked and learns its bone length again
+N_SB = 7
 # parameters (pf[k])
 P_MARGIN = 0
 P_TOL_ABS = 1
@@ -534,6 +535,13 @@ def gate_frame(
         if use_bones:
             blen = _dist(y[j, 0], y[j, 1], y[j, 2], y[pp, 0], y[pp, 1], y[pp, 2])
             Lj = sf[j, S_L_CUR] if online else L_fixed[j]
+            if online and mirror and not math.isfinite(Lj) and not sb[j, B_RELEARN]:
+                # no length learnt yet (the stream's first frames): the other side's
+                # bone, once learnt, stands in for it (a body's two sides have the same
+                # bones). Not after a re-lock, which trusts the measurement
+                m = int(pj[j, J_MIRROR])
+                if m >= 0:
+                    Lj = sf[m, S_L_CUR]
         tol = tol_abs + tol_rel * Lj  # NaN without a bone length (yet): no bone rule
         if use_bones:
             bone_ok = is_root or (not math.isfinite(Lj)) or (not (abs(blen - Lj) > tol))
@@ -588,6 +596,7 @@ def gate_frame(
             if relock and not (gate_ok and bone_ok and parent_acc):
                 _window_reset(h_val, h_cnt, j)
                 sf[j, S_L_CUR] = math.nan
+                sb[j, B_RELEARN] = True
             if ok and not is_root and acc[p]:
                 # the usual push, done here: the new length and the leaving one outside
                 # the band (_bone_push), only counted

@@ -27,7 +27,8 @@ A valid measurement ``y_j(t)`` is *accepted* when
    with ``L_j`` the recording's median bone length (offline) or the median of the
    lengths seen so far (online; in 3-D, when the length learnt for the bone's mirror
    image disagrees with its own, a bone that keeps the mirror's is accepted too, so a
-   limb failing at a stream's start does not teach the gate a wrong length for good).
+   limb failing at a stream's start does not teach the gate a wrong length for good;
+   before the bone has a length of its own, the mirror's stands in).
    A wrong bone is blamed on the distal joint, unless a joint's bones to two or more
    children with children of their own broke while those children went on as before
    (accepted in the previous frame, not INFERRED, a step inside their speed gate, their
