@@ -7,6 +7,7 @@ twice as large in it with probability P(chi2_3 <= 7.8147 / 4) (scipy's chi-squar
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -95,6 +96,40 @@ def test_pooling_weighs_recordings_by_their_samples(track) -> None:
     assert pooled["claimed"]["in_95_ball_pct"] == pytest.approx(expected)
     assert pooled["claimed"]["fine_in_95_ball_pct"] == pytest.approx(expected)
     assert pooled["raw"]["in_95_ball_pct"] is None
+
+
+def test_json_gives_the_share_in_percent_per_recording_as_pooled(track, tmp_path) -> None:
+    """``evaluate --json`` gave each recording's share as a fraction (``in_sd_ball``) and
+    the pooled one in percent (``in_95_ball_pct``): one unit, named, in both."""
+    short = track.replace(
+        positions=track.positions[:90], tracking_state=None, timestamps=track.timestamps[:90]
+    )
+    # exact for 30 of 90 frames, then 10 cm off with a claimed sd of 1 cm: outside
+    tab = evaluate_methods(short, short.positions, ["raw", ("claimed", _claimed(0.1, 0.01, 30))])
+    scores = {s["method"]: s for s in json.loads(json.dumps(tab.to_dict()))["scores"]}
+    assert scores["claimed"]["in_95_ball_pct"] == pytest.approx(100 * 30 / 90)
+    by_class = scores["claimed"]["in_95_ball_pct_by_class"]
+    assert by_class["fine"] == pytest.approx(100 * 30 / 90)  # raw is exact: all fine
+    assert by_class["sustained"] is None  # no sample of that class
+    assert scores["raw"]["in_95_ball_pct"] is None  # no sd
+    assert not [k for s in scores.values() for k in s if k.startswith("in_sd_ball")]
+    # the CLI: one recording twice, so the pooled share is each recording's, in one unit
+    from click.testing import CliRunner
+
+    from tobitkf.app.commands import app
+    from tobitkf.io import save
+
+    save([short], tmp_path / "track.csv", format="csv")
+    save([short], tmp_path / "truth.csv", format="csv")
+    args = ["evaluate", *[str(tmp_path / "track.csv")] * 2, "--methods", "kf", "--json"]
+    res = CliRunner().invoke(app, [*args, *["--truth", str(tmp_path / "truth.csv")] * 2])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    (pooled,) = out.pop("pooled")
+    (table,) = out.values()  # both recordings have the same path
+    (kf,) = table["scores"]
+    assert 0 < kf["in_95_ball_pct"] <= 100  # percent (the fraction was at most 1)
+    assert kf["in_95_ball_pct"] == pytest.approx(pooled["in_95_ball_pct"])
 
 
 def test_a_method_without_an_sd_has_no_coverage_and_shows_a_dash(track) -> None:

@@ -181,8 +181,16 @@ class MethodScore:
         return r
 
     def to_dict(self) -> dict:
+        """The JSON form (``tobitkf evaluate --json``): the fields above, lengths in
+        metres, except the 95 % ball share, which is in percent as in the pooled rows
+        (:func:`~tobitkf.evaluation.evaluate.pool_scores`) and named so:
+        ``in_95_ball_pct`` and ``in_95_ball_pct_by_class`` instead of the 0..1
+        ``in_sd_ball`` and ``in_sd_ball_by_class``."""
         d = asdict(self)
         d["angles"] = {k: v.to_dict() for k, v in self.angles.items()}
+        share, by_class = d.pop("in_sd_ball"), d.pop("in_sd_ball_by_class")
+        d["in_95_ball_pct"] = None if share is None else 100 * share
+        d["in_95_ball_pct_by_class"] = {k: 100 * v for k, v in by_class.items()}
         return to_jsonable(d)
 
 
