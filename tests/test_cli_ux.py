@@ -740,8 +740,24 @@ def test_columns_is_read_at_each_invocation_not_at_import():
     for columns, widest in (("50", lambda n: n <= 50), ("300", lambda n: n > 100)):
         out = CliRunner(env={"COLUMNS": columns}).invoke(app, ["methods"]).output
         assert widest(max(len(line) for line in out.splitlines())), (columns, out)
-    out = CliRunner(env={"COLUMNS": None}).invoke(app, ["methods"]).output  # a pipe: 160
-    assert 100 < max(len(line) for line in out.splitlines()) <= 160
+    out = CliRunner(env={"COLUMNS": None}).invoke(app, ["methods"]).output  # a pipe
+    assert max(len(line) for line in out.splitlines()) > 300  # not cut at 50 or 300
+    assert commands.console.width == 160  # tables fit in 160 columns in a pipe
+
+
+def test_piped_lines_are_not_wrapped_in_the_middle_of_a_parameter():
+    """Piped (no terminal, no COLUMNS), ``methods`` cut its lines at 160 characters, in
+    the middle of robust's ``speed_sd={'hands': 1.0, 'arms': ...}``: a line is whole."""
+    from tobitkf.smoothing.api import methods
+
+    env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+    out = subprocess.run([sys.executable, "-m", "tobitkf", "methods"], env=env,
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    lines = out.splitlines()
+    for name, spec in methods().items():
+        wanted = [f"{k}=" for k in spec.defaults]
+        assert any(all(w in line for w in wanted) for line in lines), (name, wanted, out)
+    assert any(len(line) > 160 for line in lines)  # robust's: longer than the width
 
 
 def test_method_labels_with_parameters_are_shown_whole(tmp_path):

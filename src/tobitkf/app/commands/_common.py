@@ -22,17 +22,20 @@ _OWN_CONSOLE = console  # (a console put in its place, by a test or an embedding
 def _fit_console() -> None:
     """Set the table console's width from the environment of this invocation, not of the
     import: ``COLUMNS`` when set; else the terminal's own; else (files and pipes) 160, so
-    a log gets whole tables, not 80-column cuts. rich reads ``COLUMNS`` once, when the
-    console is made; a second ``main()`` in one process (tests, notebooks) would keep
-    the first one's width."""
+    a log gets whole tables, not 80-column cuts, and lines of text are not wrapped at
+    all (soft wrap: a method's parameters stay on their line, not cut in the middle of
+    a dict). rich reads ``COLUMNS`` once, when the console is made; a second ``main()``
+    in one process (tests, notebooks) would keep the first one's width."""
     own = _OWN_CONSOLE
     columns = os.environ.get("COLUMNS", "")
+    own.soft_wrap = False
     if columns.isdigit() and int(columns) > 0:
         own.width = int(columns)
     else:
         own.width = None  # rich asks the terminal at each print
         if not own.is_terminal:
             own.width = 160
+            own.soft_wrap = True
 
 
 _fit_console()
