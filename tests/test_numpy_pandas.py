@@ -298,3 +298,25 @@ def test_a_tracking_state_that_is_no_code_is_refused():
     assert tk.from_dataframe(df.assign(tracking_state=[2.0, 1.0]))[0].tracking_state.tolist() == [
         [2, 1]
     ]
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        ({"confidance": [0.5, 0.9]}, r"'confidance': did you mean 'confidence'\?"),
+        ({"subject": [7, 7]}, r"unexpected column\(s\) \['subject'\]"),
+        ({"confidence": [1.0, 1.0], "likelihood": [0.5, 0.9]}, "a second confidence column"),
+    ],
+)
+def test_a_long_table_with_a_column_it_does_not_know_is_refused(extra, match):
+    """A misspelt confidence was dropped without a word (every sample read as certain);
+    the long layout refuses a column it has no role for, as the wide and flat ones do,
+    and says how to go on."""
+    df = pd.DataFrame({"frame": [0, 0], "keypoint": ["a", "b"], "x": [1.0, 2.0],
+                       "y": [0.0, 0.0]})  # fmt: skip
+    with pytest.raises(ValueError, match=match) as err:
+        tk.from_dataframe(df.assign(**extra))
+    assert "df.drop(columns=" in str(err.value)
+    # the same table without the column reads, as does pandas' index column from a CSV
+    (seq,) = tk.from_dataframe(df.assign(**{"Unnamed: 0": [0, 1], "likelihood": [0.5, 0.9]}))
+    np.testing.assert_array_equal(seq.confidence, [[0.5, 0.9]])

@@ -9,7 +9,8 @@ individual and keypoint::
 
 ``individual`` is the body id (a column only when some body has one or there are
 several bodies); ``time`` (seconds) when the sequence has timestamps or an fps;
-``std`` and ``sample_state`` after smoothing. Wide layout (``layout="wide"``): one row
+``std`` and ``sample_state`` after smoothing; any other column is an error (a
+pandas index column ``Unnamed: 0`` is passed over). Wide layout (``layout="wide"``): one row
 per frame (index ``time`` when there are timestamps or an fps, else ``frame``) and
 columns ``(individual, keypoint, coord)`` with coord ``x``, ``y``, ``z``, ``confidence``,
 ``tracking_state``, ``std``, ``sample_state`` — the layout of a DeepLabCut table, whose
@@ -32,6 +33,7 @@ frames of the whole table (NaN where an individual has no row).
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Sequence
 from typing import Any
 
@@ -166,6 +168,9 @@ def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
         )
     ind_col = _pick(df.columns, "individual")
     conf_col = _pick(df.columns, "confidence")
+    _check_long_columns(
+        df.columns, {"keypoint": kp_col, "individual": ind_col, "confidence": conf_col}
+    )
     key = "frame" if "frame" in df.columns else "time" if "time" in df.columns else None
     if key is None:
         raise ValueError("expected a frame or time column")
@@ -196,6 +201,39 @@ def _from_long(df: Any, attrs: dict[str, Any]) -> list[SkeletonSequence]:
             values[role] = v
         out.append(_build(values, names, times, ind, attrs))
     return out
+
+
+#: the long layout's columns besides those named by an alias (:data:`_ALIASES`)
+_LONG = ("frame", "time", *_COORDS, *_PER_SAMPLE)
+
+
+def _check_long_columns(columns: Sequence[Any], picked: dict[str, Any]) -> None:
+    """``ValueError`` naming the columns of a long table that no role takes (a typo such
+    as ``confidance``, a second confidence column, an extra), as the wide and flat
+    layouts refuse theirs: a column is not dropped without a word. ``picked``: the
+    column taken for each role of :data:`_ALIASES` (None if none)."""
+    taken = {c for c in picked.values() if c is not None}
+    odd = [c for c in columns if c not in taken and c not in _LONG]
+    odd = [c for c in odd if str(c) and not str(c).lower().startswith("unnamed:")]
+    if not odd:
+        return
+    role_of = {a: role for role, names in _ALIASES.items() for a in names}
+    known = [*_LONG, *role_of]
+    notes = []
+    for c in odd:
+        low = str(c).lower()
+        if low in role_of:  # e.g. likelihood next to confidence: which one?
+            notes.append(f"{c!r}: a second {role_of[low]} column, besides {picked[role_of[low]]!r}")
+        elif close := difflib.get_close_matches(low, known, n=1, cutoff=0.75):
+            notes.append(f"{c!r}: did you mean {close[0]!r}?")
+    raise ValueError(
+        f"long table: unexpected column(s) {[str(c) for c in odd[:5]]}"
+        + (f" ({'; '.join(notes[:5])})" if notes else "")
+        + ". Its columns are keypoint (or bodypart, joint, marker), x, y[, z] and "
+        "optionally frame, time, individual (or body, track, animal), one confidence (or "
+        "likelihood, score, visibility), tracking_state, std, sample_state: rename a "
+        "misspelt column, or drop the others (df.drop(columns=[...]))"
+    )
 
 
 #: the flat layout's column suffixes and the roles they give
