@@ -436,6 +436,18 @@ def test_report_command_runs_on_pixels_without_the_methods_in_metres(tmp_path):
     assert "<tr><td>robust</td>" in page and "<tr><td>atkf</td>" not in page
 
 
+@pytest.mark.parametrize("folder", ["new/", "existing"])
+def test_report_into_a_folder_writes_report_html_in_it(tmp_path, folder):
+    # "-o reports/" named a file "reports"; an existing folder was refused
+    seq = _recording(T=40)
+    save([seq], tmp_path / "k.csv", format="csv")
+    (tmp_path / "existing").mkdir()
+    target = f"{tmp_path}/{folder}"
+    res = _invoke("report", tmp_path / "k.csv", "-o", target, "--no-gif", "--methods", "raw,kf")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / folder.rstrip("/") / "report.html").is_file()
+
+
 @pytest.mark.parametrize(
     ("units", "methods"),
     [("m", ["raw", "kf", "robust"]), ("mm", ["raw", "kf", "robust"]), ("m", ["raw", "kf"])],

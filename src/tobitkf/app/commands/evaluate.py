@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -264,8 +265,8 @@ def _scaled(value: Any, factor: float) -> Any:
     "--output",
     default="report.html",
     show_default=True,
-    type=click.Path(dir_okay=False),
-    help="HTML file to write.",
+    type=click.Path(),
+    help="HTML file to write; a folder (existing, or a path ending in /) gets report.html.",
 )
 @click.option("--methods", default=None, help="Comma-separated methods (see evaluate).")
 @click.option(
@@ -290,6 +291,8 @@ def report(
     from tobitkf.evaluation.evaluate import default_methods
 
     specs = _method_list(methods) or default_methods()
+    if Path(output).is_dir() or str(output).endswith(("/", os.sep)):
+        output = str(Path(output) / "report.html")  # not a file named after the folder
     _need_matplotlib("the report's figures")
     _writable_file(output, "the report")  # before seconds of evaluating and drawing
     raw = _load_one(track, "track", input_format, fps=fps, topology=topology, units=units)
