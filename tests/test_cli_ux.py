@@ -812,3 +812,21 @@ def test_the_pose2d_benchmark_table_says_nothing_scored_as_the_markdown_does():
     assert res.exit_code == 0 and md.exit_code == 0, res.output
     assert "nan" not in res.output and "±" not in res.output
     assert "–" in md.output and "–" in res.output
+
+
+@pytest.mark.parametrize("name", ["out.c3d", "res.csv", "nested/clean.trc"])
+def test_an_outdir_named_like_a_file_is_a_usage_error(tmp_path, name):
+    # "-o out.c3d" made a folder out.c3d holding a.robust.csv
+    seq = _recording(T=40)
+    save([seq], tmp_path / "a.csv", format="csv")
+    res = _invoke("smooth", tmp_path / "a.csv", "-o", tmp_path / name, "-m", "kf")
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.split())
+    ext = name.rsplit(".", 1)[1]
+    assert "looks like a file name" in text and f"-f {ext}" in text
+    assert not (tmp_path / name).exists()
+    # an existing folder of that name is a folder
+    (tmp_path / name).mkdir(parents=True)
+    res = _invoke("smooth", tmp_path / "a.csv", "-o", tmp_path / name, "-m", "kf")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / name / "a.kf.csv").is_file()

@@ -33,6 +33,25 @@ from tobitkf.app.commands._common import (
 from tobitkf.core.jsonable import dumps
 
 
+def _not_a_file_name(outdir: str) -> None:
+    """A usage error for ``-o out.c3d`` (a new folder named like an output file, which
+    would then hold ``<input>.robust.csv``): -o is the folder, -f the format."""
+    from tobitkf.io import output_extension, writable_formats
+
+    name = outdir.rstrip("/").rsplit("/", 1)[-1].lower()
+    if "://" not in outdir and Path(outdir).is_dir():
+        return  # an existing folder, whatever its name
+    for fmt in writable_formats():
+        ext = output_extension(fmt)
+        if name.endswith(ext) and len(name) > len(ext):
+            raise click.BadParameter(
+                f"{outdir!r} looks like a file name, but -o is the folder the outputs go "
+                f"into, each named after its input (walk.txt gives walk.<method>{ext}); "
+                f"for {fmt} output give a folder and -f {fmt}",
+                param_hint="-o/--outdir",
+            )
+
+
 # --------------------------------------------------------------------------- smooth
 @app.command()
 @click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
@@ -221,6 +240,7 @@ def smooth(
     if step_guard:
         kwargs["step_guard"] = True  # passed to tobitkf.smooth with the method's parameters
     _check_cluster_options(cluster, workers, jobs)
+    _not_a_file_name(outdir)
     if "://" not in outdir:
         _writable_folder(outdir, "the outputs")  # once, before any file is read
     try:
