@@ -129,3 +129,20 @@ def test_broadcasting_shapes_and_validation():
     with pytest.raises(ValueError, match="rho"):
         bivariate_normal_cdf(0.0, 0.0, 1.5)
     assert np.isnan(bivariate_normal_cdf(np.nan, 0.0, 0.5))
+
+
+@settings(max_examples=80, deadline=None)
+@given(finite, corr, st.floats(3.0, 308.0), st.booleans())
+def test_a_limit_beyond_1e3_sd_is_an_infinite_one(h, r, log_k, swap):
+    # P(X > h, Y > k) = Q(h) for k = -huge, 0 for k = +huge (to below 1e-300). Drezner's
+    # expansion raised (h - k)² to the square and h k times it: NaN from |k| ~ 1e77 on
+    k = 10.0**log_k
+    args = [(h, -k), (h, k)]
+    if swap:
+        args = [(b, a) for a, b in args]
+    low = bivariate_normal_upper(*args[0], r)
+    assert abs(low - ndtr(-h)) <= 1e-15 * ndtr(-h)
+    assert bivariate_normal_upper(*args[1], r) == 0.0
+    # the CDF: P(X <= h, Y <= huge) = Φ(h), P(X <= h, Y <= -huge) = 0
+    assert abs(bivariate_normal_cdf(h, k, r) - ndtr(h)) <= 1e-15 * ndtr(h)
+    assert bivariate_normal_cdf(h, -k, r) == 0.0

@@ -608,3 +608,133 @@ def test_a_covariance_that_is_not_one_is_refused(cov, match):
     pair averaged (a correlation of 0.9 and -0.9: none)."""
     with pytest.raises(ValueError, match=match):
         clipped_normal_moments([0.0, 0.0], cov, [-1.0, -1.0], [1.0, 1.0])
+
+
+# ---------------------------------------------------------------------------------------
+# Far limits: two-sided intervals far out, limits beyond 1e154 sd (where z² overflows)
+# ---------------------------------------------------------------------------------------
+
+# (α, β, μ_T, v_T): two-sided intervals 50 .. 1e8 sd out with (β² - α²)/2 = 2.5 .. 3, from
+# the closed form in 120-digit decimal arithmetic (Q(x) = φ(x)/λ(x), λ by Laplace's
+# continued fraction with 2000 terms), at the exact binary values of α and β
+FAR_TWO_SIDED = [
+    (50.0, 50.05, 50.01552547470628, 0.0001563963821802101),
+    (-50.05, -50.0, -50.01552547470628, 0.0001563963821802101),
+    (1000.0, 1000.003, 1000.0008428123084, 5.037303694566891e-07),
+    (-1000.003, -1000.0, -1000.0008428123084, 5.037303694566891e-07),
+    (100000.0, 100000.000025, 100000.00000776436, 3.911099769501335e-11),
+    (-100000.000025, -100000.0, -100000.00000776436, 3.911099769501335e-11),
+    (30000000.0, 30000000.0000001, 30000000.00000003, 5.639184400989245e-16),
+    (-30000000.0000001, -30000000.0, -30000000.00000003, 5.639184400989245e-16),
+    (100000000.0, 100000000.00000003, 100000000.00000001, 4.9942518996816045e-17),
+    (-100000000.00000003, -100000000.0, -100000000.00000001, 4.9942518996816045e-17),
+]
+
+
+@pytest.mark.parametrize(("a", "b", "mu", "v"), FAR_TWO_SIDED)
+def test_far_two_sided_interval_high_precision(a, b, mu, v):
+    # Q(β)/Q(α) from log Φ differences kept a rounding of ~α² 1e-16: v_T off by 8e-13 at
+    # 50 sd, 2 % at 3e7 sd, NaN or 100 % at 1e8 sd (both logs rounded to one number)
+    t = truncated_standard_normal(a, b)
+    assert abs(t.mu_t - mu) <= 1e-15 * abs(mu)
+    assert abs(t.v_t / v - 1) <= 1e-13
+
+
+@st.composite
+def far_instead_of_infinite(draw):
+    """A problem of :func:`problems` and the same one with each infinite limit replaced by
+    a finite one 40 .. 1e300 sd beyond the mean (and the other limit)."""
+    m, S, lo, up = draw(problems())
+    s = np.sqrt(np.diag(S))
+    lo_f, up_f = lo.copy(), up.copy()
+    for i in range(len(m)):
+        if np.isinf(lo[i]):
+            lo_f[i] = min(m[i], up[i]) - 10.0 ** draw(st.floats(np.log10(40.0), 300.0)) * s[i]
+        if np.isinf(up[i]):
+            up_f[i] = max(m[i], lo[i]) + 10.0 ** draw(st.floats(np.log10(40.0), 300.0)) * s[i]
+    return m, S, lo, up, lo_f, up_f
+
+
+@settings(max_examples=60, deadline=None)
+@given(far_instead_of_infinite())
+def test_a_limit_40_to_1e300_sd_out_is_an_infinite_one(prob):
+    # P(Z < -40) ~ 4e-350 underflows: the moments are those with the infinite limit (they
+    # were NaN beyond 1e154 sd, and the cross-covariance off by O(1) at 1e100 sd, |ρ| > 0.99)
+    m, S, lo, up, lo_f, up_f = prob
+    ref = clipped_normal_moments(m, S, lo, up)
+    far = clipped_normal_moments(m, S, lo_f, up_f)
+    sc = _scale(S)
+    np.testing.assert_allclose(far.mean, ref.mean, rtol=1e-13, atol=1e-14 * np.sqrt(sc))
+    np.testing.assert_allclose(far.cov, ref.cov, rtol=1e-12, atol=1e-14 * sc)
+    for got, exp in ((far.p_lower, ref.p_lower), (far.p_upper, ref.p_upper)):
+        np.testing.assert_array_equal(got, exp)
+    np.testing.assert_allclose(far.p_uncensored, ref.p_uncensored, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("z", [1e3, 1e100, 1e160, 1e300])
+@pytest.mark.parametrize("rho", [0.3, 0.995, -0.995])
+def test_a_far_limit_at_high_correlation_is_an_infinite_one(z, rho):
+    # |ρ| >= 0.99: the corners use K - ρQQ, whose terms grow like z and cancel: at 1e100
+    # sd the covariance came out 0.53 for 0.49 (NaN before that from the bivariate CDF)
+    S = [[1.0, rho], [rho, 1.0]]
+    ref = clipped_normal_moments([0.0, 0.0], S, [-INF, -1.0], [0.5, 1.0])
+    far = clipped_normal_moments([0.0, 0.0], S, [-z, -1.0], [0.5, 1.0])
+    np.testing.assert_allclose(far.mean, ref.mean, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(far.cov, ref.cov, rtol=1e-12, atol=0)
+
+
+@st.composite
+def beyond_1e154(draw):
+    """A latent N(m, s²), s <= 1e-140, whose limits lie 2e154 .. 1e300 s from m (z² is
+    infinite): both outside ("inside": the mean is between them), or the whole interval
+    below or above the mean. Returns (m, s, lower, upper, kind)."""
+    m = draw(st.floats(-5.0, 5.0))
+    s = 10.0 ** draw(st.floats(-150.0, -140.0))
+    d1, d2 = (10.0 ** draw(st.floats(154.3, 300.0)) * s for _ in range(2))
+    kind = draw(st.sampled_from(["inside", "below", "above"]))
+    if kind == "inside":
+        lo, up = m - d1, m + d2
+    elif kind == "below":
+        up = m - d1
+        lo = draw(st.sampled_from([-INF, up - d2]))
+    else:
+        lo = m + d1
+        up = draw(st.sampled_from([INF, lo + d2]))
+    return m, s, lo, up, kind
+
+
+def _check_exact_far_limits(mean, var, p_lo, p_un, p_up, m, s, lo, up, kind):
+    """Limits many sd beyond the mean: the uncensored moments; the whole interval beyond
+    it: the point mass at the nearer limit."""
+    if kind == "inside":
+        assert (p_lo, p_un, p_up) == (0.0, 1.0, 0.0)
+        assert mean == m and var == s * s
+    else:
+        edge = up if kind == "below" else lo
+        assert (p_lo, p_un, p_up) == ((0.0, 0.0, 1.0) if kind == "below" else (1.0, 0.0, 0.0))
+        assert abs(mean - edge) <= 4e-16 * abs(edge - m) and var == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(beyond_1e154(), st.floats(-0.999, 0.999))
+def test_limits_beyond_1e154_sd_give_the_exact_limits(prob, rho):
+    m, s, lo, up, kind = prob
+    d = clipped_normal_moments_diag(m, s * s, lo, up)
+    got = (d.mean[0], d.cov[0, 0], d.p_lower[0], d.p_uncensored[0], d.p_upper[0])
+    _check_exact_far_limits(*got, m, s, lo, up, kind)
+    t = truncated_standard_normal((lo - m) / s, (up - m) / s)
+    if kind == "inside":
+        assert (t.mu_t, t.v_t) == (0.0, 1.0)
+    # with a second, ordinary component: its own moments, and Stein's Cov(Y1, clip(Y2)) =
+    # S12 P_un,2 when the first is uncensored, 0 when it is a point mass
+    S = np.array([[s * s, rho * s], [rho * s, 1.0]])
+    r = clipped_normal_moments([m, 0.3], S, [lo, -1.0], [up, 1.0])
+    got = (r.mean[0], r.cov[0, 0], r.p_lower[0], r.p_uncensored[0], r.p_upper[0])
+    _check_exact_far_limits(*got, m, s, lo, up, kind)
+    second = clipped_normal_moments_diag(0.3, 1.0, -1.0, 1.0)
+    assert abs(r.mean[1] - second.mean[0]) <= 1e-15
+    assert abs(r.cov[1, 1] / second.cov[0, 0] - 1) <= 1e-14
+    p_un2 = norm.cdf(0.7) - norm.cdf(-1.3)
+    expected = rho * s * p_un2 if kind == "inside" else 0.0
+    assert abs(r.cov[0, 1] - expected) <= 1e-14 * abs(rho * s)
+    assert r.cov[0, 1] == r.cov[1, 0]

@@ -16,6 +16,7 @@ from scipy import special
 
 import tobitkf as tk
 from conftest import data_file
+from test_censored import FAR_TWO_SIDED
 from tobitkf.core.censored import clipped_normal_variance_diag, truncated_standard_normal
 from tobitkf.smoothing import _kalman_kernels as k
 from tobitkf.smoothing import paper
@@ -185,3 +186,58 @@ def test_kernel_equals_the_core_on_real_recordings(relative: str) -> None:
     for name in ("tkf", "tkfc"):
         inp = _input(clipped, states, steps, False)
         assert _compare(inp, name, 5e-10, lower=lower, upper=upper) > 0
+
+
+@pytest.mark.parametrize(("a", "b", "mu", "v"), FAR_TWO_SIDED)
+def test_truncated_far_two_sided_interval_high_precision(a, b, mu, v) -> None:
+    # the exact values of tests/test_censored.py (120-digit decimal arithmetic)
+    _, _, _, mu_t, v_t, _, _ = k.truncated(a, b)
+    assert abs(mu_t - mu) <= 1e-15 * abs(mu)
+    assert abs(v_t / v - 1) <= 1e-13
+
+
+@pytest.mark.parametrize("kind", ["inside", "below", "above"])
+@pytest.mark.parametrize("z", [2e154, 1e200, 1e300])
+@pytest.mark.parametrize("m", [-3.0, 0.0, 0.7])
+def test_limits_beyond_1e154_sd_give_the_exact_limits(kind: str, z: float, m: float) -> None:
+    # z² overflows: the uncensored moments (limits outside), or the point mass at the nearer
+    # limit (interval beyond the mean) -- they were NaN
+    s = 1e-145
+    d = z * s
+    lo, up = {"inside": (m - d, m + d), "below": (-np.inf, m - d), "above": (m + d, m + 2 * d)}[
+        kind
+    ]
+    mean, var, p_lo, p_un, p_up = k.clipped_diag(m, s * s, lo, up)
+    if kind == "inside":
+        assert (p_lo, p_un, p_up) == (0.0, 1.0, 0.0) and mean == m and var == s * s
+        assert k.truncated((lo - m) / s, (up - m) / s)[3:5] == (0.0, 1.0)
+    else:
+        edge = up if kind == "below" else lo
+        assert (p_lo, p_up) == ((0.0, 1.0) if kind == "below" else (1.0, 0.0)) and p_un == 0.0
+        assert abs(mean - edge) <= 4e-16 * d and var == 0.0
+
+
+@pytest.mark.parametrize("name", ["tkf", "tkfc"])
+def test_subnormal_noise_gives_finite_estimates_equal_to_the_core(name: str) -> None:
+    # r = q = 1e-320: the standardised limits are ~1e158 (tkf^c: NaN before) and the
+    # safeguard ε S underflows to 0 where a joint is certainly censored (0/0 before)
+    rng = np.random.default_rng(5)
+    T, B, J = 100, 2, 6
+    pos = _random_walks(rng, T, B, J)
+    lower, upper = (-0.3, -0.3, 1.8), (0.3, 0.3, 2.2)
+    pos = np.clip(pos, lower, upper)
+    # a joint first seen 0.2 m beyond the upper x limit (used as measured), then reported
+    # at that limit: certainly censored (P_un = 0), so the estimate stays where it was
+    pos[:, 0, 0, 1:] = (0.0, 2.0)
+    pos[:, 0, 0, 0] = 0.3
+    pos[0, 0, 0, 0] = 0.5
+    steps = np.full(T, paper.REFERENCE_DT)
+    inp = _input(pos, None, steps, False)
+    kind, variant = METHODS[name]
+    full = check_params(name, {"lower": lower, "upper": upper, "r": (1e-320,) * 3,
+                               "q": (1e-320,) * 3})  # fmt: skip
+    got = run_kalman(inp, kind, variant, **full)
+    seen = ~np.isnan(pos[..., 0])
+    assert np.all(np.isfinite(got.positions[seen]))
+    np.testing.assert_array_equal(got.positions[:, 0, 0, 0], 0.5)
+    _compare(inp, name, 1e-12, **{k_: full[k_] for k_ in ("lower", "upper", "r", "q")})

@@ -566,3 +566,55 @@ def test_an_uncensored_measurement_far_out_keeps_the_tkfc_finite():
     # it moves towards the measurement, never past it
     m = res.means[:, 0]
     assert np.all(np.diff(m) > 0) and np.all((m > 0) & (m <= 1e154))
+
+
+# ------------------------------------------------- standardised limits beyond 1e154 sd
+
+
+def _scalar_model(x0, P0, Q, R):
+    x0 = np.asarray(x0, dtype=float)
+    return LinearGaussian(A=np.eye(1), H=np.eye(1), Q=[[Q]], R=[[R]], x0=x0, P0=[[P0]])
+
+
+@pytest.mark.parametrize("variant", ["standard", "corrected"])
+def test_subnormal_r_exact_limits_not_nan(variant):
+    """R = 1e-320 (√R = 1e-160: limits 1e160 sd away, z² infinite). A prediction inside
+    the limits: the limits are as if infinite (the KF); one beyond them, certainly
+    censored (P_un = 0, Pxy = 0): no gain, the prediction is kept. They were NaN."""
+    ys = np.array([[[0.3], [0.4]], [[0.5], [0.6]], [[-0.2], [0.1]]])  # (T, batch, p)
+    model = _scalar_model([[0.0], [3.0]], 1e-320, 0.0, 1e-320)
+    res = tobit_filter(model, ys, -1.0, 1.0, variant=variant)
+    with np.errstate(over="ignore"):  # the KF's log-likelihood: 1/S overflows
+        kf = kalman_filter(model.replace(x0=[[0.0]]), ys[:, :1])
+    np.testing.assert_array_equal(res.means[:, :1], kf.means)
+    np.testing.assert_array_equal(res.covs[:, :1], kf.covs)
+    np.testing.assert_array_equal(res.means[:, 1], 3.0)
+    np.testing.assert_array_equal(res.covs[:, 1], 1e-320)
+    # the standard TKF (probabilities from R alone): with P0 = Q = 1 the measurement is
+    # exact, the posterior mean is the measurement and the variance ~R
+    model = _scalar_model([[0.0], [3.0]], 1.0, 1.0, 1e-320)
+    res = tobit_filter(model, ys, -1.0, 1.0, variant="standard")
+    np.testing.assert_allclose(res.means[:, 0], ys[:, 0], rtol=4e-16, atol=0)
+    assert np.all(res.covs[:, 0] <= 1e-320)
+    np.testing.assert_array_equal(res.means[:, 1], 3.0)
+    np.testing.assert_array_equal(res.covs[:, 1, 0, 0], [2.0, 3.0, 4.0])
+
+
+@pytest.mark.parametrize("diagonal", [True, False])
+def test_limits_beyond_1e154_sd_tkfc_is_the_kf(diagonal):
+    """S ~ 1e-300 and limits ±1e5: 7e154 sd away, z² infinite. TKF^c with limits that
+    far is the KF (P_un = 1, E[y] = m, Cov[y] = S); the general path also through the
+    cross-covariances (correlated states). They were NaN."""
+    rng = np.random.default_rng(3)
+    P0 = 1e-300 * _spd(rng, 2)
+    Q = np.diag([1e-300, 2e-300]) if diagonal else 1e-300 * _spd(rng, 2)
+    P0 = np.diag(np.diag(P0)) if diagonal else P0
+    model = LinearGaussian(
+        A=np.eye(2), H=np.eye(2), Q=Q, R=np.diag([1e-300, 3e-300]), x0=[0.0, 1.0], P0=P0
+    )
+    ys = 1e-150 * rng.normal(size=(20, 2)) + [0.0, 1.0]
+    kf = kalman_filter(model, ys, diagonal=diagonal)
+    tc = tobit_filter(model, ys, -1e5, 1e5, variant="corrected", diagonal=diagonal)
+    assert np.all(tc.p_uncensored == 1.0)
+    np.testing.assert_allclose(tc.means, kf.means, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(tc.covs, kf.covs, rtol=1e-12, atol=0)

@@ -18,7 +18,12 @@ component pairs):
   the (centred, hence non-negative) variance without cancellation.
 * Far tails (whole interval beyond 3 standard deviations) use Laplace's continued fraction
   of the Mills ratio for the distance of the truncated mean from the near limit, so the
-  truncated variance ``≈ 1/α²`` keeps relative precision where ``1 + αλ - λ²`` would not.
+  truncated variance ``≈ 1/α²`` keeps relative precision where ``1 + αλ - λ²`` would not;
+  beyond 40 sd also for the tail ratio ``Q(β)/Q(α)`` (a difference of ``log Q`` loses
+  ``~α² 1e-16``).
+* Standardised limits beyond ~1e154, where ``z²`` overflows (e.g. a subnormal variance),
+  give the exact limits: probabilities 0 or 1, the uncensored moments or the point mass
+  at a limit. No term multiplies a zero probability by such a squared distance.
 * The clipped variance is the non-negative mixture form of MATH.md §2.
 * Cross-covariances use Hoeffding's formula with Plackett's identity (see
   :func:`_pair_covariance`): ``Cov = S_ij P_un,i P_un,j + s_i s_j Σ_corners ± J`` with
@@ -73,6 +78,14 @@ _RHO_MAX = 1.0 - 2.0**-49
 # |ρ| at or above this: J from K - ρQQ unless every corner term is below _TINY_J
 _THETA_RHO_MAX = 0.99
 _TINY_J = 1e-10
+# A corner beyond this many sd has J = 0 exactly: φ₂(h, k; r) <= e^{-h²/2} / (2π sqrt(1-r²))
+# underflows for |h| >= 40 at every |r| <= _RHO_MAX (K - ρQQ would cancel to ~|h| 1e-16).
+_J_ZERO = 40.0
+# Standardised limits beyond this count as infinite in the cross-covariances: their corners
+# contribute 0 either way, and below it h² + k² (and every product of them) stays finite.
+_HUGE = 1e150
+# Beyond this many sd the far branch takes Q(x2)/Q(x1) from the Mills ratios (see there).
+_MILLS_RATIO = 40.0
 
 
 def _log_phi(z: NDArray) -> NDArray:
@@ -228,25 +241,36 @@ def _truncated_core(alpha: NDArray, beta: NDArray, logs: bool = True) -> dict[st
             x1 = -b[far]  # >= 3
             x2 = -a[far]  # > x1, may be +inf
             r1, s1 = _mills_tail(x1)
+            fin2 = np.isfinite(x2)
+            x2f = np.where(fin2, x2, x1 + 1.0)
+            r2, s2 = _mills_tail(x2f)
+            gap = np.where(fin2, x2f - x1, 0.0)
             lq1 = log_ndtr(-x1)
-            lq2 = log_ndtr(-x2)
-            ratio = np.exp(lq2 - lq1)  # Q(x2)/Q(x1) in [0, 1)
+            # Q(x2)/Q(x1) in [0, 1): up to _MILLS_RATIO sd from the difference of the log
+            # tails, which carry a rounding of ~x1² 1e-16 (at 1e8 sd they can round to one
+            # number, and ratio = 1 gave NaN; beyond 1.3e154 both are -inf); beyond, from
+            # Q(x) = φ(x)/(x + r(x)): exp(-gap (x1 + x2)/2) (x1 + r1)/(x2 + r2).
+            ratio = np.exp(log_ndtr(-x2) - lq1)
+            big = x1 > _MILLS_RATIO
+            if np.any(big):
+                g, x1b, r1b = gap[big], x1[big], r1[big]
+                mills = np.exp(
+                    -g * (0.5 * x1b + 0.5 * x2f[big]) - np.log1p((g + r2[big] - r1b) / (x1b + r1b))
+                )
+                ratio[big] = np.where(fin2[big], mills, 0.0)
             lp[far] = lq1 + np.log1p(-ratio)
             p_un[far] = np.exp(lp[far])
             # Two-sided: signed mixture of Z|Z>x1 (weight w1) and Z|Z>x2 (weight w2),
             # w1 - w2 = 1. Infinite x2 gives w2 = 0 exactly.
             w2 = ratio / (1.0 - ratio)
             w1 = 1.0 + w2
-            fin2 = np.isfinite(x2)
-            x2f = np.where(fin2, x2, x1 + 1.0)
-            r2, s2 = _mills_tail(x2f)
-            gap = np.where(fin2, x2f - x1, 0.0)
             # mean relative to x1: m = w1 r1 - w2 (gap + r2)
             m_rel = w1 * r1 - np.where(fin2, w2 * (gap + r2), 0.0)
             v1_ = r1 * (s1 - r1)
             v2_ = r2 * (s2 - r2)
+            # w2 = 0 whenever gap² could overflow (gaps beyond 1e154): no 0 * inf
             second = w1 * (v1_ + (r1 - m_rel) ** 2) - np.where(
-                fin2, w2 * (v2_ + (gap + r2 - m_rel) ** 2), 0.0
+                fin2 & (w2 > 0), w2 * (v2_ + (gap + r2 - m_rel) ** 2), 0.0
             )
             # back to the reflected frame (Z -> -Z): mean = -(x1 + m_rel)
             mu[far] = -(x1 + m_rel)
@@ -380,12 +404,14 @@ def _diag_parts(m: NDArray, v: NDArray, lo: NDArray, up: NDArray) -> dict[str, N
             + np.where(fb, beta * p_up, 0.0)
             + np.where(p_un > 0, mu_t * p_un, 0.0)
         )
-        # MATH.md §2 mixture form, every term >= 0
+        # MATH.md §2 mixture form, every term >= 0. A term is taken only where its
+        # probabilities are > 0: a distance to a limit beyond ~1e154 sd (where P = 0)
+        # squares to inf, and 0 * inf would be NaN.
         vf = (
             np.where(p_un > 0, p_un * core["v_t"], 0.0)
-            + np.where(fa & (p_un > 0), p_lo * p_un * core["d_lower"] ** 2, 0.0)
-            + np.where(fb & (p_un > 0), p_up * p_un * core["d_upper"] ** 2, 0.0)
-            + np.where(fa & fb, p_lo * p_up * (beta - alpha) ** 2, 0.0)
+            + np.where(fa & (p_un > 0) & (p_lo > 0), p_lo * p_un * core["d_lower"] ** 2, 0.0)
+            + np.where(fb & (p_un > 0) & (p_up > 0), p_up * p_un * core["d_upper"] ** 2, 0.0)
+            + np.where(fa & fb & (p_lo > 0) & (p_up > 0), p_lo * p_up * (beta - alpha) ** 2, 0.0)
         )
         # E[clip(Y)] lies in [a, b]; clipping only removes rounding at the ulp level
         mean_y = np.clip(m + s * ef, lo, up)
@@ -571,8 +597,9 @@ def _corner_sum(ai: NDArray, bi: NDArray, aj: NDArray, bj: NDArray, rho: NDArray
             use_k[sel] = (np.abs(r) >= _THETA_RHO_MAX) & (jmax > _TINY_J)
         if np.any(use_k):
             out[use_k] = 0.0
+            live = np.maximum(np.abs(H), np.abs(K)) < _J_ZERO
             for c in range(4):
-                m = use_k & fin[c]
+                m = use_k & fin[c] & live[c]
                 if np.any(m):
                     out[m] += signs[c] * _j_large(H[c, m], K[c, m], rho[m])
     return out
@@ -677,6 +704,9 @@ def _pair_covariance(
     there the Hoeffding double integral is evaluated directly with a 10×10 Gauss–Legendre
     rule on the rectangle; when only one is narrow, :func:`_one_narrow_cov`.
     """
+    ai, bi, aj, bj = (
+        np.where(np.abs(z) > _HUGE, np.copysign(np.inf, z), z) for z in (ai, bi, aj, bj)
+    )
     corner = _corner_sum(ai, bi, aj, bj, rho)
     with np.errstate(invalid="ignore", over="ignore"):
         sig = np.sqrt((1.0 - rho) * (1.0 + rho))
@@ -912,7 +942,7 @@ def censored_logpdf(
     if np.any(v <= 0):
         raise ValueError("censored_logpdf: variances s2 must be > 0")
     s = np.sqrt(v)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # log φ = -inf beyond ~1e154 sd
         at_lo = y <= lo
         at_up = ~at_lo & (y >= up)
         out = _log_phi((y - m) / s) - np.log(s)

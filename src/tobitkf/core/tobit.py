@@ -155,6 +155,9 @@ def tkf_update(
     if sm.diagonal:
         Pxy = Pxy0 * Pu
         Pyy = Pu * Pu * HPH + floor
+        # P_un = 0 (so Pxy = 0) and R ε below the smallest subnormal: Pyy = 0. No
+        # cross-covariance, no gain (not 0/0); elsewhere K = 0 / Pyy = 0 as before.
+        Pyy = np.where(Pxy == 0.0, 1.0, Pyy)
         x, P, K = gain_update_diag(xp, Pp, Pxy, Pyy, e, obs, full, out_x)
         # v = v⁻ - Pxy²/Pyy = v⁻ floor / Pyy exactly; the second form has no cancellation
         # (the first went negative once v⁻ exceeded about 1e16 floor: Q/R >= 1e16)
@@ -201,6 +204,7 @@ def tkfc_update(
         Ey, Vy, Pa, Pu, Pb = clipped_normal_variance_diag(m, S, lower, upper)
         Pxy = Pxy0 * Pu
         Pyy = Vy + EPS_CENSORED * S * (Pa + Pb)
+        Pyy = np.where(Pxy == 0.0, 1.0, Pyy)  # as in tkf_update: S ε can underflow
         x, P, K = gain_update_diag(xp, Pp, Pxy, Pyy, y - Ey, obs, full, out_x)
         s2 = S
     else:

@@ -42,6 +42,7 @@ _EPS = 1e-9  # as core.tobit.EPS_CENSORED
 _FAR = 3.0  # as core.censored._FAR
 _UNCENSORED = 12.0  # both limits further (in sd): uncensored to 1.8e-33
 _CF_TERMS = 60  # as core.censored._CF_TERMS
+_MILLS_RATIO = 40.0  # as core.censored._MILLS_RATIO
 _GL12_X, _GL12_W = np.polynomial.legendre.leggauss(12)
 # core.tobit._SERIES: 2 ∫_0^β z² φ(z) dz = 2 φ(0) Σ_k (-1/2)^k / k! β^(2k+3) / (2k+3)
 _SERIES = np.array(
@@ -149,19 +150,28 @@ def truncated(alpha: float, beta: float) -> tuple:
             x1 = -b
             x2 = -a
             r1, s1 = _mills_tail(x1)
+            fin2 = math.isfinite(x2)
+            r2, s2 = _mills_tail(x2) if fin2 else (0.0, 0.0)
             lq1 = log_ndtr(-x1)
-            lq2 = log_ndtr(-x2)
-            ratio = math.exp(lq2 - lq1)
+            if x1 <= _MILLS_RATIO:
+                ratio = math.exp(log_ndtr(-x2) - lq1)
+            elif fin2:  # Q(x2)/Q(x1) from the Mills ratios, as core.censored
+                gap = x2 - x1
+                ratio = math.exp(
+                    -gap * (0.5 * x1 + 0.5 * x2) - math.log1p((gap + r2 - r1) / (x1 + r1))
+                )
+            else:
+                ratio = 0.0
             p_un = math.exp(lq1 + math.log1p(-ratio))
             w2 = ratio / (1.0 - ratio)
             w1 = 1.0 + w2
-            if math.isfinite(x2):
-                r2, s2 = _mills_tail(x2)
+            if fin2:
                 gap = x2 - x1
                 m_rel = w1 * r1 - w2 * (gap + r2)
-                v2_ = r2 * (s2 - r2)
-                dd = gap + r2 - m_rel
-                second = w1 * (r1 * (s1 - r1) + (r1 - m_rel) ** 2) - w2 * (v2_ + dd * dd)
+                second = w1 * (r1 * (s1 - r1) + (r1 - m_rel) ** 2)
+                if w2 > 0.0:  # w2 = 0 where dd² could overflow (gaps beyond 1e154)
+                    dd = gap + r2 - m_rel
+                    second = second - w2 * (r2 * (s2 - r2) + dd * dd)
                 d_lo = gap - m_rel
             else:
                 m_rel = w1 * r1 - 0.0
@@ -201,9 +211,13 @@ def clipped_diag(m: float, v: float, lo: float, up: float) -> tuple:
     pos = p_un > 0
     ef = (alpha * p_lo if fa else 0.0) + (beta * p_up if fb else 0.0)
     ef = ef + (mu_t * p_un if pos else 0.0)
-    vf = (p_un * v_t if pos else 0.0) + (p_lo * p_un * d_lo**2 if fa and pos else 0.0)
-    vf = vf + (p_up * p_un * d_hi**2 if fb and pos else 0.0)
-    vf = vf + (p_lo * p_up * (beta - alpha) ** 2 if fa and fb else 0.0)
+    # terms with a zero probability are skipped: their squared distances overflow for
+    # limits beyond ~1e154 sd (0 * inf), as in core.censored._diag_parts
+    lo_in = fa and p_lo > 0.0
+    up_in = fb and p_up > 0.0
+    vf = (p_un * v_t if pos else 0.0) + (p_lo * p_un * d_lo**2 if lo_in and pos else 0.0)
+    vf = vf + (p_up * p_un * d_hi**2 if up_in and pos else 0.0)
+    vf = vf + (p_lo * p_up * (beta - alpha) ** 2 if lo_in and up_in else 0.0)
     mean = min(max(m + s * ef, lo), up)
     return mean, v * vf, p_lo, p_un, p_up
 
@@ -428,7 +442,8 @@ def tobit_run(
                     S = vp + rr
                     ey, vy, p_lo, pu, p_up = clipped_diag(xp, S, lo, up)
                     pxy = vp * pu
-                    K = pxy / (vy + _EPS * S * (p_lo + p_up))
+                    # pxy = 0: no gain, also where S ε underflowed (0/0; core.tobit)
+                    K = pxy / (vy + _EPS * S * (p_lo + p_up)) if pxy != 0.0 else 0.0
                 else:
                     sr = math.sqrt(rr)
                     p_lo, pu, p_up, mu_t, v_t, _, _ = truncated((lo - xp) / sr, (up - xp) / sr)
@@ -437,7 +452,7 @@ def tobit_run(
                     floor = rr * (v_t + _EPS * (p_lo + p_up))
                     pxy = vp * pu
                     pyy = pu * pu * vp + floor
-                    K = pxy / pyy
+                    K = pxy / pyy if pxy != 0.0 else 0.0
                     state[n, a, 0] = xp + K * (yc - ey)
                     # v⁻ - Pxy²/Pyy written as v⁻ floor/Pyy: no cancellation (core.tobit)
                     state[n, a, 1] = vp * (floor / pyy) if K != 0.0 else vp
