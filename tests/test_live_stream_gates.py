@@ -215,3 +215,16 @@ def test_a_gate_given_for_some_regions_keeps_the_measured_gates_of_the_others():
     np.testing.assert_array_equal(
         tk.smooth(animal, v_max={"hands": 6.0}).positions, tk.smooth(animal).positions
     )
+
+
+def test_the_gates_hold_after_the_last_measurement():
+    """A stream longer than twice STREAM_LAST frames: its last gate measurement is at
+    frame STREAM_LAST and the frames kept for it are let go; every frame after that is
+    stepped with those gates, as batch does (the next measurement was once scheduled at
+    2 STREAM_LAST, on no frames: an error on every frame from there on)."""
+    _, y = _pixels(T=2 * STREAM_LAST + 40)
+    seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units="px")
+    batch = tk.smooth(seq, "robust_online", gates="stream").positions
+    live = tk.LiveSmoother(TOPO, fps=30, gates_from="stream", units="px")
+    out = np.array([live.update(frame) for frame in y])
+    np.testing.assert_array_equal(out, batch)

@@ -799,7 +799,7 @@ class LiveSmoother:
         at the first, and is retuned, its state kept, at the others); before the first,
         the frame as measured. What ``smooth(..., gates="stream")`` gives."""
         ys, missing, batch_states, conf, batch_pos = self._inputs(pos, states, conf)
-        if gates.n == gates.next:
+        if gates.n == gates.next and gates.n <= STREAM_LAST:  # then the gates hold
             measured = recording_gates(np.stack(gates.frames), np.asarray(gates.steps),
                                        self.topology.parents, self._dims)  # fmt: skip
             mine = with_given({k: measured[k] for k in GATE_PARAMS}, self.params,
