@@ -559,6 +559,18 @@ class LiveSmoother:
                 f"stream's units (or units='m' if it is in metres)"
             )
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickling (a saved stream, or one handed to another process): the method is
+        kept by its name, and looked up again in the registry when unpickled."""
+        state = dict(self.__dict__)
+        state["spec"] = self.spec.name
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state = dict(state)
+        state["spec"] = get_method(state["spec"])  # a method of one's own: register it first
+        self.__dict__.update(state)
+
     def reset(self) -> None:
         """Forget the stream; the next frame starts new tracks (and may have another
         number of coordinates, unless the gates were measured on a sample)."""
