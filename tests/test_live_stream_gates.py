@@ -253,3 +253,27 @@ def test_a_stream_pickled_midway_goes_on_as_the_original(method):
         for other in copies:
             np.testing.assert_array_equal(other.update(frame), expected)
             np.testing.assert_array_equal(other.std, live.std)
+
+
+@pytest.mark.parametrize(("factor", "unit"), [(1e3, "milliseconds"), (1e6, "microseconds")])
+def test_timestamps_in_milliseconds_are_refused_not_taken_as_seconds(factor, unit):
+    """MediaPipe and Azure Kinect stamp frames in ms or µs: taken as seconds, a frame
+    lasted half a minute and nothing was rejected or smoothed (the output was the input).
+    Batch, live (on the stream's first three steps) and delayed say so; seconds pass."""
+    _, y = _pixels(T=60)
+    y = np.concatenate([y, 0 * y[..., :1] + 500.0], axis=-1) / 500.0  # metres
+    stamps = np.arange(len(y)) / 30.0
+    seq = SkeletonSequence(positions=y, topology=TOPO, fps=30, units="m")
+    for fps in (30.0, None):
+        with pytest.raises(ValueError, match=f"look like {unit}"):
+            tk.smooth(seq.replace(timestamps=stamps * factor, fps=fps), "robust")
+    tk.smooth(seq.replace(timestamps=stamps), "robust")
+    tk.smooth(seq.replace(timestamps=stamps * 30.0, fps=None), "robust")  # one frame a second
+    live = tk.LiveSmoother(TOPO, fps=30, units="m")
+    for k in range(3):
+        live.update(y[k], timestamp=stamps[k] * factor)
+    with pytest.raises(ValueError, match=f"look like {unit}"):
+        live.update(y[3], timestamp=stamps[3] * factor)
+    live = tk.LiveSmoother(TOPO, fps=30, units="m")
+    for k in range(10):
+        live.update(y[k], timestamp=stamps[k])

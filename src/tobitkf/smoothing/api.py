@@ -89,7 +89,12 @@ from tobitkf.smoothing.registry import (
     register_method,
     unregister_method,
 )
-from tobitkf.smoothing.timebase import DEFAULT_INFERRED_NOISE_FACTOR, frame_steps, frame_times
+from tobitkf.smoothing.timebase import (
+    DEFAULT_INFERRED_NOISE_FACTOR,
+    check_time_unit,
+    frame_steps,
+    frame_times,
+)
 from tobitkf.smoothing.untangle import check_untangle, untangle_sequences
 
 __all__ = [
@@ -430,7 +435,9 @@ def _smooth_group(
         # stream of the recording gives)
         seqs, untangled = untangle_sequences(seqs, stream=params.get("gates") == "stream")
     ref = seqs[0]
-    steps, _, is_reference = frame_steps(ref)
+    steps, nominal, is_reference = frame_steps(ref)
+    if ref.timestamps is not None:
+        check_time_unit(nominal, ref.fps)
     # (T, B, J, D); one body is a view, not a copy
     positions = (
         seqs[0].positions[:, None]

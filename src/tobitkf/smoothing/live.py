@@ -84,6 +84,7 @@ from tobitkf.smoothing.stream_frames import (
 from tobitkf.smoothing.timebase import (
     DEFAULT_INFERRED_NOISE_FACTOR,
     TRACKED_CODE,
+    check_time_unit,
     frame_steps,
     measurements,
 )
@@ -191,6 +192,10 @@ class _Group:
     members: list[Any]  # body id of each slot (None once dropped)
     frames: int = 0
     gates: _StreamGates | None = None
+
+
+#: a live stream's timestamps are judged to be seconds on their first this many steps
+_TIME_UNIT_STEPS = 3
 
 
 @dataclass
@@ -584,6 +589,7 @@ class LiveSmoother:
         # slot order: the same ids again step that group as they are (no regrouping)
         self._same: tuple[tuple[Any, ...], _Group, list[_Body]] | None = None
         self._clock = 0.0
+        self._first_steps: list[float] = []  # the stamps' first steps (their unit)
         self._time: float | None = None  # the timestamp of the frame being stepped
         self._size_checked = False  # a frame with a body has passed check_body_scale
         self.n_frames = 0
@@ -658,7 +664,17 @@ class LiveSmoother:
             return nominal, t
         if t < self._last_timestamp:
             raise ValueError(f"timestamps must not decrease: {t} after {self._last_timestamp}")
-        return max(t - self._last_timestamp, 0.1 * nominal), t
+        d = t - self._last_timestamp
+        if d > 0 and len(self._first_steps) < _TIME_UNIT_STEPS:
+            # the stamps' unit, judged on their first steps (as batch on their median)
+            self._first_steps.append(d)
+            if len(self._first_steps) == _TIME_UNIT_STEPS:
+                try:
+                    check_time_unit(float(np.median(self._first_steps)), self.fps)
+                except ValueError:
+                    self._first_steps.pop()  # the frame is refused: judged again on the next
+                    raise
+        return max(d, 0.1 * nominal), t
 
     def update(
         self,

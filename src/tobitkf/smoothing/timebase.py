@@ -59,6 +59,42 @@ def frame_steps(sequence: SkeletonSequence) -> tuple[Array, float, bool]:
     return steps, nominal, is_reference
 
 
+#: units timestamps are mistaken for seconds in (MediaPipe and Azure Kinect give
+#: milliseconds or microseconds), and their size in seconds
+_TIME_UNITS = (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9))
+#: without a frame rate, stamps further apart than this (s) that would be a usual
+#: tracking rate (Hz) in a smaller unit are taken to be in it (a frame a second in
+#: seconds, or a thousand a second in ms, is not told apart: it passes)
+_SLOW_STEP = 2.0
+_RATES = (5.0, 1000.0)
+
+
+def check_time_unit(step: float, fps: float | None) -> None:
+    """``ValueError`` when timestamps ``step`` apart (their median positive step) are
+    not seconds: the step is a thousand (a million, a billion) times ``1/fps``, give or
+    take a factor of 3, or, without a frame rate, a frame every two seconds or more
+    would be a usual tracking rate in milliseconds (microseconds, nanoseconds). Every
+    gate and the motion model are in seconds: such stamps stretch a frame to half a
+    minute, and nothing is rejected or smoothed."""
+    if not (np.isfinite(step) and step > 0):
+        return
+    for name, size in _TIME_UNITS:
+        if fps is not None:
+            hit = size / 3.0 <= step * fps <= size * 3.0
+        else:
+            hit = step > _SLOW_STEP and _RATES[0] <= size / step <= _RATES[1]
+        if hit:
+            rate = (
+                f"the frame rate of {fps:g} Hz says {1.0 / fps:.4g} s"
+                if fps
+                else (f"a frame every {step:.4g} s is no tracking rate")
+            )
+            raise ValueError(
+                f"the timestamps are {step:.4g} apart (median step) and {rate}: they look "
+                f"like {name}; give them in seconds (divide by {size:g})"
+            )
+
+
 def typical_step(steps: Array) -> float:
     """The typical time step of ``steps (T,)`` (:func:`frame_steps`): the median of the
     steps between frames, ``steps[0]`` (the nominal step) for a single frame."""
