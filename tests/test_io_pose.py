@@ -4,12 +4,15 @@ read back exactly; tobitkf's writers read by those tools; fuzzing of the text re
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tobitkf as tk
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io import ReadError
 
 pd = pytest.importorskip("pandas")
@@ -347,6 +350,77 @@ def test_movement_output_keeps_the_sd_the_sample_states_and_the_pairs(tmp_path):
         load_poses.from_dlc_file(tmp_path / "dlc.h5")["position"].values,
         np.stack([s.positions for s in seqs], -1).transpose(0, 2, 1, 3),
     )
+
+
+def _without_provenance(seq):
+    return seq.replace(metadata={k: v for k, v in seq.metadata.items() if k != "provenance"})
+
+
+@pytest.mark.parametrize("fmt, suffix", [("movement", ".nc"), ("deeplabcut", ".h5")])
+def test_pose_outputs_keep_the_provenance(tmp_path, fmt, suffix):
+    """movement's netCDF (a dataset attribute) and DeepLabCut's .h5 (attributes of the
+    table's group) keep the provenance, robust's long one, read back equal: the one the
+    individuals share, or each one's own (one without); movement, xarray and
+    pandas.read_hdf still read the files."""
+    ds, pos, _, names = _movement_ds(fps=30)
+    seqs = tk.smooth(tk.from_movement(ds), method="robust")
+    provs = [to_jsonable(s.metadata["provenance"]) for s in seqs]  # NaN is null in JSON
+    assert len(json.dumps(provs[0])) > 255 and provs[0] == provs[1]  # shared: one JSON
+    own = [seqs[0].replace(metadata={**seqs[0].metadata, "provenance": {"method": "kf"}}),
+           _without_provenance(seqs[1])]  # fmt: skip
+    for case, want in ((seqs, provs), (own, [{"method": "kf"}, None])):
+        path = tmp_path / f"out{suffix}"
+        tk.save(case, path, format=fmt)
+        back = tk.load(path)
+        assert [s.metadata.get("provenance") for s in back] == want
+        if fmt == "movement":
+            from movement.validators.datasets import ValidPosesInputs
+
+            with xr.open_dataset(path, engine="h5netcdf") as theirs:
+                ValidPosesInputs.validate(theirs)  # as movement's napari loader opens .nc
+                text = theirs.attrs["tobitkf_provenance"]
+                xr.testing.assert_equal(theirs["position"], tk.to_movement(case)["position"])
+        else:
+            df = pd.read_hdf(path)  # DeepLabCut's own read: no key, one table
+            assert df.shape == (len(pos), len(names) * len(KP) * 3)
+            with pd.HDFStore(path, mode="r") as store:
+                text = store.get_storer("df_with_missing").attrs.tobitkf_provenance
+            theirs = load_poses.from_dlc_file(path, fps=30)
+            np.testing.assert_array_equal(
+                theirs["position"].values,
+                np.stack([s.positions for s in case], -1).transpose(0, 2, 1, 3),
+            )
+        doc = json.loads(text)
+        assert doc == (want[0] if case is seqs else want)
+    assert json.loads(tk.to_movement(seqs).attrs["tobitkf_provenance"]) == provs[0]
+    assert tk.from_movement(tk.to_movement(own))[0].metadata["provenance"] == {"method": "kf"}
+
+
+def test_long_provenance_in_deeplabcut_h5_and_movement_nc(tmp_path):
+    """An HDF5 attribute holds at most 64 KB: DeepLabCut's .h5 splits longer JSON into
+    tobitkf_provenance, tobitkf_provenance_2, ...; netCDF keeps one attribute."""
+    ds = _movement_ds(fps=30)[0]
+    seqs = tk.smooth(tk.from_movement(ds), method="robust")
+    long = to_jsonable({**seqs[0].metadata["provenance"], "note": "x" * 100000})
+    seqs = [s.replace(metadata={**s.metadata, "provenance": long}) for s in seqs]
+    for fmt, suffix in (("deeplabcut", ".h5"), ("movement", ".nc")):
+        path = tmp_path / f"long{suffix}"
+        tk.save(seqs, path, format=fmt)
+        assert [s.metadata["provenance"] for s in tk.load(path)] == [long, long]
+    with pd.HDFStore(tmp_path / "long.h5", mode="r") as store:
+        attrs = store.get_storer("df_with_missing").attrs._v_attrnames
+    assert {"tobitkf_provenance", "tobitkf_provenance_2", "tobitkf_provenance_4"} <= set(attrs)
+    assert pd.read_hdf(tmp_path / "long.h5").shape[0] == seqs[0].n_frames
+
+
+def test_pose_provenance_that_is_not_json_is_a_read_error(tmp_path):
+    ds = _movement_ds(fps=30)[0]
+    bad = ds.assign_attrs(tobitkf_provenance="{oops")
+    with pytest.raises(ReadError, match="tobitkf_provenance is not the provenance's JSON"):
+        tk.from_movement(bad)
+    three = ds.assign_attrs(tobitkf_provenance="[{}, {}, {}]")
+    with pytest.raises(ReadError, match="a list of 2 \\(one per body\\), found an array of 3"):
+        tk.from_movement(three)
 
 
 def test_pose_readers_errors(tmp_path):

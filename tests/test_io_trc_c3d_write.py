@@ -10,10 +10,14 @@ our reader. Values written by the C3D format are float32: expected values are
 
 from __future__ import annotations
 
+import json
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
 
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io import ReadError, detect_format, load, save
 from tobitkf.io.trc import read_trc, write_trc
 from tobitkf.skeleton.sequence import SkeletonSequence
@@ -322,3 +326,73 @@ def test_trc_is_y_up_and_c3d_keeps_the_up_axis(tmp_path):
         (b,) = load(p)
         assert b.topology.up_axis == up
         np.testing.assert_allclose(b.positions, s.positions, rtol=1e-6, atol=1e-6)
+
+
+# ------------------------------------------------------------------ C3D provenance
+def _smoothed():
+    from test_cli import _recording
+    from tobitkf import smooth
+
+    return smooth(_recording(), method="robust")
+
+
+def test_c3d_keeps_the_provenance_in_a_group_of_its_own(tmp_path):
+    """A smoothed sequence's provenance (robust's, thousands of characters) is ASCII JSON
+    in the char array TOBITKF:PROVENANCE, rows of at most 255 characters (a C3D
+    dimension is one byte), read back equal; the c3d library reads the file as before."""
+    c3d = pytest.importorskip("c3d")
+    out = _smoothed()
+    prov = to_jsonable(out.metadata["provenance"])  # JSON: NaN is null
+    p = tmp_path / "s.robust.c3d"
+    save(out, p)
+    with open(p, "rb") as fh:
+        r = c3d.Reader(fh)
+        rows = list(r.get("TOBITKF:PROVENANCE").string_array)
+        assert [lab.strip() for lab in r.point_labels] == list(out.joint_names)
+        pts = np.stack([p_[:, :3] for _, p_, _ in r.read_frames()])
+    np.testing.assert_array_equal(pts, out.positions.astype(np.float32))
+    text = "".join(rows)
+    assert len(text.strip()) > 255 and len(rows) > 1 and {len(row) for row in rows} == {255}
+    assert json.loads(text) == prov
+    (back,) = load(p)
+    assert back.metadata["provenance"] == prov
+    # a sequence without provenance gets no group
+    save(_seq(["A", "B"]), p)
+    with open(p, "rb") as fh:
+        assert c3d.Reader(fh).get("TOBITKF") is None
+    assert "provenance" not in load(p)[0].metadata
+
+
+def test_c3d_provenance_beyond_one_parameter_and_beyond_the_file(tmp_path):
+    """JSON longer than one parameter holds (a 16-bit size) goes on in PROVENANCE2, ...;
+    longer than the parameter section holds is refused, nothing written."""
+    c3d = pytest.importorskip("c3d")
+    out = _smoothed()
+    long = to_jsonable({**out.metadata["provenance"], "note": "x" * 40000})
+    p = tmp_path / "long.c3d"
+    save(out.replace(metadata={**out.metadata, "provenance": long}), p)
+    with open(p, "rb") as fh:
+        assert sorted(c3d.Reader(fh).get("TOBITKF").param_keys()) == [
+            "PROVENANCE",
+            "PROVENANCE2",
+        ]
+    assert load(p)[0].metadata["provenance"] == long
+    huge = {**long, "note": "x" * 70000}
+    q = tmp_path / "huge.c3d"
+    with pytest.raises(ValueError, match=r"cannot write the provenance \(\d+ characters"):
+        save(out.replace(metadata={**out.metadata, "provenance": huge}), q)
+    assert not q.exists()
+
+
+def test_c3d_provenance_that_is_not_json_is_a_read_error(tmp_path):
+    c3d = pytest.importorskip("c3d")
+    w = c3d.Writer(point_rate=50.0, point_scale=-1.0, point_units="m")
+    w.add_frames([(np.zeros((1, 5), dtype=np.float32), np.zeros((0, 0), dtype=np.float32))] * 3)
+    w.set_point_labels(["A"])
+    w.add_group(w.numeric_key_next, "TOBITKF", "x").add_str("PROVENANCE", "x", "{oops", 5, 1)
+    p = tmp_path / "bad.c3d"
+    with open(p, "wb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the library's note on the empty analog group
+        w.write(fh)
+    with pytest.raises(ReadError, match="TOBITKF:PROVENANCE is not the provenance's JSON"):
+        load(p)

@@ -3,20 +3,35 @@ strict parsing and typed access, every failure a :class:`ReadError` naming the f
 
 JSON has no line numbers worth reporting once parsed, so errors name the file and the
 place in the document (``frames[3].bodies[0].joint_positions``).
+
+Also the provenance as one JSON text (:func:`provenance_text`, :func:`provenance_from_text`)
+for the binary formats that keep it in a text field of their own (a C3D parameter, a
+netCDF or HDF5 attribute).
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from tobitkf.core.jsonable import to_jsonable
 from tobitkf.io._text import decode, read_bytes
 from tobitkf.io.errors import ReadError
+from tobitkf.skeleton.sequence import SkeletonSequence
 
-__all__ = ["as_list", "as_object", "load_json", "number_array"]
+__all__ = [
+    "as_list",
+    "as_object",
+    "load_json",
+    "number_array",
+    "provenance_from_text",
+    "provenance_text",
+]
 
 
 def _no_constant(name: str) -> float:
@@ -98,3 +113,45 @@ def number_array(
     if np.isinf(arr).any():
         raise ReadError(path, None, f"expected finite numbers in {where}, found a huge number")
     return arr
+
+
+def provenance_text(sequences: Sequence[SkeletonSequence]) -> str | None:
+    """The bodies' ``metadata["provenance"]`` as one line of ASCII JSON: the provenance
+    when every body has the same one, else a list with each body's (``null`` where it has
+    none); None when no body has one."""
+    provs = [s.metadata.get("provenance") for s in sequences]
+    if all(p is None for p in provs):
+        return None
+    texts = [json.dumps(to_jsonable(p), separators=(",", ":"), allow_nan=False) for p in provs]
+    if len(set(texts)) == 1:
+        return texts[0]
+    return "[" + ",".join(texts) + "]"
+
+
+def provenance_from_text(
+    path: str | os.PathLike[str], text: Any, n_bodies: int, where: str
+) -> list[dict[str, Any] | None]:
+    """Each of ``n_bodies`` bodies' provenance from :func:`provenance_text`'s JSON (str or
+    bytes) found in ``where`` of the file; a ReadError naming ``where`` when it is not
+    that JSON."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", errors="replace")
+    try:
+        doc = json.loads(str(text), parse_constant=_no_constant)
+    except (ValueError, RecursionError) as exc:
+        msg = exc.msg if isinstance(exc, json.JSONDecodeError) else type(exc).__name__
+        raise ReadError(path, None, f"{where} is not the provenance's JSON ({msg})") from None
+    if isinstance(doc, dict):
+        return [copy.deepcopy(doc) for _ in range(n_bodies)]
+    if (
+        isinstance(doc, list)
+        and len(doc) == n_bodies
+        and all(p is None or isinstance(p, dict) for p in doc)
+    ):
+        return doc
+    raise ReadError(
+        path, None,
+        f"{where} must hold a JSON object (the provenance) or a list of {n_bodies} "
+        f"(one per body), found {_kind(doc)}"
+        + (f" of {len(doc)}" if isinstance(doc, list) else ""),
+    )  # fmt: skip

@@ -29,6 +29,9 @@ cuts them), their residuals ``metadata["residuals"]`` (T, J).
 
 Entries left out are counted by kind in ``metadata["reader_warnings"]`` (e.g. "left out
 80 of 193 POINT entries (26 angles, 20 forces, 18 moments, 16 powers)").
+
+A file tobitkf wrote from a smoothed sequence keeps its provenance in the parameter group
+``TOBITKF`` (:mod:`tobitkf.io.c3d_write`): read back as ``metadata["provenance"]``.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._json import provenance_from_text
 from tobitkf.io._text import check_positions, check_rate
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
@@ -47,6 +51,9 @@ from tobitkf.skeleton.sequence import PER_JOINT, SkeletonSequence
 from tobitkf.skeleton.topology import Topology
 
 __all__ = ["classify_labels", "read_c3d", "sniff_c3d"]
+
+#: the parameter group and parameter of the provenance's JSON (:mod:`tobitkf.io.c3d_write`)
+PROVENANCE_GROUP, PROVENANCE_PARAM = "TOBITKF", "PROVENANCE"
 
 _UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "dm": 0.1, "in": 0.0254}
 #: name fragments of the model outputs that are not positions, and what each is
@@ -187,6 +194,7 @@ def read_c3d(
             expected = int(reader.frame_count)
             first_frame = int(reader.first_frame)
             screen = reader.get_screen_axis()
+            provenance = _provenance_json(reader)
             frames = [np.array(pts[:, :4], dtype=float) for _, pts, _an in reader.read_frames()]
     except FileNotFoundError:
         raise
@@ -235,6 +243,10 @@ def read_c3d(
     positions[:, real] = view
     # the capture's clock: frame 1 at time 0 (a trial cut from a longer capture starts later)
     stamps = None if first_frame == 1 else (first_frame - 1 + np.arange(len(data))) / rate
+    meta = {}
+    if provenance is not None:
+        where = f"the parameter {PROVENANCE_GROUP}:{PROVENANCE_PARAM}"
+        meta["provenance"] = provenance_from_text(path, provenance, 1, where)[0]
     seq = SkeletonSequence(
         positions=positions,
         topology=Topology.from_names(names, up_axis=_up_axis(screen), name="c3d"),
@@ -251,9 +263,23 @@ def read_c3d(
             "residuals": np.ascontiguousarray(residual[:, keep]),
             "reader_warnings": notes,
             PER_JOINT: ["labels", "point_kinds"],
+            **meta,
         },
     )
     return [seq]
+
+
+def _provenance_json(reader) -> bytes | None:
+    """The provenance's JSON that tobitkf's writer put in ``TOBITKF:PROVENANCE`` (the
+    char array's rows joined, then those of ``PROVENANCE2``, ...), None without it."""
+    group = reader.get(PROVENANCE_GROUP)
+    if group is None or group.get(PROVENANCE_PARAM) is None:
+        return None
+    parts, k = [], 1
+    while (param := group.get(PROVENANCE_PARAM + (str(k) if k > 1 else ""))) is not None:
+        parts.append(param.bytes)
+        k += 1
+    return b"".join(parts)
 
 
 def _up_axis(screen: tuple[str, str] | None) -> int:

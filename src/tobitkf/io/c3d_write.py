@@ -12,24 +12,43 @@ joint names, a missing sample written with residual -1 (the C3D convention that
 channels. Labels must be printable ASCII without surrounding spaces (C3D labels are
 space-padded ASCII); anything else is refused with a ValueError.
 
+A smoothed sequence's provenance (``metadata["provenance"]``) goes into a parameter
+group of its own, ``TOBITKF``, which other C3D readers pass by: ``TOBITKF:PROVENANCE``
+is a char array holding the provenance's ASCII JSON in rows of at most 255 characters
+(a C3D dimension is one byte), joined in order to read it (the last row padded with
+spaces); JSON too long for one parameter (at most 32 KB) goes on in ``PROVENANCE2``,
+``PROVENANCE3``, ... :func:`tobitkf.io.c3d.read_c3d` reads it back.
+
 This module attaches the writer to the ``c3d`` format registered by
 :mod:`tobitkf.io.c3d`.
 """
 
 from __future__ import annotations
 
+import io
 import os
+import struct
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
+from tobitkf.io._json import provenance_text
 from tobitkf.io._marker_writer import first_frame, one_3d_sequence
-from tobitkf.io.c3d import _import_c3d
+from tobitkf.io.c3d import PROVENANCE_GROUP, PROVENANCE_PARAM, _import_c3d
 from tobitkf.io.registry import get_format, register_format, require_rate_grid
 from tobitkf.skeleton.sequence import SkeletonSequence
 
 __all__ = ["write_c3d"]
+
+#: the longest row of a C3D char array (its dimensions are one byte each)
+_ROW = 255
+#: rows per provenance parameter: a parameter's size is a 16-bit offset (< 32767 bytes)
+_ROWS = 120
+#: a C3D file's parameter section has at most 255 blocks of 512 bytes (the c3d package
+#: counts each group twice, so about 64 KB of parameters fit)
+_MAX_PARAMETER_BLOCKS = 255
 
 
 def _check_label(name: str) -> str:
@@ -94,9 +113,42 @@ def write_c3d(
     # the up axis, where C3D keeps it (POINT:Y_SCREEN, the axis up on the screen)
     up = seq.topology.up_axis
     writer.set_screen_axis("+Y" if up == 0 else "+X", "+" + "XYZ"[up])
-    with open(path, "wb") as fh, warnings.catch_warnings():
+    provenance = _add_provenance(writer, seq)
+    buf = io.BytesIO()  # written whole or not at all
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the library's notes on the empty analog group
-        writer.write(fh)
+        try:
+            writer.write(buf)
+        except struct.error:  # the parameter section's block count is one byte
+            if not provenance or writer.parameter_blocks() <= _MAX_PARAMETER_BLOCKS:
+                raise
+            raise ValueError(
+                f"cannot write the provenance ({provenance} characters of JSON) to C3D: "
+                f"with the labels the parameters need {writer.parameter_blocks()} blocks, "
+                f"the c3d package writes at most {_MAX_PARAMETER_BLOCKS}; use format='npz' "
+                "or 'csv'"
+            ) from None
+    Path(path).write_bytes(buf.getvalue())
+
+
+def _add_provenance(writer, seq: SkeletonSequence) -> int:
+    """The group ``TOBITKF`` with the provenance's JSON (module docstring), when the
+    sequence has a provenance; the JSON's length (0 without)."""
+    text = provenance_text([seq])
+    if text is None:
+        return 0
+    group = writer.add_group(
+        writer.numeric_key_next, PROVENANCE_GROUP, "tobitkf: how this file was smoothed"
+    )
+    width = min(_ROW, len(text))
+    step = width * _ROWS
+    for k, start in enumerate(range(0, len(text), step)):
+        part = text[start : start + step]
+        rows = -(-len(part) // width)
+        name = PROVENANCE_PARAM + (str(k + 1) if k else "")
+        desc = "tobitkf provenance: JSON, rows joined (then PROVENANCE2, 3, ...)"
+        group.add_str(name, desc, part.ljust(rows * width), width, rows)
+    return len(text)
 
 
 _spec = get_format("c3d")

@@ -22,7 +22,12 @@ path's suffix, ``likelihood`` = the confidence (1 where a position is given with
 one, 0 where a smoother filled it: no detection lies there, so DeepLabCut's ``pcutoff``
 and movement's confidence filter do not take it for a sure one; NaN where the position
 is missing), scorer ``tobitkf`` unless the input's is kept; each individual with its own
-body parts (the ``single`` individual of unique body parts keeps them).
+body parts (the ``single`` individual of unique body parts keeps them). In the ``.h5``
+a smoothed output's provenance (``metadata["provenance"]``; the individuals' shared one,
+else a list with each one's) is JSON text in HDF5 attributes of the table's group,
+``tobitkf_provenance`` (then ``tobitkf_provenance_2``, ... for JSON beyond 32,000
+characters: one HDF5 attribute holds at most 64 KB), which ``pandas.read_hdf`` passes
+by and :func:`read_deeplabcut` reads back; the ``.csv`` has no place for it.
 Needs pandas (and PyTables for ``.h5``): ``pip install 'tobitkf[pose]'``.
 """
 
@@ -36,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from tobitkf.io._json import provenance_from_text, provenance_text
 from tobitkf.io._pose import (
     check_alike,
     check_hdf5_reads,
@@ -64,6 +70,10 @@ __all__ = [
 #: the HDF5 key DeepLabCut writes its table under
 DLC_KEY = "df_with_missing"
 _LEVELS = ("scorer", "individuals", "bodyparts", "coords")
+#: the HDF5 attribute (of the table's group) holding the provenance's JSON
+PROVENANCE_ATTR = "tobitkf_provenance"
+#: characters of the JSON per attribute (an HDF5 attribute holds at most 64 KB)
+_ATTR_CHARS = 32000
 
 
 def _header_rows(path: Path) -> tuple[int, bool]:
@@ -85,8 +95,9 @@ def _header_rows(path: Path) -> tuple[int, bool]:
     return n, labelled
 
 
-def _read_table(path: Path, pd: Any) -> Any:
-    """The DataFrame of a DeepLabCut ``.h5`` (PyTables' HDF5 errors in one line)."""
+def _read_table(path: Path, pd: Any) -> tuple[Any, str | None]:
+    """The DataFrame of a DeepLabCut ``.h5`` and the provenance's JSON tobitkf wrote
+    beside it (None without; PyTables' HDF5 errors in one line)."""
     require("tables", "reading DeepLabCut .h5 files (pandas.read_hdf)")
     check_hdf5_reads(path, "reading DeepLabCut .h5 files")
     try:
@@ -99,7 +110,7 @@ def _read_table(path: Path, pd: Any) -> Any:
             key = "/" + DLC_KEY if "/" + DLC_KEY in keys else (keys[0] if keys else None)
             if key is None:
                 raise ReadError(path, None, "no table in the HDF5 file")
-            return store[key]
+            return store[key], _provenance_json(store.get_storer(key).attrs)
     except ReadError:
         raise
     except (OSError, ValueError, TypeError, KeyError, RuntimeError, AttributeError) as exc:
@@ -123,10 +134,22 @@ def _check_row_widths(path: Path, data: bytes, n_header: int) -> None:
             )  # fmt: skip
 
 
-def _read_frame(path: Path) -> Any:
+def _provenance_json(attrs: Any) -> str | None:
+    """The JSON of ``tobitkf_provenance``, ``tobitkf_provenance_2``, ... joined (None
+    without them)."""
+    parts, k = [], 1
+    while (part := getattr(attrs, PROVENANCE_ATTR + (f"_{k}" if k > 1 else ""), None)) is not None:
+        parts.append(part.decode("utf-8", "replace") if isinstance(part, bytes) else str(part))
+        k += 1
+    return "".join(parts) if parts else None
+
+
+def _read_frame(path: Path) -> tuple[Any, str | None]:
+    """The file's DataFrame and, for an ``.h5`` tobitkf wrote, its provenance's JSON."""
     pd = require("pandas", "reading DeepLabCut files")
+    provenance = None
     if is_hdf5(path):
-        df = _read_table(path, pd)
+        df, provenance = _read_table(path, pd)
     elif path.suffix.lower() in (".h5", ".hdf5"):  # named HDF5, is not: say so, not "CSV"
         raise ReadError(path, None, "not an HDF5 file (it lacks the HDF5 signature)")
     else:
@@ -141,7 +164,7 @@ def _read_frame(path: Path) -> Any:
             raise ReadError(path, None, f"not a DeepLabCut CSV ({exc})") from None
     if not isinstance(df, pd.DataFrame):
         raise ReadError(path, None, "expected a DataFrame in the file")
-    return df
+    return df, provenance
 
 
 def sequences_from_dlc_frame(
@@ -215,9 +238,15 @@ def read_deeplabcut(
 ) -> list[SkeletonSequence]:
     """Read a DeepLabCut ``.h5`` or ``.csv`` pose file (module docstring)."""
     p = Path(path)
-    return sequences_from_dlc_frame(
-        p, _read_frame(p), fps=fps, skeleton=skeleton, implausible=implausible
-    )
+    df, provenance = _read_frame(p)
+    seqs = sequences_from_dlc_frame(p, df, fps=fps, skeleton=skeleton, implausible=implausible)
+    if provenance is not None:
+        where = f"the HDF5 attribute {PROVENANCE_ATTR}"
+        provs = provenance_from_text(p, provenance, len(seqs), where)
+        for s, prov in zip(seqs, provs, strict=True):
+            if prov is not None:
+                s.metadata["provenance"] = prov
+    return seqs
 
 
 def dlc_frame(sequences: Sequence[SkeletonSequence], scorer: str | None = None) -> Any:
@@ -266,6 +295,14 @@ def write_deeplabcut(
     elif p.suffix.lower() in (".h5", ".hdf5"):
         require("tables", "writing DeepLabCut .h5 files (pandas.to_hdf)")
         df.to_hdf(p, key=DLC_KEY, format="table", mode="w")
+        provenance = provenance_text(sequences)
+        if provenance is not None:
+            pd = require("pandas", "writing DeepLabCut files")
+            with pd.HDFStore(p, mode="a") as store:
+                attrs = store.get_storer(DLC_KEY).attrs
+                for k, start in enumerate(range(0, len(provenance), _ATTR_CHARS)):
+                    name = PROVENANCE_ATTR + (f"_{k + 1}" if k else "")
+                    setattr(attrs, name, provenance[start : start + _ATTR_CHARS])
     else:
         raise ValueError(f"a DeepLabCut file ends in .h5 or .csv, not {p.name!r}")
 

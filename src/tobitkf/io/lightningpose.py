@@ -35,7 +35,7 @@ def read_lightningpose(
     likelihood)."""
     p = Path(path)
     return sequences_from_dlc_frame(
-        p, _read_frame(p), fmt="lightningpose", fps=fps, skeleton=skeleton,
+        p, _read_frame(p)[0], fmt="lightningpose", fps=fps, skeleton=skeleton,
         implausible=implausible,
     )  # fmt: skip
 

@@ -13,9 +13,11 @@ its name; positions in pixels for 2-D, unknown units for 3-D unless the dataset 
 ``units``); :func:`to_movement` builds such a dataset (loadable by movement, e.g.
 ``movement.io.save_poses.to_dlc_file``) and records the units, the bones and the
 left/right pairs in the attributes ``tobitkf_units``, ``tobitkf_parents`` and
-``tobitkf_symmetry``, and a smoothed sequence's posterior standard deviation and sample
+``tobitkf_symmetry``, a smoothed sequence's posterior standard deviation and sample
 states in the variables ``tobitkf_std`` and ``tobitkf_sample_state`` (dims ``(time,
-keypoints, individuals)``; movement's own functions pass them by), so that a round trip
+keypoints, individuals)``; movement's own functions pass them by), and its provenance
+(``metadata["provenance"]``) as JSON text in the attribute ``tobitkf_provenance`` (the
+provenance the individuals share, else a list with each one's), so that a round trip
 loses nothing.
 The ``.nc`` files are that dataset written by ``Dataset.to_netcdf`` (movement saves and
 loads its datasets this way); :func:`read_movement` / :func:`write_movement` read and
@@ -32,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from tobitkf.core.version import __version__
+from tobitkf.io._json import provenance_from_text, provenance_text
 from tobitkf.io._pose import (
     check_hdf5_opens,
     frame_numbers,
@@ -113,6 +116,13 @@ def from_movement(
             seqs = [s.replace(topology=topo) for s in seqs]
         except ValueError:
             pass  # not a tree: keep the keypoints without bones
+    if attrs.get("tobitkf_provenance") is not None:
+        provs = provenance_from_text(
+            path, attrs["tobitkf_provenance"], len(seqs), "the attribute tobitkf_provenance"
+        )
+        for s, prov in zip(seqs, provs, strict=True):
+            if prov is not None:
+                s.metadata["provenance"] = prov
     return _smoothed_fields(ds, seqs)
 
 
@@ -171,6 +181,9 @@ def to_movement(sequences: SkeletonSequence | Sequence[SkeletonSequence]) -> Any
     src = first.metadata.get("source")
     if src:
         attrs["source_file"] = str(src)
+    provenance = provenance_text(seqs)
+    if provenance is not None:
+        attrs["tobitkf_provenance"] = provenance
     per_sample = ("time", "keypoints", "individuals")
     variables: dict[str, Any] = {
         "position": (
