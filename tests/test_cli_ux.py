@@ -12,6 +12,7 @@ import shutil
 import stat
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from rich.text import Text  # noqa: E402
 from test_cli import _recording  # noqa: E402
 from tobitkf.app.commands import _common as commands  # noqa: E402
 from tobitkf.app.commands import app  # noqa: E402
-from tobitkf.io import save  # noqa: E402
+from tobitkf.io import load, save  # noqa: E402
 
 ROOT = os.geteuid() == 0  # permissions do not apply to root
 
@@ -217,6 +218,44 @@ def test_a_recording_named_like_an_output_in_a_format_tobitkf_never_writes_is_sm
     outputs = sorted(p.name for p in (tmp_path / "out").glob("*.csv"))
     assert outputs == ["dance.kinect.robust.csv", "walk.sgf.robust.csv"]
     assert "earlier run" not in " ".join(res.output.split())
+
+
+def _plain_c3d(path: Path) -> None:
+    """A recording as a plain C3D writer (the c3d package) writes it: no TOBITKF group."""
+    c3d = pytest.importorskip("c3d")
+    rec = _recording()
+    w = c3d.Writer(point_rate=30.0, point_scale=-1.0, point_units="m")
+    no_analog = np.zeros((0, 0), dtype=np.float32)
+    pts = np.zeros((rec.n_frames, rec.n_joints, 5), dtype=np.float32)
+    pts[..., :3] = rec.positions
+    w.add_frames([(frame, no_analog) for frame in pts])
+    w.set_point_labels(list(rec.joint_names))
+    with open(path, "wb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the library's note on the empty analog group
+        w.write(fh)
+
+
+def test_a_c3d_recording_named_like_an_output_is_smoothed_and_outputs_are_passed_over(tmp_path):
+    """C3D keeps the provenance: ``subject01.kinect.c3d`` from a plain C3D writer is a
+    recording ('kinect' is a method name); tobitkf's own ``x.kinect.c3d`` (provenance:
+    kinect) is an earlier output, passed over when smoothing the folder in place."""
+    src = tmp_path / "in"
+    src.mkdir()
+    _plain_c3d(src / "subject01.kinect.c3d")
+    _plain_c3d(src / "x.c3d")
+    for run in range(2):
+        res = _invoke("smooth", src, "-o", src, "-m", "kinect", "-f", "c3d")
+        assert res.exit_code == 0, res.output
+        text = " ".join(res.output.split())
+        assert ("earlier run" in text) == (run == 1), text
+    assert sorted(p.name for p in src.iterdir()) == [
+        "subject01.kinect.c3d",
+        "subject01.kinect.kinect.c3d",
+        "tobitkf-manifest.jsonl",
+        "x.c3d",
+        "x.kinect.c3d",
+    ]
+    assert load(src / "x.kinect.c3d")[0].metadata["provenance"]["method"] == "kinect"
 
 
 def test_outputs_get_the_umask_mode(tmp_path):

@@ -413,6 +413,27 @@ def test_long_provenance_in_deeplabcut_h5_and_movement_nc(tmp_path):
     assert pd.read_hdf(tmp_path / "long.h5").shape[0] == seqs[0].n_frames
 
 
+@pytest.mark.parametrize("fmt, suffix", [("movement", ".nc"), ("deeplabcut", ".h5")])
+def test_a_pose_file_named_like_an_output_is_one_only_by_its_provenance(tmp_path, fmt, suffix):
+    """``mice.kinect.nc`` / ``.h5`` written by movement is a recording ('kinect' is a
+    method name); tobitkf's output is an earlier output of the method its provenance
+    names, whatever its name says."""
+    from tobitkf.app.batch import smoothing_output_method
+
+    ds = _movement_ds(fps=30)[0]
+    theirs = tmp_path / f"mice.kinect{suffix}"
+    if fmt == "movement":
+        ds.to_netcdf(theirs, engine="h5netcdf")
+    else:
+        save_poses.to_dlc_file(ds, theirs, split_individuals=False)
+    assert smoothing_output_method(theirs) is None
+    ours = tmp_path / f"mice.kf{suffix}"
+    tk.save(tk.smooth(tk.from_movement(ds), method="kf"), ours, format=fmt)
+    assert smoothing_output_method(ours) == "kf"
+    renamed = ours.rename(tmp_path / f"mice.sgf{suffix}")
+    assert smoothing_output_method(renamed) is None
+
+
 def test_pose_provenance_that_is_not_json_is_a_read_error(tmp_path):
     ds = _movement_ds(fps=30)[0]
     bad = ds.assign_attrs(tobitkf_provenance="{oops")

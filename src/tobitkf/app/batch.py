@@ -25,6 +25,9 @@ import numpy as np
 
 #: compound extensions stripped from input names before naming outputs
 _COMPOUND = (".txt.gz", ".csv.gz", ".tsv.gz")
+#: endings of the outputs whose file holds the provenance (NPZ, C3D, movement's netCDF,
+#: DeepLabCut's HDF5); a CSV's is in its sidecar
+_KEEPS_PROVENANCE = (".npz", ".c3d", ".nc", ".h5")
 
 
 @dataclass(frozen=True)
@@ -184,9 +187,11 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
     """The method that wrote ``path``, when it is a tobitkf smoothing output; else None.
 
     The rule: the name is ``<name>.<method><ext>`` with a registered method, and the file's
-    provenance (the CSV's sidecar, an NPZ's metadata) names that method. A format that
-    keeps no provenance (NTU) is recognised by its name alone, and only when tobitkf
-    writes files of its extension: a recording named ``dance.kinect.bvh`` is an input.
+    provenance (the CSV's sidecar; in the file of an NPZ, C3D, movement ``.nc`` or
+    DeepLabCut ``.h5``) names that method: a recording ``subject01.kinect.c3d`` is an
+    input. A format that keeps no provenance (NTU, TRC, LightningPose's CSV) is recognised
+    by its name alone, and only when tobitkf writes files of its extension: a recording
+    named ``dance.kinect.bvh`` is an input.
     """
     from tobitkf.io import output_extension, writable_formats
     from tobitkf.smoothing.api import method_names
@@ -208,7 +213,7 @@ def smoothing_output_method(path: str | os.PathLike[str]) -> str | None:
         if prov is None:  # no sidecar: a CSV format that keeps no provenance (LightningPose)?
             return method if _provenance_free_csv(p) else None
         return method if prov.get("method") == method else None
-    if lower.endswith(".npz"):
+    if lower.endswith(_KEEPS_PROVENANCE):
         from tobitkf.io import load
 
         try:
