@@ -205,3 +205,31 @@ def test_help_imports_no_numerics():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.splitlines()[-1] == "[]"
+
+
+def test_a_read_only_installation_caches_in_a_temporary_folder(tmp_path):
+    # site-packages read-only and no writable home: numba found no place for its cache
+    # and every kernel failed at import ("no locator available"). numba is told here to
+    # look only where NUMBA_CACHE_DIR points, which is unset: the same situation
+    numba_config = pytest.importorskip("numba").config
+    if not hasattr(numba_config, "CACHE_LOCATOR_CLASSES"):
+        pytest.skip("this numba cannot be told where to look for a cache (an older numba)")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    env.update(
+        NUMBA_CACHE_LOCATOR_CLASSES="UserProvidedCacheLocator",
+        TMPDIR=str(tmp_path),
+        PYTHONDONTWRITEBYTECODE="1",
+    )
+    code = (
+        "import numpy as np, tobitkf as tk\n"
+        "y = np.cumsum(np.random.default_rng(0).normal(size=(40, 25, 3)) * 0.01, 0)\n"
+        "out = tk.smooth(tk.SkeletonSequence(y, 'kinect_v2', fps=30), 'one_euro')\n"
+        "print(np.isfinite(out.positions).all())\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip() == "True"
+    assert "NUMBA_CACHE_DIR" in run.stderr and str(tmp_path) in run.stderr
+    cached = list(tmp_path.glob("tobitkf-numba-*/**/*.nbi"))
+    assert cached, "nothing was cached in the fallback folder"

@@ -15,7 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from tobitkf.smoothing._numba_cache import njit
 
 _NOT_TRACKED = 0
 _INFERRED = 1

@@ -30,7 +30,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from tobitkf.smoothing._numba_cache import njit
 
 _jit = njit(cache=True, nogil=True, error_model="numpy")
 

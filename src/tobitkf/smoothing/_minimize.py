@@ -48,9 +48,9 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from tobitkf.smoothing._noise_kernels import profile_nll_grad
+from tobitkf.smoothing._numba_cache import njit
 
 __all__ = [
     "CONVERGED_F",

@@ -26,8 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from tobitkf.smoothing._numba_cache import njit
 from tobitkf.smoothing._robust_kernels import ou_table
 
 _jit = njit(cache=True, nogil=True)

@@ -6,7 +6,8 @@ when the window holds none). In NumPy it sorted a copy of every window."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from tobitkf.smoothing._numba_cache import njit
 
 
 @njit(cache=True, nogil=True)

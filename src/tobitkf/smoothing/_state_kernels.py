@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from tobitkf.skeleton.sequence import SampleState, TrackingState
+from tobitkf.smoothing._numba_cache import njit
 
 # the codes as plain ints (frozen into the kernels), from the enums themselves
 _MEASURED = int(SampleState.MEASURED)

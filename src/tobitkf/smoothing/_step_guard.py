@@ -25,7 +25,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from tobitkf.smoothing._numba_cache import njit
 
 
 def new_state(B: int, J: int, D: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from tobitkf.smoothing._numba_cache import njit
 from tobitkf.smoothing._scale_kernels import insert_sorted, middle
 
 
