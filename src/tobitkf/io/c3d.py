@@ -71,12 +71,12 @@ _KIND_TEXT = {
 }
 
 
-def _import_c3d():
+def _import_c3d(doing: str = "reading"):
     try:
         import c3d
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "reading C3D files needs the 'c3d' package: pip install tobitkf[c3d] "
+            f"{doing} C3D files needs the 'c3d' package: pip install 'tobitkf[c3d]' "
             "(or pip install c3d)"
         ) from exc
     return c3d

@@ -94,7 +94,7 @@ def write_c3d(
         if k[-1] > 0:
             rate = float(1.0 / np.polyfit(k, t, 1)[0])
     require_rate_grid(seq, rate, "C3D")
-    c3d = _import_c3d()
+    c3d = _import_c3d("writing")
     pos = seq.positions * scale
     missing = np.isnan(pos).any(axis=-1)
     writer = c3d.Writer(point_rate=rate, point_scale=-1.0, point_units=units)
