@@ -233,3 +233,22 @@ def test_a_read_only_installation_caches_in_a_temporary_folder(tmp_path):
     assert "NUMBA_CACHE_DIR" in run.stderr and str(tmp_path) in run.stderr
     cached = list(tmp_path.glob("tobitkf-numba-*/**/*.nbi"))
     assert cached, "nothing was cached in the fallback folder"
+
+
+@pytest.mark.parametrize("command", ["evaluate", "report", "benchmark", "demo"])
+def test_commands_that_run_methods_say_when_kernels_compile(command):
+    # only smooth said why a first run waits; demo sat silent for two minutes on a fresh
+    # installation. The command runs inside _noticing_compiles, and a kernel compiled
+    # inside it (two fresh functions here) gets the notice, once
+    from numba import njit
+
+    from tobitkf.app.commands import _common, app
+
+    callback = app.commands[command].callback
+    assert callback.__code__ is _common._noticing_compiles(len).__code__  # the wrapper
+    fresh = [njit(lambda x, k=k: x + k) for k in (1, 2)]  # compiled on their first call
+    said = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_common.err_console, "print", lambda *a, **k: said.append(str(a[0])))
+        _common._noticing_compiles(lambda: [f(1.0) for f in fresh])()
+    assert len(said) == 1 and said[0].startswith("compiling the smoothers' kernels")

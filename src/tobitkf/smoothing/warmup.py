@@ -28,8 +28,9 @@ is warmed on a still, clean recording too.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any
 
@@ -160,6 +161,16 @@ def warm(method: str, on_compile: Callable[[], Any] | None = None) -> float:
     with event.install_listener("numba:compile", watch.listener()):
         _run_tiny(method)
     return watch.seconds
+
+
+@contextmanager
+def on_first_compile(callback: Callable[[], Any]) -> Iterator[None]:
+    """Call ``callback`` once, when the first kernel starts compiling inside the block
+    (a command that runs methods says why the first run on a machine waits)."""
+    from numba.core import event
+
+    with event.install_listener("numba:compile", _Watch(callback).listener()):
+        yield
 
 
 def _warm_in_child(method: str) -> tuple[str, float]:

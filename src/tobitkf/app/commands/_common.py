@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import tempfile
@@ -228,6 +229,34 @@ def _writable_file(path: str | Path, what: str) -> Path:
         _fail(f"cannot write {what} {target}: it is a folder")
     _writable_folder(target.parent, what)
     return target
+
+
+@contextmanager
+def _compile_notice(what: str = "the smoothers' kernels"):
+    """Say so once when kernels start compiling inside the block (a fresh machine, or
+    after an upgrade: minutes of silence otherwise)."""
+    from tobitkf.smoothing.warmup import on_first_compile
+
+    def notice() -> None:
+        err_console.print(
+            f"compiling {what} for this machine: seconds to a few minutes, first run only "
+            "(they are cached for later runs; `tobitkf warmup` does it ahead)"
+        )
+
+    with on_first_compile(notice):
+        yield
+
+
+def _noticing_compiles(command):
+    """A command that runs methods, with :func:`_compile_notice` around it (the
+    decorator nearest to ``def``, under click's)."""
+
+    @functools.wraps(command)
+    def run(*args, **kwargs):
+        with _compile_notice():
+            return command(*args, **kwargs)
+
+    return run
 
 
 def _need_matplotlib(what: str) -> None:

@@ -6,6 +6,7 @@ import click
 
 from tobitkf.app.commands._common import (
     _need_matplotlib,
+    _noticing_compiles,
     _writable_folder,
     app,
     console,
@@ -25,6 +26,7 @@ from tobitkf.app.commands._common import (
 )
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--no-gif", is_flag=True, help="Leave out the skeleton animation.")
+@_noticing_compiles
 def demo(outdir, seed, no_gif):
     """The main job end to end on the built-in synthetic recording (no files needed)."""
     from tobitkf.app.demo import run_demo

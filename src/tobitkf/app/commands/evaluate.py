@@ -18,6 +18,7 @@ from tobitkf.app.commands._common import (
     _input_format_option,
     _load_one,
     _need_matplotlib,
+    _noticing_compiles,
     _print_table,
     _progress,
     _ticking,
@@ -134,6 +135,7 @@ def _for_units(specs: list[Any], track: Any, path: str) -> tuple[list[Any], str]
     "Length unit of each TRACK that states none (a CSV without its sidecar, read as "
     "metres in 3-D; a .npy array), e.g. mm; files stating their own keep it."
 )
+@_noticing_compiles
 def evaluate(
     tracks,
     truths,
@@ -283,6 +285,7 @@ def _scaled(value: Any, factor: float) -> Any:
 )
 @_topology_option("Skeleton of TRACK if it names none, e.g. h36m17 or coco17.")
 @_units_option("Length unit of TRACK if it states none (a CSV without its sidecar), e.g. mm.")
+@_noticing_compiles
 def report(
     track, truth, output, methods, pairs, no_gif, input_format, truth_format, fps, topology, units
 ):
@@ -395,6 +398,7 @@ def _print_scores(table: Any, where: str) -> None:
     help="Frame rate of the recording: the motion is generated (or the BVH resampled) "
     "at it, and failures keep their duration in seconds.",
 )
+@_noticing_compiles
 def benchmark(seed, seeds, motion, source, duration, methods, as_json, as_markdown, kind, fps):
     """Every method on a corrupted synthetic recording with known truth (RMSE by glitch)."""
     if as_json and as_markdown:
