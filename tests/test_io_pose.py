@@ -505,3 +505,34 @@ def test_missing_optional_package_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "sleap_io", None)
     with pytest.raises(ImportError, match=r"pip install 'tobitkf\[slp\]'"):
         tk.load(path, format="slp")
+
+
+def test_without_h5py_a_sleap_analysis_file_is_not_taken_for_deeplabcut(tmp_path, monkeypatch):
+    # the DeepLabCut sniffer claimed every .h5 it could not open, so a SLEAP analysis
+    # file asked for pandas, then tables, then h5py, each in turn
+    import sys
+
+    from tobitkf.io import detect_format
+
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    for name, fmt in (("x.analysis.h5", "sleap_analysis"), ("mouseDLC_resnet50.h5", "deeplabcut")):
+        path = tmp_path / name
+        path.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
+        assert detect_format(path) == fmt
+    with pytest.raises(ImportError, match="h5py"):
+        tk.load(tmp_path / "x.analysis.h5")
+
+
+def test_a_netcdf4_file_without_h5netcdf_names_the_package(tmp_path, monkeypatch):
+    # "(or pip install xarray)" was followed, and the valid file was then called "not a
+    # movement poses netCDF file": the netCDF-4 (HDF5) library was what was missing
+    import sys
+
+    pytest.importorskip("h5netcdf")
+    y = np.random.default_rng(0).normal(size=(10, 3, 2))
+    seq = tk.SkeletonSequence(y, tk.Topology.from_names(["a", "b", "c"]), fps=30, units="px")
+    tk.save([seq], tmp_path / "m.nc", format="movement")
+    monkeypatch.setitem(sys.modules, "h5netcdf", None)
+    monkeypatch.setitem(sys.modules, "netCDF4", None)
+    with pytest.raises(ImportError, match=r"h5netcdf.*pip install 'tobitkf\[pose\]'"):
+        tk.load(tmp_path / "m.nc")

@@ -324,7 +324,9 @@ def sniff_deeplabcut(path: Path, head: str) -> int:
         try:
             import h5py
         except ImportError:
-            return 5 if path.suffix.lower() == ".h5" else 0  # the reader says what to install
+            # the reader says what to install; SLEAP's analysis files are its (by name)
+            name = path.name.lower()
+            return 5 if name.endswith(".h5") and not name.endswith(".analysis.h5") else 0
         try:
             with h5py.File(path, "r") as f:
                 if DLC_KEY in f:

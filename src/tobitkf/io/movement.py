@@ -26,6 +26,7 @@ write them (xarray and h5netcdf: ``pip install 'tobitkf[pose]'``).
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -217,6 +218,9 @@ def read_movement(
     p = Path(path)
     xr = require("xarray", "reading movement netCDF files")
     engine = _engine_for(p)
+    if engine is None and is_hdf5(p) and importlib.util.find_spec("netCDF4") is None:
+        # a netCDF-4 file and no library for it: xarray would call it no netCDF at all
+        require("h5netcdf", "reading movement netCDF-4 files")
     if engine == "h5netcdf" and is_hdf5(p):  # h5py reads it anyway: no library clash
         check_hdf5_opens(p, "reading movement netCDF files")
     try:
