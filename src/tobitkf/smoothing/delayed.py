@@ -403,7 +403,8 @@ class DelayedSmoother:
         Keyed by body id (``positions`` a mapping ``{body_id: (J, D)}``, and
         ``tracking_state`` and ``confidence`` mappings of the same ids, or None): returns
         ``{body_id: (J, D)}`` for the bodies that were in the stream at the frame
-        returned (``std`` and ``sample_state`` are such mappings too). Each body is
+        returned, an empty mapping while no frame is returned yet (``std`` and
+        ``sample_state`` are such mappings too). Each body is
         smoothed alone, as a stream of its own from its first frame, missing in the
         frames it is absent from; a body is forgotten once its last frame has been
         returned (absent for more than ``delay``), so nothing of it is lost, and an id
