@@ -869,3 +869,7 @@ def test_an_outdir_named_like_a_file_is_a_usage_error(tmp_path, name):
     res = _invoke("smooth", tmp_path / "a.csv", "-o", tmp_path / name, "-m", "kf")
     assert res.exit_code == 0, res.output
     assert (tmp_path / name / "a.kf.csv").is_file()
+    # a new folder said to be one (a trailing /) is a folder too
+    res = _invoke("smooth", tmp_path / "a.csv", "-o", f"{tmp_path}/new.{ext}/", "-m", "kf")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / f"new.{ext}" / "a.kf.csv").is_file()

@@ -210,6 +210,7 @@ class Manifest:
         if self._remote is not None and self._open:
             self._open = False
             self._rewrite_remote()
+        _LAST_READ.clear()  # the run is over: its parse is not kept for the process's life
         if self._file is None:
             return
         try:

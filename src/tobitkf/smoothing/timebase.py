@@ -87,7 +87,7 @@ def check_time_unit(step: float, fps: float | None) -> None:
             rate = (
                 f"the frame rate of {fps:g} Hz says {1.0 / fps:.4g} s"
                 if fps
-                else (f"a frame every {step:.4g} s is no tracking rate")
+                else f"a frame every {step:.4g} s is no tracking rate"
             )
             raise ValueError(
                 f"the timestamps are {step:.4g} apart (median step) and {rate}: they look "

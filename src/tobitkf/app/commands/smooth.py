@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -38,9 +39,9 @@ def _not_a_file_name(outdir: str) -> None:
     would then hold ``<input>.robust.csv``): -o is the folder, -f the format."""
     from tobitkf.io import output_extension, writable_formats
 
-    name = outdir.rstrip("/").rsplit("/", 1)[-1].lower()
-    if "://" not in outdir and Path(outdir).is_dir():
-        return  # an existing folder, whatever its name
+    if outdir.endswith(("/", os.sep)) or ("://" not in outdir and Path(outdir).is_dir()):
+        return  # a folder, said so or existing, whatever its name
+    name = outdir.rsplit("/", 1)[-1].lower()
     for fmt in writable_formats():
         ext = output_extension(fmt)
         if name.endswith(ext) and len(name) > len(ext):
