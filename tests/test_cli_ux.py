@@ -873,3 +873,21 @@ def test_an_outdir_named_like_a_file_is_a_usage_error(tmp_path, name):
     res = _invoke("smooth", tmp_path / "a.csv", "-o", f"{tmp_path}/new.{ext}/", "-m", "kf")
     assert res.exit_code == 0, res.output
     assert (tmp_path / f"new.{ext}" / "a.kf.csv").is_file()
+
+
+def test_a_missing_writer_package_fails_once_before_any_file(tmp_path, monkeypatch):
+    # each file failed with "reading C3D files needs ..." after being read and smoothed,
+    # and the output folder and a manifest were made
+    import sys
+
+    seq = _recording(T=40)
+    for name in ("a", "b"):
+        save([seq], tmp_path / f"{name}.csv", format="csv")
+    monkeypatch.setitem(sys.modules, "c3d", None)
+    out = tmp_path / "out"
+    res = _invoke("smooth", tmp_path / "a.csv", tmp_path / "b.csv", "-o", out, "-f", "c3d")
+    assert res.exit_code == 1, res.output
+    text = " ".join(res.output.split())
+    assert text.count("writing C3D files needs the 'c3d' package") == 1
+    assert "pip install 'tobitkf[c3d]'" in text
+    assert not out.exists()

@@ -53,6 +53,27 @@ def _not_a_file_name(outdir: str) -> None:
             )
 
 
+def _writer_installed(output_format: str) -> None:
+    """Fail once, before any file, when the output format's writer needs a package that
+    is not installed (each file failed with it, after reading and smoothing): a tiny
+    recording is written to a temporary folder, and only an ImportError counts."""
+    if output_format == "auto":  # CSV or NTU: no optional package
+        return
+    import tempfile
+
+    from tobitkf.io import output_extension, save
+    from tobitkf.smoothing.warmup import tiny_recording
+
+    with tempfile.TemporaryDirectory() as folder:
+        probe = Path(folder) / f"probe{output_extension(output_format)}"
+        try:
+            save([tiny_recording()], probe, format=output_format)
+        except ImportError as exc:
+            _fail(f"-f {output_format}: {exc}")
+        except Exception:  # a tiny recording this format cannot hold: no matter
+            pass
+
+
 # --------------------------------------------------------------------------- smooth
 @app.command()
 @click.argument("inputs", nargs=-1, required=True, type=_InputPath(exists=True))
@@ -242,6 +263,7 @@ def smooth(
         kwargs["step_guard"] = True  # passed to tobitkf.smooth with the method's parameters
     _check_cluster_options(cluster, workers, jobs)
     _not_a_file_name(outdir)
+    _writer_installed(output_format)
     if "://" not in outdir:
         _writable_folder(outdir, "the outputs")  # once, before any file is read
     try:
