@@ -618,3 +618,26 @@ def test_limits_beyond_1e154_sd_tkfc_is_the_kf(diagonal):
     assert np.all(tc.p_uncensored == 1.0)
     np.testing.assert_allclose(tc.means, kf.means, rtol=1e-15, atol=0)
     np.testing.assert_allclose(tc.covs, kf.covs, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("variant", ["standard", "corrected"])
+@pytest.mark.parametrize("r", [1e-300, 1e-320, 1e-6])
+def test_a_certainly_censored_component_is_dropped_on_the_general_path(variant, r):
+    """Correlated states, the first measured component certainly censored (its
+    prediction 5 far beyond the limit ±1 in sd of R): it carries no information, and the
+    filter equals a Kalman filter that measures the second component alone. With R =
+    1e-300 the general path gave NaN (its variance's inverse overflowed, times a zero
+    innovation)."""
+    P0 = np.array([[1.0, 0.6], [0.6, 1.0]])
+    kw = dict(A=np.eye(2), Q=0.1 * P0, x0=[5.0, 0.0], P0=P0)
+    both = LinearGaussian(H=np.eye(2), R=np.diag([r, r]), **kw)
+    ys = np.array([[1.0, 0.2], [1.0, 0.3], [1.0, -0.1]])
+    res = tobit_filter(both, ys, -1.0, 1.0, variant=variant, diagonal=False)
+    if variant == "corrected":  # probabilities from S = HPH + R: not certain there
+        assert np.all(np.isfinite(res.means)) and np.all(np.isfinite(res.covs))
+        return
+    assert np.all(res.p_uncensored[:, 0] == 0.0)
+    one = LinearGaussian(H=np.array([[0.0, 1.0]]), R=np.array([[r]]), **kw)
+    kf = kalman_filter(one, ys[:, 1:])
+    np.testing.assert_allclose(res.means, kf.means, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(res.covs, kf.covs, rtol=1e-9, atol=1e-15)

@@ -167,9 +167,25 @@ def tkf_update(
         Pyy = HPH * Pu[..., :, None] * Pu[..., None, :]
         idx = np.arange(Pyy.shape[-1])
         Pyy[..., idx, idx] += floor
+        Pyy, e = _certainly_censored(Pyy, e, Pu)
         x, P, K, _ = gain_update_general(xp, Pp, Pxy, Pyy, e, obs, full)
     ll = sum_last(censored_logpdf(y, m, r, lower, upper))
     return UpdateOut(x, P, ll, Pa, Pu, Pb, _clipped_flag(y, lower, upper), K)
+
+
+def _certainly_censored(Pyy: Array, e: Array, Pu: Array) -> tuple[Array, Array]:
+    """General path: a component certainly censored (P_un = 0) is its limit, a constant:
+    no covariance with the state (its Pxy column is 0) nor with the other components,
+    and no innovation. Its row and column of Pyy are those of the identity and its
+    innovation 0, the exact limit; left as computed, a variance that underflowed to 0 or
+    a subnormal made Pyy singular, or its inverse infinite times a zero innovation (NaN)."""
+    dead = Pu == 0.0
+    if not np.any(dead):
+        return Pyy, e
+    Pyy = np.where(dead[..., :, None] | dead[..., None, :], 0.0, Pyy)
+    idx = np.arange(Pyy.shape[-1])
+    Pyy[..., idx, idx] = np.where(dead, 1.0, Pyy[..., idx, idx])
+    return Pyy, np.where(dead, 0.0, e)
 
 
 # --------------------------------------------------------------------------------------
@@ -221,6 +237,7 @@ def tkfc_update(
         idx = np.arange(Pyy.shape[-1])
         Pyy[..., idx, idx] += EPS_CENSORED * s2 * (Pa + Pb)
         e = y - cm.mean
+        Pyy, e = _certainly_censored(Pyy, e, Pu)
         x, P, K, _ = gain_update_general(xp, Pp, Pxy, Pyy, e, obs, full)
     ll = sum_last(censored_logpdf(y, m, s2, lower, upper))
     return UpdateOut(x, P, ll, Pa, Pu, Pb, _clipped_flag(y, lower, upper), K)
