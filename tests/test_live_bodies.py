@@ -110,3 +110,24 @@ def test_keyed_stream_errors_leave_it_unchanged():
     plain.update(a[0])
     with pytest.raises(ValueError, match="not keyed by body id"):
         plain.update({1: a[1]})
+
+
+def test_a_keyed_stream_says_which_joints_were_clipped_per_body():
+    """``clipped`` was None on a stream keyed by id (an array stream gave (J,)): now
+    ``{body_id: (J,)}``, each body's flags those of a stream of it alone."""
+    rng = np.random.default_rng(0)
+    y = np.clip(np.cumsum(rng.normal(scale=0.05, size=(40, 25, 3)), axis=0), -0.3, 0.3)
+    kw = {"fps": 30, "lower": -0.3, "upper": 0.3}  # a sensor clipped there
+    keyed = tk.LiveSmoother("kinect_v2", "tkf", **kw)
+    alone = [tk.LiveSmoother("kinect_v2", "tkf", **kw) for _ in range(2)]
+    seen = 0
+    for frame in y:
+        keyed.update({4: frame, 9: -frame})
+        for s, sign in zip(alone, (1.0, -1.0), strict=True):
+            s.update(sign * frame)
+        assert set(keyed.clipped) == {4, 9}
+        np.testing.assert_array_equal(keyed.clipped[4], alone[0].clipped)
+        np.testing.assert_array_equal(keyed.clipped[9], alone[1].clipped)
+        seen += int(alone[0].clipped.sum())
+    assert seen > 0  # the limits clip some samples
+    assert tk.LiveSmoother("kinect_v2", fps=30).clipped is None

@@ -633,8 +633,22 @@ class LiveSmoother:
         return v if v is None or not self._single else v[0]
 
     @property
-    def clipped(self) -> NDArray[np.bool_] | None:
-        """Which joints' last measurements were clipped (censoring methods), else None."""
+    def clipped(self) -> Any:
+        """Which joints' last measurements were clipped (censoring methods), shaped as
+        :attr:`std` (``{body_id: (J,)}`` for a keyed stream), else None."""
+        if self._bodies is not None:
+            out = {}
+            for b in self._keys or ():
+                body = self._bodies.get(b)
+                if body is None:
+                    continue
+                group = body.group
+                stepper = group.gates.stepper if group.gates is not None else group.stepper
+                flags = getattr(stepper, "clipped", None)
+                if flags is None:
+                    return None  # the method clips nothing
+                out[b] = np.asarray(flags)[body.slot]
+            return out or None
         clipped = getattr(self._stepper, "clipped", None)
         return clipped[0] if clipped is not None and self._single else clipped
 
