@@ -72,3 +72,13 @@ def test_a_stream_is_timed_by_stamps_at_every_frame_or_at_none(first):
     assert live.n_frames == 1
     live.update(frames[1], timestamp=None if first is None else 5.1)
     assert live.n_frames == 2
+
+
+def test_messages_say_what_to_give():
+    # float tracking states said "found []"; centimetres did not name LiveSmoother's units
+    live = tk.LiveSmoother("kinect_v2", fps=30)
+    frame = np.random.default_rng(0).normal(scale=0.3, size=(25, 3))
+    with pytest.raises(ValueError, match=r"found them as float64 \(give tracking_state.astype"):
+        live.update(frame, tracking_state=np.full(25, 2.0))
+    with pytest.raises(ValueError, match=r"LiveSmoother\(\.\.\., units='mm'\) for a stream"):
+        live.update(frame * 100.0)

@@ -195,7 +195,8 @@ def check_body_scale(ys: NDArray[np.floating], metres: bool) -> NDArray[np.float
         f"the positions are taken as metres, but {body} {r:.3g} m from their centre on "
         f"average, where a person's lie about {TYPICAL_BODY_RADIUS_M} m: {_looks_like(r)}. "
         "The methods' speeds, noise and limits are physical, so declare the unit the data "
-        "are in: SkeletonSequence(..., units='mm') or seq.replace(units='mm'); --units mm of "
+        "are in: SkeletonSequence(..., units='mm') or seq.replace(units='mm'); "
+        "LiveSmoother(..., units='mm') for a stream; --units mm of "
         "tobitkf smooth / evaluate / report for a file that states none (a CSV without its "
         "sidecar, an array); units=None (unknown) takes the gates from the recording itself"
     )

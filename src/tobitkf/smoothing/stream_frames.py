@@ -64,9 +64,14 @@ def check_states(tracking_state: ArrayLike | None, shape: tuple[int, ...]) -> An
     if raw.shape != shape:
         raise ValueError(f"tracking_state: expected shape {shape}, found {raw.shape}")
     if raw.dtype.kind not in "iu" or not _known(raw).all():
+        odd = raw.ravel()[~np.isin(raw.ravel(), STATES)][:3].tolist()
         raise ValueError(
             "tracking_state: expected integers 0 (not tracked), 1 (inferred) or "
-            f"2 (tracked), found {raw.ravel()[~np.isin(raw.ravel(), STATES)][:3].tolist()}"
+            + (
+                f"2 (tracked), found {odd}"
+                if odd
+                else f"2 (tracked), found them as {raw.dtype} (give tracking_state.astype(int))"
+            )
             if raw.dtype.kind in "iuf"
             else f"tracking_state: expected integers 0, 1 or 2, found dtype {raw.dtype}"
         )
