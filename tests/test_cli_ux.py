@@ -891,3 +891,17 @@ def test_a_missing_writer_package_fails_once_before_any_file(tmp_path, monkeypat
     assert text.count("writing C3D files needs the 'c3d' package") == 1
     assert "pip install 'tobitkf[c3d]'" in text
     assert not out.exists()
+
+
+def test_the_demo_without_matplotlib_writes_the_recordings_and_the_table(tmp_path, monkeypatch):
+    # with the cli extra alone the demo stopped at "needs matplotlib": the recordings and
+    # the table need no figure
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    res = _invoke("demo", "-o", tmp_path / "d", "--no-gif")
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "pip install 'tobitkf[plot]'" in text and "robust" in text
+    assert (tmp_path / "d" / "synthetic_kinect.robust.csv").is_file()
+    assert not (tmp_path / "d" / "report.html").exists()

@@ -18,7 +18,7 @@ class DemoResult:
     """What the demo wrote and measured."""
 
     table: Any  # BenchmarkTable
-    report: Path
+    report: Path | None  # None: written without the report (no matplotlib)
     files: tuple[Path, ...]
 
 
@@ -39,6 +39,7 @@ def run_demo(
     seed: int = 0,
     methods: Any = None,
     gif: bool = True,
+    report: bool = True,
 ) -> DemoResult:
     """Generate, corrupt, smooth, score and report the built-in synthetic recording.
 
@@ -49,6 +50,7 @@ def run_demo(
     methods : method specs (default: the issue's comparison plus our robust methods when
         available)
     gif : embed the skeleton animation in the report
+    report : write ``report.html`` (it needs matplotlib: the ``plot`` extra)
 
     Returns
     -------
@@ -78,6 +80,8 @@ def run_demo(
         if name in smoothed:
             files.append(outdir / f"synthetic_kinect.{name}.csv")
             save([smoothed[name]], files[-1], format="csv")
+    if not report:
+        return DemoResult(table=table, report=None, files=tuple(files))
     rows = table.to_dict()["rows"]
     columns = list(rows[0])
     spec = TableSpec(
@@ -101,5 +105,5 @@ def run_demo(
             "tobitkf.evaluation.corruption; every method sees only the corrupted track.",
         ],
     )
-    report = write_report(inp, outdir / "report.html", gif=gif)
-    return DemoResult(table=table, report=report, files=tuple(files))
+    page = write_report(inp, outdir / "report.html", gif=gif)
+    return DemoResult(table=table, report=page, files=tuple(files))
