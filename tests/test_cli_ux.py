@@ -114,8 +114,7 @@ def test_missing_matplotlib_names_the_extra(tmp_path, monkeypatch):
     track = tmp_path / "a.csv"
     save([_recording()], track, format="csv")
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
-    for args in (
-        ["demo", "-o", tmp_path / "d"],
+    for args in (  # the demo writes what needs no figure (its own test)
         ["report", track, "-o", tmp_path / "r.html", "--methods", "raw"],
         ["reproduce", "oscillator", "--runs", "1", "--steps", "5", "--out", tmp_path / "f"],
     ):
