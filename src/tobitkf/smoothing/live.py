@@ -258,13 +258,16 @@ def _group_positions(arr: Array, sts: list[Any] | None, rows: Sequence[int]) -> 
 
 
 class _FrameInfo:
-    """One stepped frame ``(B, J)``, for ``LiveSmoother.std`` and ``.sample_state``: its
-    output, missing samples, the stepper's sd and rejections, and the stream's metres
-    per unit; the sd in the stream's units and the sample states, by the causal rules
-    of :func:`~tobitkf.smoothing.output_states.sample_states`, on first use."""
+    """One stepped frame ``(B, J)``, for ``LiveSmoother.std``, ``.sample_state`` and
+    ``.clipped``: its output, missing samples, the stepper's sd, rejections and clipped
+    flags, and the stream's metres per unit; the sd in the stream's units and the sample
+    states, by the causal rules of
+    :func:`~tobitkf.smoothing.output_states.sample_states`, on first use."""
 
-    def __init__(self, out: Array, missing: Any, std: Any, rejected: Any, scale: float) -> None:
+    def __init__(self, out: Array, missing: Any, std: Any, rejected: Any, scale: float,
+                 clipped: Any = None) -> None:  # fmt: skip
         self._raw = (out, missing, std, rejected, scale)
+        self.clipped = clipped
         self._std: Any = None
         self._state: Any = None
 
@@ -619,12 +622,17 @@ class LiveSmoother:
         return self._frame_info(1)
 
     def _frame_info(self, k: int) -> Any:
+        """The last frame's sd (``k`` 0), sample states (1) or clipped flags (2), shaped
+        as :meth:`update` returned its positions."""
+
         def value(info: _FrameInfo) -> Any:
-            return info.std() if k == 0 else info.state()
+            if k == 0:
+                return info.std()
+            return info.state() if k == 1 else info.clipped
 
         if self._keyed_info is not None:
             rows = {b: value(info) for b, (info, _) in self._keyed_info.items()}
-            if k == 0 and all(v is None for v in rows.values()):
+            if k != 1 and all(v is None for v in rows.values()):
                 return None
             return {b: rows[b][self._keyed_info[b][1]] for b in rows}
         if self._last is None:
@@ -636,21 +644,7 @@ class LiveSmoother:
     def clipped(self) -> Any:
         """Which joints' last measurements were clipped (censoring methods), shaped as
         :attr:`std` (``{body_id: (J,)}`` for a keyed stream), else None."""
-        if self._bodies is not None:
-            out = {}
-            for b in self._keys or ():
-                body = self._bodies.get(b)
-                if body is None:
-                    continue
-                group = body.group
-                stepper = group.gates.stepper if group.gates is not None else group.stepper
-                flags = getattr(stepper, "clipped", None)
-                if flags is None:
-                    return None  # the method clips nothing
-                out[b] = np.asarray(flags)[body.slot]
-            return out or None
-        clipped = getattr(self._stepper, "clipped", None)
-        return clipped[0] if clipped is not None and self._single else clipped
+        return self._frame_info(2)
 
     @property
     def bodies(self) -> list[Any]:
@@ -817,14 +811,15 @@ class LiveSmoother:
         if getattr(stepper, "uses_time", False):  # the frame's timestamp (None: not given)
             kw["time"] = self._time if self._time is not None else time
         out = np.asarray(stepper.step(ys, missing, batch_states, dt, **kw))
-        self._note(out, missing, getattr(stepper, "std", None), getattr(stepper, "rejected", None))
+        self._note(out, missing, getattr(stepper, "std", None), getattr(stepper, "rejected", None),
+                   getattr(stepper, "clipped", None))  # fmt: skip
         return out
 
-    def _note(self, out: Array, missing: Any, std: Any, rejected: Any) -> None:
-        """Keep what :attr:`std` and :attr:`sample_state` give of the frame just stepped
-        (worked out only when they are read: a stream that never reads them pays
-        nothing for them)."""
-        self._last = _FrameInfo(out.copy(), missing, std, rejected, self._scale)
+    def _note(self, out: Array, missing: Any, std: Any, rejected: Any, clipped: Any = None) -> None:
+        """Keep what :attr:`std`, :attr:`sample_state` and :attr:`clipped` give of the
+        frame just stepped (worked out only when they are read: a stream that never reads
+        them pays nothing for them)."""
+        self._last = _FrameInfo(out.copy(), missing, std, rejected, self._scale, clipped)
 
     def _output(self, out: Array, pos: Array) -> Array:
         """A stepper's output ``(B, J, 3)`` in the stream's coordinates, units and shape."""
