@@ -27,6 +27,7 @@ from tobitkf.skeleton.sequence import SkeletonSequence
 __all__ = [
     "as_list",
     "as_object",
+    "attach_provenance",
     "load_json",
     "number_array",
     "provenance_from_text",
@@ -155,3 +156,16 @@ def provenance_from_text(
         f"(one per body), found {_kind(doc)}"
         + (f" of {len(doc)}" if isinstance(doc, list) else ""),
     )  # fmt: skip
+
+
+def attach_provenance(
+    path: str | os.PathLike[str], sequences: Sequence[SkeletonSequence], text: Any, where: str
+) -> None:
+    """Put the provenance that :func:`provenance_text` wrote in ``where`` of the file into
+    each body's ``metadata["provenance"]`` (nothing when ``text`` is None)."""
+    if text is None:
+        return
+    for s, prov in zip(sequences, provenance_from_text(path, text, len(sequences), where),
+                       strict=True):  # fmt: skip
+        if prov is not None:
+            s.metadata["provenance"] = prov

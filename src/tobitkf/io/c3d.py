@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tobitkf.io._json import provenance_from_text
+from tobitkf.io._json import attach_provenance
 from tobitkf.io._text import check_positions, check_rate
 from tobitkf.io.errors import OptionError, ReadError
 from tobitkf.io.registry import register_format
@@ -243,10 +243,6 @@ def read_c3d(
     positions[:, real] = view
     # the capture's clock: frame 1 at time 0 (a trial cut from a longer capture starts later)
     stamps = None if first_frame == 1 else (first_frame - 1 + np.arange(len(data))) / rate
-    meta = {}
-    if provenance is not None:
-        where = f"the parameter {PROVENANCE_GROUP}:{PROVENANCE_PARAM}"
-        meta["provenance"] = provenance_from_text(path, provenance, 1, where)[0]
     seq = SkeletonSequence(
         positions=positions,
         topology=Topology.from_names(names, up_axis=_up_axis(screen), name="c3d"),
@@ -263,9 +259,10 @@ def read_c3d(
             "residuals": np.ascontiguousarray(residual[:, keep]),
             "reader_warnings": notes,
             PER_JOINT: ["labels", "point_kinds"],
-            **meta,
         },
     )
+    where = f"the parameter {PROVENANCE_GROUP}:{PROVENANCE_PARAM}"
+    attach_provenance(path, [seq], provenance, where)
     return [seq]
 
 

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from tobitkf.io._json import provenance_from_text, provenance_text
+from tobitkf.io._json import attach_provenance, provenance_text
 from tobitkf.io._pose import (
     check_alike,
     check_hdf5_reads,
@@ -240,12 +240,7 @@ def read_deeplabcut(
     p = Path(path)
     df, provenance = _read_frame(p)
     seqs = sequences_from_dlc_frame(p, df, fps=fps, skeleton=skeleton, implausible=implausible)
-    if provenance is not None:
-        where = f"the HDF5 attribute {PROVENANCE_ATTR}"
-        provs = provenance_from_text(p, provenance, len(seqs), where)
-        for s, prov in zip(seqs, provs, strict=True):
-            if prov is not None:
-                s.metadata["provenance"] = prov
+    attach_provenance(p, seqs, provenance, f"the HDF5 attribute {PROVENANCE_ATTR}")
     return seqs
 
 

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from tobitkf.core.version import __version__
-from tobitkf.io._json import provenance_from_text, provenance_text
+from tobitkf.io._json import attach_provenance, provenance_text
 from tobitkf.io._pose import (
     check_hdf5_opens,
     frame_numbers,
@@ -117,13 +117,9 @@ def from_movement(
             seqs = [s.replace(topology=topo) for s in seqs]
         except ValueError:
             pass  # not a tree: keep the keypoints without bones
-    if attrs.get("tobitkf_provenance") is not None:
-        provs = provenance_from_text(
-            path, attrs["tobitkf_provenance"], len(seqs), "the attribute tobitkf_provenance"
-        )
-        for s, prov in zip(seqs, provs, strict=True):
-            if prov is not None:
-                s.metadata["provenance"] = prov
+    attach_provenance(
+        path, seqs, attrs.get("tobitkf_provenance"), "the attribute tobitkf_provenance"
+    )
     return _smoothed_fields(ds, seqs)
 
 
