@@ -154,23 +154,22 @@ def warm(method: str, on_compile: Callable[[], Any] | None = None) -> float:
     ``on_compile`` is called once, when the first kernel starts compiling (e.g. to tell
     the person waiting why).
     """
-    from numba.core import event
-
     get_method(method)  # an unknown name fails here, with the list of methods
-    watch = _Watch(on_compile)
-    with event.install_listener("numba:compile", watch.listener()):
+    with on_first_compile(on_compile) as watch:
         _run_tiny(method)
     return watch.seconds
 
 
 @contextmanager
-def on_first_compile(callback: Callable[[], Any]) -> Iterator[None]:
+def on_first_compile(callback: Callable[[], Any] | None) -> Iterator[_Watch]:
     """Call ``callback`` once, when the first kernel starts compiling inside the block
-    (a command that runs methods says why the first run on a machine waits)."""
+    (a command that runs methods says why the first run on a machine waits); the block
+    gets the :class:`_Watch`, whose ``seconds`` are the time spent compiling."""
     from numba.core import event
 
-    with event.install_listener("numba:compile", _Watch(callback).listener()):
-        yield
+    watch = _Watch(callback)
+    with event.install_listener("numba:compile", watch.listener()):
+        yield watch
 
 
 def _warm_in_child(method: str) -> tuple[str, float]:
